@@ -1,0 +1,189 @@
+"""Parser tests: every form of the grammar, precedence, round trips and malformed inputs with their messages."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import pytest
+
+from tubempc.errors import SpecSyntaxError
+from tubempc.mitl import (
+    FALSE,
+    TRUE,
+    UNBOUNDED,
+    Always,
+    And,
+    Atom,
+    Eventually,
+    Implies,
+    Interval,
+    Next,
+    Not,
+    Or,
+    Until,
+    atoms,
+    parse,
+)
+
+a, b, c = Atom("a"), Atom("b"), Atom("c")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("a", a),
+        ("true", TRUE),
+        ("false", FALSE),
+        ("(a)", a),
+        ("((a))", a),
+        ("!a", Not(a)),
+        ("not a", Not(a)),
+        ("¬a", Not(a)),
+        ("X a", Next(UNBOUNDED, a)),
+        ("next a", Next(UNBOUNDED, a)),
+        ("○ a", Next(UNBOUNDED, a)),
+        ("X[1,2] a", Next(Interval(1, 2, True, True), a)),
+        ("F a", Eventually(UNBOUNDED, a)),
+        ("eventually a", Eventually(UNBOUNDED, a)),
+        ("◇a", Eventually(UNBOUNDED, a)),
+        ("G a", Always(UNBOUNDED, a)),
+        ("always a", Always(UNBOUNDED, a)),
+        ("□a", Always(UNBOUNDED, a)),
+        ("a U b", Until(UNBOUNDED, a, b)),
+        ("a until b", Until(UNBOUNDED, a, b)),
+        ("a U(0.5,3] b", Until(Interval(Fraction(1, 2), 3, False, True), a, b)),
+        ("a & b", And((a, b))),
+        ("a and b", And((a, b))),
+        ("a ∧ b", And((a, b))),
+        ("a | b", Or((a, b))),
+        ("a or b", Or((a, b))),
+        ("a ∨ b", Or((a, b))),
+        ("a -> b", Implies(a, b)),
+        ("a implies b", Implies(a, b)),
+        ("a → b", Implies(a, b)),
+        ("F[30,50] a", Eventually(Interval(30, 50, True, True), a)),
+        ("F(30,50) a", Eventually(Interval(30, 50, False, False), a)),
+        ("F[30,50) a", Eventually(Interval(30, 50, True, False), a)),
+        ("F(30,50] a", Eventually(Interval(30, 50, False, True), a)),
+        ("G[0,inf) a", Always(UNBOUNDED, a)),
+        ("G[0,∞) a", Always(UNBOUNDED, a)),
+        ("G(2,inf) a", Always(Interval(2, None, False, False), a)),
+        ("F[3,3] a", Eventually(Interval(3, 3, True, True), a)),
+        ("F[17.3,20.1] a", Eventually(Interval(Fraction("17.3"), Fraction("20.1"), True, True), a)),
+        ("F[.5,1.] a", Eventually(Interval(Fraction(1, 2), 1, True, True), a)),
+    ],
+)
+def test_every_form(text: str, expected: object) -> None:
+    assert parse(text) == expected
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        # unary binds tighter than everything
+        ("G[0,inf) !(obs_1 | obs_2) & F[30,50] m",
+         And((Always(UNBOUNDED, Not(Or((Atom("obs_1"), Atom("obs_2"))))),
+              Eventually(Interval(30, 50, True, True), Atom("m"))))),
+        ("!a & b", And((Not(a), b))),
+        ("F a U b", Until(UNBOUNDED, Eventually(UNBOUNDED, a), b)),
+        # U is right-associative and tighter than &
+        ("a U b U c", Until(UNBOUNDED, a, Until(UNBOUNDED, b, c))),
+        ("a & b U c", And((a, Until(UNBOUNDED, b, c)))),
+        # & tighter than |, | tighter than ->
+        ("a | b & c", Or((a, And((b, c))))),
+        ("a & b | c", Or((And((a, b)), c))),
+        ("a | b -> c", Implies(Or((a, b)), c)),
+        # -> is right-associative
+        ("a -> b -> c", Implies(a, Implies(b, c))),
+        ("(a -> b) -> c", Implies(Implies(a, b), c)),
+        # & and | are associative: flattened
+        ("a & b & c", And((a, b, c))),
+        ("(a & b) & c", And((a, b, c))),
+        ("a & (b & c)", And((a, b, c))),
+        ("a | (b | c)", Or((a, b, c))),
+        # keywords are whole words only
+        ("note & Gate & Untilx & Fx", And((Atom("note"), Atom("Gate"), Atom("Untilx"), Atom("Fx")))),
+    ],
+)
+def test_precedence(text: str, expected: object) -> None:
+    assert parse(text) == expected
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4) & F[30,50] mission_2 & F[80,110] mission_1",
+        "a U[0,5] b U c",
+        "!(a & b) -> (c | F(1,2] a)",
+        "G(a -> F[0,60] b)",
+        "X X X a",
+        "(a U b) U c",
+        "F (G a)",
+        "!!a",
+        "true -> false",
+        "G[0,inf) (a -> F[2,inf) b)",
+    ],
+)
+def test_round_trip_examples(text: str) -> None:
+    f = parse(text)
+    assert parse(str(f)) == f
+    assert str(parse(str(f))) == str(f)
+    assert hash(parse(text)) == hash(f)
+
+
+def test_canonical_text_of_paper_formula() -> None:
+    f = parse("G[0,inf)!(obs_1|obs_2|obs_3|obs_4)&F[30,50]mission_2&F[80,110]mission_1")
+    assert str(f) == "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4) & F[30,50] mission_2 & F[80,110] mission_1"
+    assert atoms(f) == {"obs_1", "obs_2", "obs_3", "obs_4", "mission_1", "mission_2"}
+
+
+@pytest.mark.parametrize(
+    ("text", "column", "fragment"),
+    [
+        ("", 1, "empty formula"),
+        ("   ", 1, "empty formula"),
+        ("a &", 4, "unexpected end of input, expected one of '!', '('"),
+        ("a b", 3, "unexpected 'b', expected one of '&'"),
+        ("(a", 3, "unexpected end of input, expected ')'"),
+        ("a)", 2, "unexpected ')'"),
+        ("F[5,2] a", 2, "lower bound 5 exceeds upper bound 2"),
+        ("F[1,inf] a", 8, "cannot be closed at inf"),
+        ("F[1,1) a", 2, "is empty"),
+        ("F(1,1] a", 2, "is empty"),
+        ("F[-1,2] a", 3, "unexpected character '-', expected a number"),
+        ("F[1,2 a", 7, "expected one of ')', ']'"),
+        ("F[1;2] a", 4, "unexpected character ';'"),
+        ("a $ b", 3, "unexpected character '$'"),
+        ("U a", 1, "unexpected 'U'"),
+        ("F[1,2]", 7, "unexpected end of input"),
+        ("G inf", 3, "unexpected 'inf'"),
+        ("a -> ", 6, "unexpected end of input"),
+        ("F[a,2] b", 3, "expected a number"),
+    ],
+)
+def test_malformed(text: str, column: int, fragment: str) -> None:
+    with pytest.raises(SpecSyntaxError) as info:
+        parse(text)
+    assert isinstance(info.value, ValueError)
+    assert info.value.column == column, str(info.value)
+    assert fragment in str(info.value)
+    assert f"column {column}" in str(info.value)
+
+
+def test_interval_semantics() -> None:
+    iv = Interval(30, 50, True, False)
+    assert iv.contains(30) and iv.contains(Fraction("49.99")) and not iv.contains(50)
+    assert not Interval(30, 50, False, True).contains(30)
+    assert UNBOUNDED.contains(10**9) and not UNBOUNDED.bounded
+    with pytest.raises(ValueError, match="negative"):
+        Interval(-1, 2)
+    with pytest.raises(ValueError, match="empty"):
+        Interval(2, 2, True, False)
+    assert str(Interval(Fraction("0.25"), None, False)) == "(0.25,inf)"
+
+
+def test_reserved_words_are_not_atoms() -> None:
+    with pytest.raises(ValueError, match="reserved"):
+        Atom("U")
+    with pytest.raises(ValueError, match="not an atomic proposition"):
+        Atom("1a")

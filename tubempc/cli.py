@@ -1,0 +1,122 @@
+"""The ``tubempc`` command: a thin front over both packages; maps errors to exit codes and one clear line.
+
+Exit codes (all subcommands): 0 success / all checks pass; 1 a violation was found (certify, regress) or no
+accepting run exists (plan); 2 inconclusive (certify); 3 unusable input (unreadable or truncated log, missing
+topic, malformed formula or scenario, impossible controller design); 4 feature not available; 70 internal error.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import NoReturn
+
+import click
+
+from tubempc.commands.demo import demo
+from tubempc.commands.plan import plan
+from tubempc.commands.regress import regress
+from tubempc.commands.simulate import simulate
+from tubempc.errors import NoAcceptingRunError, NotAvailableError, TubeMPCError
+from tubempc.mitl import parse
+from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
+from verify.command import certify
+from verify.errors import VerifyError
+
+__all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
+           "cli", "main"]
+
+EXIT_OK = 0
+EXIT_FAIL = 1
+EXIT_INCONCLUSIVE = 2
+EXIT_UNUSABLE = 3
+EXIT_NOT_AVAILABLE = 4
+EXIT_INTERNAL = 70
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="tubempc")
+@click.option("--debug", is_flag=True, help="Show full tracebacks instead of one-line errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """Plan timed robot missions with tube MPC under MITL, and certify their ROS logs."""
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+@cli.group()
+def scenario() -> None:
+    """Inspect and validate scenario files."""
+
+
+@scenario.command("show")
+@click.argument("name", default="nexus-sml")
+def scenario_show(name: str) -> None:
+    """Print a built-in scenario (default: the paper's Nexus setup) or a scenario file, as YAML."""
+    if name in BUILTIN_SCENARIOS:
+        click.echo(builtin_scenario_text(name), nl=False)
+    else:
+        click.echo(dump_scenario(load_scenario(name)), nl=False)
+
+
+@scenario.command("validate")
+@click.argument("path")
+def scenario_validate(path: str) -> None:
+    """Validate a scenario file; print a summary or one line naming the problem (exit 3)."""
+    s = load_scenario(path)
+    click.echo(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
+               f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
+
+
+@cli.command("spec")
+@click.argument("text")
+def spec(text: str) -> None:
+    """Parse an MITL formula and print its canonical form (exit 3 with the column of the error)."""
+    click.echo(str(parse(text)))
+
+
+cli.add_command(certify)
+cli.add_command(plan)
+cli.add_command(simulate)
+cli.add_command(regress)
+cli.add_command(demo)
+
+
+def _exit_code(err: BaseException) -> int:
+    if isinstance(err, NotAvailableError):
+        return EXIT_NOT_AVAILABLE
+    if isinstance(err, NoAcceptingRunError):
+        return EXIT_FAIL
+    if isinstance(err, TubeMPCError | VerifyError):
+        return EXIT_UNUSABLE
+    return EXIT_INTERNAL
+
+
+def main(argv: list[str] | None = None) -> NoReturn:
+    """Console entry point: run the CLI, turning expected errors into one stderr line and an exit code."""
+    args = sys.argv[1:] if argv is None else argv
+    debug = "--debug" in args
+    try:
+        cli.main(args=args, prog_name="tubempc", standalone_mode=False)
+    except click.exceptions.Exit as err:
+        sys.exit(err.exit_code)
+    except click.Abort:
+        click.echo("tubempc: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as err:
+        err.show()
+        sys.exit(EXIT_UNUSABLE if err.exit_code == 2 else err.exit_code)
+    except (TubeMPCError, VerifyError) as err:
+        if debug:
+            raise
+        click.echo(f"tubempc: error: {err}", err=True)
+        sys.exit(_exit_code(err))
+    except KeyboardInterrupt:
+        click.echo("tubempc: interrupted", err=True)
+        sys.exit(130)
+    except Exception as err:
+        if debug:
+            raise
+        click.echo(f"tubempc: internal error: {err.__class__.__name__}: {err} (rerun with --debug for the "
+                   f"traceback)", err=True)
+        sys.exit(EXIT_INTERNAL)
+    sys.exit(EXIT_OK)

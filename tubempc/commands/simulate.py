@@ -1,0 +1,16 @@
+"""The `tubempc simulate` subcommand (placeholder until its feature lands: exits 4 with one clear line)."""
+
+from __future__ import annotations
+
+import click
+
+from tubempc.errors import NotAvailableError
+
+__all__ = ["simulate"]
+
+
+@click.command(context_settings={"ignore_unknown_options": True})
+@click.argument("args", nargs=-1, type=click.UNPROCESSED)
+def simulate(args: tuple[str, ...]) -> None:
+    """Not available yet."""
+    raise NotAvailableError("'tubempc simulate' is not available yet in this version")

@@ -1,0 +1,71 @@
+"""Exceptions of the tubempc package: one root, semantic leaves that also subclass the natural builtin.
+
+Input problems (a malformed formula or scenario) are ``ValueError``s; a controller that cannot be designed for a
+scenario is a ``DesignError``; a specification the planner cannot satisfy is ``NoAcceptingRunError``.
+Failed *checks* are never exceptions: they are values (see ``verify``).
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "DesignError",
+    "LogWriteError",
+    "NoAcceptingRunError",
+    "NotAvailableError",
+    "ScenarioError",
+    "SolverError",
+    "SpecSyntaxError",
+    "TubeMPCError",
+]
+
+
+class TubeMPCError(Exception):
+    """Root of every error raised on purpose by ``tubempc``."""
+
+
+class SpecSyntaxError(TubeMPCError, ValueError):
+    """Malformed MITL text. ``column`` is 1-based; ``text`` is the whole input."""
+
+    def __init__(self, message: str, *, text: str, column: int) -> None:
+        self.text = text
+        self.column = column
+        self.reason = message
+        super().__init__(f"column {column}: {message} (in {text!r})")
+
+
+class ScenarioError(TubeMPCError, ValueError):
+    """A scenario file or value is malformed; the message names the file and the field."""
+
+    def __init__(self, message: str, *, source: str = "<scenario>", field: str | None = None) -> None:
+        self.source = source
+        self.field = field
+        self.reason = message
+        where = f"{source}: {field}" if field else source
+        super().__init__(f"{where}: {message}")
+
+
+class DesignError(TubeMPCError, ValueError):
+    """The tube/MPC design is impossible for a scenario (empty tightened set, region too small, ...)."""
+
+
+class SolverError(TubeMPCError, RuntimeError):
+    """A numerical solver failed in a way that cannot be recovered by the documented backup."""
+
+
+class NoAcceptingRunError(TubeMPCError, ValueError):
+    """The planner proved that no timed run of the abstraction satisfies the formula.
+
+    ``obligation`` names the sub-formula that cannot be met when the planner can tell.
+    """
+
+    def __init__(self, message: str, *, obligation: str | None = None) -> None:
+        self.obligation = obligation
+        super().__init__(message)
+
+
+class LogWriteError(TubeMPCError, OSError):
+    """A ROS log could not be written."""
+
+
+class NotAvailableError(TubeMPCError, NotImplementedError):
+    """A subcommand whose feature has not landed yet (exit code 4)."""

@@ -1,0 +1,240 @@
+"""MITL text -> formula AST (``parse``), built on a Lark LALR grammar.
+
+Precedence, tightest first: unary operators (``!`` ``X`` ``F`` ``G`` with optional interval), ``U`` (right
+associative), ``&``, ``|``, ``->`` (right associative). An absent interval means ``[0,inf)``.
+Malformed text raises ``SpecSyntaxError`` (a ``ValueError``) naming the 1-based column and what was expected.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from functools import lru_cache
+from typing import Any
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+
+from tubempc.errors import SpecSyntaxError
+from tubempc.mitl.ast import (
+    FALSE,
+    TRUE,
+    UNBOUNDED,
+    Always,
+    And,
+    Atom,
+    Eventually,
+    Formula,
+    Implies,
+    Interval,
+    Next,
+    Not,
+    Or,
+    Until,
+)
+
+__all__ = ["parse"]
+
+_GRAMMAR = r"""
+?start: impl
+
+?impl: disj
+     | disj _implies impl           -> implies
+
+?disj: conj
+     | disj _or conj                -> or_
+
+?conj: until
+     | conj _and until              -> and_
+
+?until: unary
+      | unary _until interval? until -> until
+
+?unary: atom
+      | _not unary                  -> not_
+      | _next interval? unary       -> next_
+      | _eventually interval? unary -> eventually
+      | _always interval? unary     -> always
+      | LPAR impl RPAR              -> group
+
+atom: NAME | TRUE | FALSE
+
+interval: (LSQB | LPAR) NUMBER COMMA (NUMBER | INF | INF_SYMBOL) (RSQB | RPAR)
+
+_not: "!" | "not" | "¬"
+_next: "X" | "next" | "○"
+_eventually: "F" | "eventually" | "◇"
+_always: "G" | "always" | "□"
+_until: "U" | "until"
+_and: "&&" | "&" | "and" | "∧"
+_or: "||" | "|" | "or" | "∨"
+_implies: "->" | "implies" | "→"
+TRUE: "true"
+FALSE: "false"
+INF: "inf"
+INF_SYMBOL: "∞"
+LPAR: "("
+RPAR: ")"
+LSQB: "["
+RSQB: "]"
+COMMA: ","
+NUMBER: /[0-9]+(\.[0-9]*)?|\.[0-9]+/
+NAME: /[A-Za-z_][A-Za-z0-9_]*/
+
+%import common.WS
+%ignore WS
+"""
+
+_HUMAN_NAMED = {
+    "NAME": "an atomic proposition",
+    "NUMBER": "a number",
+    "$END": "end of input",
+}
+
+
+# Error messages name each operator once, by its canonical spelling.
+_CANONICAL = {
+    alias: canon
+    for canon, aliases in {
+        "!": ("not", "¬"),
+        "X": ("next", "○"),
+        "F": ("eventually", "◇"),
+        "G": ("always", "□"),
+        "U": ("until",),
+        "&": ("&&", "and", "∧"),
+        "|": ("||", "or", "∨"),
+        "->": ("implies", "→"),
+    }.items()
+    for alias in aliases
+}
+
+class _IntervalError(Exception):
+    def __init__(self, message: str, column: int) -> None:
+        super().__init__(message)
+        self.message = message
+        self.column = column
+
+
+def _interval_of(children: list[Any]) -> Interval:
+    return children[0] if children and isinstance(children[0], Interval) else UNBOUNDED
+
+
+class _ToAst(Transformer[Token, Formula]):
+    def atom(self, children: list[Token]) -> Formula:
+        tok = children[0]
+        if tok.type == "TRUE":
+            return TRUE
+        if tok.type == "FALSE":
+            return FALSE
+        return Atom(str(tok))
+
+    def interval(self, c: list[Token]) -> Interval:
+        lpar, lo_tok, _comma, hi_tok, rpar = c
+        lo = Fraction(str(lo_tok))
+        hi = None if hi_tok.type in ("INF", "INF_SYMBOL") else Fraction(str(hi_tok))
+        column = lpar.column or 1
+        if hi is None and rpar.type == "RSQB":
+            raise _IntervalError("an interval cannot be closed at inf: use ')'", rpar.column or column)
+        if hi is not None and hi < lo:
+            raise _IntervalError(f"interval lower bound {lo_tok} exceeds upper bound {hi_tok}", column)
+        try:
+            return Interval(lo, hi, lpar.type == "LSQB", rpar.type == "RSQB")
+        except ValueError as err:
+            raise _IntervalError(str(err), column) from err
+
+    def not_(self, c: list[Any]) -> Formula:
+        return Not(c[-1])
+
+    def next_(self, c: list[Any]) -> Formula:
+        return Next(_interval_of(c[:-1]), c[-1])
+
+    def eventually(self, c: list[Any]) -> Formula:
+        return Eventually(_interval_of(c[:-1]), c[-1])
+
+    def always(self, c: list[Any]) -> Formula:
+        return Always(_interval_of(c[:-1]), c[-1])
+
+    def until(self, c: list[Any]) -> Formula:
+        return Until(_interval_of(c[1:-1]), c[0], c[-1])
+
+    def and_(self, c: list[Any]) -> Formula:
+        return And((c[0], c[-1]))
+
+    def or_(self, c: list[Any]) -> Formula:
+        return Or((c[0], c[-1]))
+
+    def implies(self, c: list[Any]) -> Formula:
+        return Implies(c[0], c[-1])
+
+    @v_args(inline=True)
+    def group(self, _lpar: Token, inner: Formula, _rpar: Token) -> Formula:
+        return inner
+
+
+@lru_cache(maxsize=1)
+def _parser() -> Lark:
+    return Lark(_GRAMMAR, parser="lalr", lexer="basic", maybe_placeholders=False)
+
+
+@lru_cache(maxsize=1)
+def _human_names() -> dict[str, str]:
+    out = dict(_HUMAN_NAMED)
+    for term in _parser().terminals:
+        if term.name not in out and term.pattern.type == "str":
+            value = str(term.pattern.value)
+            out[term.name] = repr(_CANONICAL.get(value, value))
+    out["INF_SYMBOL"] = "'inf'"
+    return out
+
+
+def _expected(names: set[str] | frozenset[str]) -> str:
+    human_of = _human_names()
+    human = sorted({human_of.get(n, n) for n in names})
+    if not human:
+        return "nothing more"
+    if len(human) == 1:
+        return human[0]
+    return "one of " + ", ".join(human)
+
+
+def _acceptable_after(prefix: str) -> set[str]:
+    """Terminals the grammar accepts after ``prefix`` (used when the lexer meets a character no token starts)."""
+    try:
+        interactive = _parser().parse_interactive(prefix)
+        interactive.exhaust_lexer()
+        accepted: set[str] = interactive.accepts()  # type: ignore[no-untyped-call]
+        return accepted
+    except UnexpectedInput:
+        return set()
+
+
+@lru_cache(maxsize=4096)
+def parse(text: str) -> Formula:
+    """Parse MITL ``text`` into a formula; raise ``SpecSyntaxError`` (a ``ValueError``) when malformed."""
+    if not isinstance(text, str):
+        raise TypeError(f"text={text!r} is not a string")
+    if not text.strip():
+        raise SpecSyntaxError("empty formula: expected an atomic proposition, 'true', 'false' or an operator",
+                              text=text, column=1)
+    try:
+        tree = _parser().parse(text)
+        return _ToAst().transform(tree)
+    except UnexpectedEOF as err:
+        raise SpecSyntaxError(f"unexpected end of input, expected {_expected(set(err.expected))}",
+                              text=text, column=len(text) + 1) from None
+    except UnexpectedToken as err:
+        got = "end of input" if err.token.type == "$END" else repr(str(err.token))
+        column = len(text) + 1 if err.token.type == "$END" else int(err.column)
+        raise SpecSyntaxError(f"unexpected {got}, expected {_expected(err.expected)}",
+                              text=text, column=column) from None
+    except UnexpectedCharacters as err:
+        pos = int(err.pos_in_stream or 0)
+        allowed = _acceptable_after(text[:pos])
+        raise SpecSyntaxError(f"unexpected character {text[pos]!r}, expected {_expected(allowed)}",
+                              text=text, column=int(err.column)) from None
+    except UnexpectedInput as err:  # pragma: no cover - other Lark input errors
+        raise SpecSyntaxError(str(err).splitlines()[0], text=text, column=int(getattr(err, "column", 1))) from None
+    except VisitError as err:
+        orig = err.orig_exc
+        if isinstance(orig, _IntervalError):
+            raise SpecSyntaxError(orig.message, text=text, column=orig.column) from None
+        raise

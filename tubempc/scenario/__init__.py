@@ -1,0 +1,43 @@
+"""Scenario model and built-in scenarios (shared by the planner and the certifier)."""
+
+from tubempc.scenario.loader import (
+    BUILTIN_SCENARIOS,
+    builtin_scenario,
+    builtin_scenario_text,
+    dump_scenario,
+    load_scenario,
+    scenario_from_dict,
+)
+from tubempc.scenario.model import (
+    DisturbanceSpec,
+    DynamicsSpec,
+    InputLimits,
+    MocapSpec,
+    MpcSpec,
+    Region,
+    RobotSpec,
+    Scenario,
+    Topics,
+    TubeSpec,
+    Workspace,
+)
+
+__all__ = [
+    "BUILTIN_SCENARIOS",
+    "DisturbanceSpec",
+    "DynamicsSpec",
+    "InputLimits",
+    "MocapSpec",
+    "MpcSpec",
+    "Region",
+    "RobotSpec",
+    "Scenario",
+    "Topics",
+    "TubeSpec",
+    "Workspace",
+    "builtin_scenario",
+    "builtin_scenario_text",
+    "dump_scenario",
+    "load_scenario",
+    "scenario_from_dict",
+]

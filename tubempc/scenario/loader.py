@@ -1,0 +1,95 @@
+"""Scenario files -> ``Scenario`` values; the built-in scenarios shipped with the package.
+
+input: a YAML path, YAML text or a mapping -> output: a validated ``Scenario``; any problem raises
+``ScenarioError`` naming the file, the field path and what is wrong (never a raw YAML or pydantic traceback).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from tubempc.errors import ScenarioError
+from tubempc.scenario.model import Scenario
+
+__all__ = ["BUILTIN_SCENARIOS", "builtin_scenario", "builtin_scenario_text", "dump_scenario", "load_scenario",
+           "scenario_from_dict"]
+
+BUILTIN_SCENARIOS = ("nexus-sml",)
+
+
+def _field_path(loc: tuple[int | str, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + part
+    return out
+
+
+def scenario_from_dict(data: Any, *, source: str = "<scenario>") -> Scenario:
+    """Validate a mapping (as read from YAML) into a ``Scenario``."""
+    if not isinstance(data, dict):
+        raise ScenarioError(f"expected a mapping at the top level, got {type(data).__name__}", source=source)
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        first = err.errors()[0]
+        field = _field_path(tuple(first["loc"])) or None
+        msg = str(first["msg"]).removeprefix("Value error, ")
+        if first["type"] == "missing":
+            msg = "required field is missing"
+        elif first["type"] == "extra_forbidden":
+            msg = "unknown field (check the spelling)"
+        more = len(err.errors()) - 1
+        if more:
+            msg += f" (and {more} more problem{'s' if more > 1 else ''})"
+        raise ScenarioError(msg, source=source, field=field) from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file, or a built-in scenario by name (``nexus-sml``)."""
+    text_path = str(path)
+    if text_path in BUILTIN_SCENARIOS and not Path(text_path).exists():
+        return builtin_scenario(text_path)
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ScenarioError("file not found", source=str(p)) from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ScenarioError(f"cannot read the file ({err.__class__.__name__}: {err})", source=str(p)) from None
+    return _from_text(text, source=str(p))
+
+
+def _from_text(text: str, *, source: str) -> Scenario:
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ScenarioError(f"{where}invalid YAML ({problem})", source=source) from None
+    return scenario_from_dict(data, source=source)
+
+
+def builtin_scenario_text(name: str = "nexus-sml") -> str:
+    if name not in BUILTIN_SCENARIOS:
+        raise ScenarioError(f"no built-in scenario named {name!r} (available: {', '.join(BUILTIN_SCENARIOS)})",
+                            source=name)
+    return resources.files("tubempc.scenario").joinpath("builtin", f"{name}.yaml").read_text(encoding="utf-8")
+
+
+def builtin_scenario(name: str = "nexus-sml") -> Scenario:
+    """The scenario shipped with the package (default: the paper's Nexus experiment)."""
+    return _from_text(builtin_scenario_text(name), source=f"<builtin:{name}>")
+
+
+def dump_scenario(scenario: Scenario) -> str:
+    """YAML text that loads back to an equal scenario."""
+    return yaml.safe_dump(scenario.to_dict(), sort_keys=False, default_flow_style=None, width=110)

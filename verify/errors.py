@@ -1,0 +1,39 @@
+"""Exceptions of the certifier: raised when a log cannot be judged at all (exit code 3).
+
+A failed *check* is never an exception; it is a verdict value with its witness.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "LogReadError",
+    "MissingTopicError",
+    "TruncatedLogError",
+    "UnusableInputError",
+    "VerifyError",
+]
+
+
+class VerifyError(Exception):
+    """Root of every error raised on purpose by ``verify``."""
+
+
+class UnusableInputError(VerifyError, ValueError):
+    """The input cannot be judged: the message names the file and the problem."""
+
+    def __init__(self, message: str, *, path: str | None = None) -> None:
+        self.path = path
+        self.reason = message
+        super().__init__(f"{path}: {message}" if path else message)
+
+
+class LogReadError(UnusableInputError):
+    """The log file is unreadable (not a bag, corrupt, unsupported format)."""
+
+
+class TruncatedLogError(LogReadError):
+    """The log ends mid-record or lacks its index; ``--salvage`` may read the complete part."""
+
+
+class MissingTopicError(UnusableInputError):
+    """A topic the scenario names is absent from the log."""
