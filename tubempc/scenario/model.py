@@ -243,6 +243,20 @@ class Scenario(_Frozen):
             return self.robot.max_speed
         return math.hypot(self.inputs.max_abs[0], self.inputs.max_abs[1])
 
+    @property
+    def g_min(self) -> float:
+        """lambda_min of sym(g) over the admissible states of the dynamics model (1 for g = I)."""
+        if self.dynamics.model == "body":
+            return math.cos(self.dynamics.theta_max)
+        return 1.0
+
+    @property
+    def tube_radius_m(self) -> float:
+        """r_q: stated in the scenario, or ``delta_bar / (sigma_low * g_min)`` (the corrected lemma)."""
+        if self.tube.radius is not None:
+            return self.tube.radius
+        return self.disturbance.bound / (self.tube.sigma_low * self.g_min)
+
     def labels(self) -> dict[str, tuple[str, ...]]:
         return {r.name: r.labels for r in self.regions}
 

@@ -1,0 +1,1 @@
+"""Dynamics, tube design, nominal FHOCP/MPC, closed-loop simulation and Algorithm 1."""
