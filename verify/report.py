@@ -1,0 +1,296 @@
+"""Certification result + scenario -> human and CI reports next to ``certificate.json``.
+
+input: a ``CertifyResult`` (certificate dict plus trajectory/nominal/inputs/robustness frames) and the scenario
+-> output: ``report.md`` (figures as files under ``figures/``), a self-contained ``report.html`` (figures embedded
+as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (one test case per check: ``failure`` for a
+failed check, ``skipped`` for an inconclusive one) so that CI systems show the checks natively.
+
+Every string that comes from a log or a scenario is escaped: ``html.escape`` in HTML, entity and backslash escapes
+in Markdown, ElementTree (plus removal of characters XML 1.0 cannot carry) in JUnit.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any, Protocol
+
+import pandas as pd
+
+from tubempc.scenario import Scenario
+from verify.errors import VerifyError
+from verify.figures import FigureSpec, render_figures
+
+__all__ = [
+    "CertifyResultLike",
+    "ReportWriteError",
+    "html_report",
+    "junit_xml",
+    "markdown_report",
+    "write_reports",
+]
+
+_MAIN_KEYS = ("checks", "timed_run", "data_quality")
+_VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+_MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+!|~])")
+
+
+class CertifyResultLike(Protocol):
+    """What the reports need from ``verify.CertifyResult`` (any object with these attributes will do)."""
+
+    @property
+    def certificate(self) -> dict[str, Any]: ...
+    @property
+    def exit_code(self) -> int: ...
+    @property
+    def trajectory(self) -> pd.DataFrame: ...
+    @property
+    def nominal(self) -> pd.DataFrame | None: ...
+    @property
+    def inputs(self) -> pd.DataFrame | None: ...
+    @property
+    def robustness(self) -> pd.DataFrame | None: ...
+
+
+class ReportWriteError(VerifyError, OSError):
+    """The report files could not be written (the message names the folder)."""
+
+
+# ---- value formatting (pure text; escaping happens per output format) -------------------------------------------
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "NaN"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return f"{value:.6g}"
+    if isinstance(value, int | str):
+        return str(value)
+    text = json.dumps(value, default=str, sort_keys=True)
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+def _flatten(data: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """Nested mappings -> ("a.b.c", leaf) rows; lists and scalars are leaves."""
+    if isinstance(data, Mapping):
+        if not data and prefix:
+            yield prefix, "{}"
+        for key in sorted(data, key=str):
+            yield from _flatten(data[key], f"{prefix}.{key}" if prefix else str(key))
+    else:
+        yield prefix or "value", data
+
+
+def _check_rows(certificate: Mapping[str, Any]) -> list[dict[str, Any]]:
+    rows = []
+    for check in certificate.get("checks", []) or []:
+        if isinstance(check, Mapping):
+            rows.append(dict(check))
+    return rows
+
+
+def _check_details(check: Mapping[str, Any]) -> str:
+    extra = {k: v for k, v in check.items() if k not in ("name", "verdict", "margin", "first_violation_time")}
+    return "; ".join(f"{k}: {_fmt(v)}" for k, v in sorted(extra.items(), key=lambda kv: str(kv[0])))
+
+
+def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
+    rows = [("scenario", scenario.name)]
+    for key in sorted(certificate, key=str):
+        if key in _MAIN_KEYS or key == "verdict":
+            continue
+        rows.append((str(key), _fmt(certificate[key])))
+    rows.append(("tube radius r_q (scenario)", f"{scenario.tube_radius_m:.6g} m"))
+    return rows
+
+
+def _verdict(certificate: Mapping[str, Any]) -> str:
+    return str(certificate.get("verdict", "inconclusive"))
+
+
+# ---- Markdown -----------------------------------------------------------------------------------------------------
+def _md(text: Any) -> str:
+    """Escape for a Markdown table cell: HTML entities first, then Markdown punctuation, no line breaks."""
+    raw = _fmt(text) if not isinstance(text, str) else text
+    escaped = html.escape(raw, quote=False)
+    escaped = _MD_SPECIAL.sub(r"\\\1", escaped)
+    return escaped.replace("\r", " ").replace("\n", " ")
+
+
+def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec], *,
+                    figure_dir: str = "figures") -> str:
+    """The report as Markdown; figures are referenced as ``figure_dir/<stem>.png``."""
+    cert = result.certificate
+    lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
+             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", "", "| field | value |",
+             "|---|---|"]
+    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _meta_rows(cert, scenario)]
+    lines += ["", "## Checks", "", "| check | verdict | margin | first violation [s] | details |",
+              "|---|---|---|---|---|"]
+    for check in _check_rows(cert):
+        lines.append(f"| {_md(check.get('name', '?'))} | {_md(check.get('verdict', '?'))} | "
+                     f"{_md(_fmt(check.get('margin')))} | {_md(_fmt(check.get('first_violation_time')))} | "
+                     f"{_md(_check_details(check))} |")
+    lines += ["", "## Timed run", ""]
+    run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
+    if run:
+        lines += ["| # | region | entered at [s] |", "|---|---|---|"]
+        lines += [f"| {i} | {_md(e.get('region', '?'))} | {_md(_fmt(e.get('time')))} |" for i, e in enumerate(run)]
+    else:
+        lines.append("The robot disc was never fully inside a region.")
+    lines += ["", "## Data quality", ""]
+    dq = list(_flatten(cert.get("data_quality", {}) or {}))
+    if dq:
+        lines += ["| finding | value |", "|---|---|"] + [f"| {_md(k)} | {_md(_fmt(v))} |" for k, v in dq]
+    else:
+        lines.append("No data-quality findings were reported.")
+    lines += ["", "## Figures", ""]
+    for fig in figures:
+        lines += [f"![{_md(fig.caption)}]({figure_dir}/{fig.stem}.png)", "", f"*{_md(fig.caption)}*", ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+# ---- HTML ---------------------------------------------------------------------------------------------------------
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}
+table{border-collapse:collapse;margin:0.5em 0 1.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;
+vertical-align:top;font-size:0.92em}th{background:#f3f3f3}.badge{color:#fff;padding:2px 10px;border-radius:4px}
+figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}code{background:#f6f6f6}
+""".strip()
+
+
+def _e(value: Any) -> str:
+    return html.escape(_fmt(value) if not isinstance(value, str) else value, quote=True)
+
+
+def _badge(verdict: str) -> str:
+    colour = _VERDICT_COLOURS.get(verdict, "#555")
+    return f'<span class="badge" style="background:{colour}">{_e(verdict)}</span>'
+
+
+def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec]) -> str:
+    """A self-contained HTML page: inline CSS, figures as ``data:image/png;base64`` URIs, no script, no links."""
+    cert = result.certificate
+    verdict = _verdict(cert)
+    parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+             f"<title>Certificate {_e(verdict)}: {_e(scenario.name)}</title>", f"<style>{_CSS}</style></head><body>",
+             f"<h1>Certificate {_badge(verdict)}</h1>",
+             f"<p>Exit code {int(result.exit_code)} (0 pass, 1 violation, 2 inconclusive).</p>",
+             '<table class="meta">']
+    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _meta_rows(cert, scenario)]
+    parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'
+              "<th>margin</th><th>first violation [s]</th><th>details</th></tr>"]
+    for check in _check_rows(cert):
+        parts.append(f"<tr><td>{_e(check.get('name', '?'))}</td><td>{_badge(str(check.get('verdict', '?')))}</td>"
+                     f"<td>{_e(check.get('margin'))}</td><td>{_e(check.get('first_violation_time'))}</td>"
+                     f"<td>{_e(_check_details(check))}</td></tr>")
+    parts += ["</table>", "<h2>Timed run</h2>"]
+    run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
+    if run:
+        parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at [s]</th></tr>')
+        parts += [f"<tr><td>{i}</td><td>{_e(e.get('region', '?'))}</td><td>{_e(e.get('time'))}</td></tr>"
+                  for i, e in enumerate(run)]
+        parts.append("</table>")
+    else:
+        parts.append("<p>The robot disc was never fully inside a region.</p>")
+    parts.append("<h2>Data quality</h2>")
+    dq = list(_flatten(cert.get("data_quality", {}) or {}))
+    if dq:
+        parts.append('<table class="data-quality"><tr><th>finding</th><th>value</th></tr>')
+        parts += [f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in dq]
+        parts.append("</table>")
+    else:
+        parts.append("<p>No data-quality findings were reported.</p>")
+    parts.append("<h2>Figures</h2>")
+    for fig in figures:
+        data = base64.b64encode(fig.png).decode("ascii")
+        parts.append(f'<figure id="fig-{_e(fig.stem)}"><img alt="{_e(fig.caption)}" '
+                     f'src="data:image/png;base64,{data}"><figcaption>{_e(fig.caption)}</figcaption></figure>')
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+# ---- JUnit --------------------------------------------------------------------------------------------------------
+def _x(value: Any) -> str:
+    return _XML_INVALID.sub("\ufffd", _fmt(value) if not isinstance(value, str) else value)
+
+
+def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify") -> ET.Element:
+    """``<testsuite>`` with one ``<testcase>`` per check (``failure`` / ``skipped`` for fail / inconclusive)."""
+    cert = result.certificate
+    checks = _check_rows(cert)
+    failures = sum(1 for c in checks if c.get("verdict") == "fail")
+    skipped = sum(1 for c in checks if c.get("verdict") not in ("pass", "fail"))
+    suite = ET.Element("testsuite", {"name": _x(suite_name), "tests": str(len(checks)), "failures": str(failures),
+                                     "errors": "0", "skipped": str(skipped), "time": "0"})
+    props = ET.SubElement(suite, "properties")
+    for key in ("verdict", "formula", "scenario_sha256", "log_sha256", "partial"):
+        if key in cert:
+            ET.SubElement(props, "property", {"name": key, "value": _x(cert[key])})
+    for check in checks:
+        case = ET.SubElement(suite, "testcase", {"classname": _x(suite_name), "name": _x(check.get("name", "?")),
+                                                 "time": "0"})
+        verdict = check.get("verdict")
+        summary = (f"verdict {_fmt(verdict)}, margin {_fmt(check.get('margin'))}, first violation at "
+                   f"{_fmt(check.get('first_violation_time'))} s")
+        details = _check_details(check)
+        if verdict == "fail":
+            node = ET.SubElement(case, "failure", {"message": _x(summary), "type": "violation"})
+            node.text = _x(details or summary)
+        elif verdict != "pass":
+            ET.SubElement(case, "skipped", {"message": _x(f"{summary}. {details}".strip(" ."))})
+    return suite
+
+
+def write_junit(suites: list[ET.Element], path: Path) -> Path:
+    """Write ``<testsuites>`` around the given suites (one per log in a batch)."""
+    root = ET.Element("testsuites", {
+        "tests": str(sum(int(s.get("tests", "0")) for s in suites)),
+        "failures": str(sum(int(s.get("failures", "0")) for s in suites)),
+        "errors": str(sum(int(s.get("errors", "0")) for s in suites)),
+        "skipped": str(sum(int(s.get("skipped", "0")) for s in suites))})
+    root.extend(suites)
+    ET.indent(root)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    return path
+
+
+# ---- writing ------------------------------------------------------------------------------------------------------
+def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | Path, *,
+                  suite_name: str = "certify") -> dict[str, Path]:
+    """Write ``report.md``, ``report.html``, ``junit.xml`` and ``figures/*.png`` into ``out_dir`` (created).
+
+    Returns the written paths keyed by their path relative to ``out_dir`` (``"report.html"``,
+    ``"figures/workspace.png"``, ...). ``suite_name`` names the JUnit suite (a batch passes the log's name).
+    """
+    out = Path(out_dir)
+    figures = render_figures(result.certificate, scenario, trajectory=result.trajectory, nominal=result.nominal,
+                             inputs=result.inputs, robustness=result.robustness)
+    written: dict[str, Path] = {}
+    try:
+        (out / "figures").mkdir(parents=True, exist_ok=True)
+        for fig in figures:
+            path = out / "figures" / f"{fig.stem}.png"
+            path.write_bytes(fig.png)
+            written[f"figures/{fig.stem}.png"] = path
+        md = out / "report.md"
+        md.write_text(markdown_report(result, scenario, figures), encoding="utf-8")
+        written["report.md"] = md
+        page = out / "report.html"
+        page.write_text(html_report(result, scenario, figures), encoding="utf-8")
+        written["report.html"] = page
+        written["junit.xml"] = write_junit([junit_xml(result, suite_name=suite_name)], out / "junit.xml")
+    except OSError as err:
+        raise ReportWriteError(f"{out}: cannot write the reports ({err.__class__.__name__}: {err})") from err
+    return written
