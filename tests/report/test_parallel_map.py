@@ -1,0 +1,37 @@
+"""The shared executor: inline, process pool and a real Dask LocalCluster on loopback give the same ordered list."""
+
+from __future__ import annotations
+
+import operator
+
+import pytest
+
+from verify.batch import parallel_map
+from verify.errors import UnusableInputError
+
+ITEMS = [3, -1, 4, -1, -5, 9, -2, 6]
+EXPECTED = [abs(x) for x in ITEMS]
+
+
+def test_inline_and_processes_keep_order() -> None:
+    assert parallel_map(abs, ITEMS, workers=1, progress=False) == EXPECTED
+    assert parallel_map(abs, ITEMS, workers=2, progress=False) == EXPECTED
+    assert parallel_map(abs, [], workers=2, progress=False) == []
+
+
+def test_exceptions_propagate() -> None:
+    with pytest.raises(TypeError):
+        parallel_map(operator.inv, [0.5], workers=1, progress=False)  # ~0.5: TypeError inside fn
+    with pytest.raises(ValueError, match="invalid literal"):
+        parallel_map(int, ["1", "x"], workers=2, progress=False)
+    with pytest.raises(ValueError, match="workers=0"):
+        parallel_map(abs, ITEMS, workers=0)
+
+
+def test_dask_local_cluster() -> None:
+    assert parallel_map(abs, ITEMS, workers=2, dask="local", progress=False) == EXPECTED
+
+
+def test_bad_dask_address_is_unusable_input() -> None:
+    with pytest.raises(UnusableInputError, match="expected 'local'"):
+        parallel_map(abs, ITEMS, dask="my-laptop", progress=False)

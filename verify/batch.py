@@ -1,0 +1,385 @@
+"""Many logs -> one certificate each, in parallel (processes or Dask), plus a summary table.
+
+input: log paths and/or folders (scanned for ``.bag``, ``.mcap``, ``.db3`` files and ROS2 bag folders), a scenario
+-> output: a ``BatchResult`` (one ``BatchItem`` per log, in input order) whose ``exit_code`` is the worst of all;
+``write_batch`` writes one sub-folder per log (``certificate.json`` + reports) and ``summary.md`` /
+``summary.csv`` / ``junit.xml`` at the top.
+
+An unusable log (unreadable, truncated, missing topic) becomes a row with exit code 3; it never stops the batch.
+"Worst" orders the codes by severity, not by value: 0 pass < 2 inconclusive < 1 violation < 3 unusable < 70
+internal error (an inconclusive log must not hide a violation in another one).
+
+``parallel_map`` is the executor shared with ``tubempc regress``: inline for one job or ``workers=1``, a
+``ProcessPoolExecutor`` (spawn) by default, or Dask distributed with ``dask="local"`` (a ``LocalCluster`` on
+loopback, worker processes, no dashboard) or ``dask="tcp://host:port"`` (an existing scheduler whose workers can
+import ``verify`` and read the same paths).
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import multiprocessing
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+from tqdm import tqdm
+
+from tubempc.mitl import parse
+from tubempc.scenario import Scenario
+from verify.errors import UnusableInputError, VerifyError
+from verify.report import CertifyResultLike, junit_xml, write_junit, write_reports
+
+__all__ = [
+    "EXIT_INTERNAL",
+    "EXIT_UNUSABLE",
+    "LOG_SUFFIXES",
+    "BatchItem",
+    "BatchResult",
+    "certify_many",
+    "discover_logs",
+    "parallel_map",
+    "worst_exit_code",
+    "write_batch",
+]
+
+LOG_SUFFIXES = (".bag", ".mcap", ".db3")
+EXIT_UNUSABLE = 3
+EXIT_INTERNAL = 70
+_SEVERITY = {0: 0, 2: 1, 1: 2, 3: 3, 70: 4}
+_VERDICT_OF_CODE = {0: "pass", 1: "fail", 2: "inconclusive", 3: "unusable", 70: "error"}
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def worst_exit_code(codes: Iterable[int]) -> int:
+    """The most severe code: 0 < 2 (inconclusive) < 1 (violation) < 3 (unusable) < 70 (internal); 0 if empty."""
+    worst = 0
+    for code in codes:
+        if _SEVERITY.get(code, 5) > _SEVERITY.get(worst, 5):
+            worst = code
+    return worst
+
+
+# ---- finding logs -------------------------------------------------------------------------------------------------
+def _is_ros2_bag_dir(path: Path) -> bool:
+    return (path / "metadata.yaml").is_file()
+
+
+def _scan(folder: Path) -> list[Path]:
+    found: list[Path] = []
+    for entry in sorted(folder.iterdir(), key=lambda p: p.name):
+        if entry.is_dir():
+            found.extend([entry] if _is_ros2_bag_dir(entry) else _scan(entry))
+        elif entry.is_file() and entry.suffix.lower() in LOG_SUFFIXES:
+            found.append(entry)
+    return found
+
+
+def discover_logs(paths: Iterable[str | Path]) -> tuple[list[Path], list[tuple[str, str]]]:
+    """Expand folders into logs; return (logs in a stable order without duplicates, [(path, problem), ...]).
+
+    A folder holding ``metadata.yaml`` is one ROS2 bag; any other folder is scanned recursively for ``.bag``,
+    ``.mcap``, ``.db3`` files and ROS2 bag folders. A missing path or a folder without logs is a problem, not an
+    exception, so that the batch can report it as an unusable row.
+    """
+    logs: list[Path] = []
+    problems: list[tuple[str, str]] = []
+    seen: set[Path] = set()
+    for raw in paths:
+        path = Path(raw)
+        if not path.exists():
+            problems.append((str(path), "file not found"))
+            continue
+        if path.is_dir() and not _is_ros2_bag_dir(path):
+            found = _scan(path)
+            if not found:
+                problems.append((str(path), "folder holds no .bag, .mcap or .db3 log and no ROS2 bag folder"))
+        else:
+            found = [path]
+        for log in found:
+            key = log.resolve()
+            if key not in seen:
+                seen.add(key)
+                logs.append(log)
+    return logs, problems
+
+
+# ---- results ------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class BatchItem:
+    """One log's outcome. ``result`` is the ``CertifyResult`` (None when the log was unusable or crashed)."""
+
+    path: str
+    name: str
+    exit_code: int
+    verdict: Literal["pass", "fail", "inconclusive", "unusable", "error"]
+    error: str | None
+    elapsed_s: float
+    result: CertifyResultLike | None
+
+    def __post_init__(self) -> None:
+        if self.exit_code not in _VERDICT_OF_CODE:
+            raise ValueError(f"exit_code={self.exit_code!r} is not one of {sorted(_VERDICT_OF_CODE)}")
+        if (self.result is None) != (self.exit_code in (EXIT_UNUSABLE, EXIT_INTERNAL)):
+            raise ValueError(f"{self.path}: a result is required exactly when the log was certified")
+
+
+@dataclass(frozen=True, slots=True)
+class BatchResult:
+    """All logs of a batch in input order; ``exit_code`` is the worst code (see the module docstring)."""
+
+    items: tuple[BatchItem, ...]
+    scenario: Scenario
+    spec: str | None
+
+    @property
+    def exit_code(self) -> int:
+        return worst_exit_code(item.exit_code for item in self.items)
+
+    def counts(self) -> dict[str, int]:
+        out = dict.fromkeys(("pass", "fail", "inconclusive", "unusable", "error"), 0)
+        for item in self.items:
+            out[item.verdict] += 1
+        return out
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One summary row per log (the content of ``summary.csv``)."""
+        rows = []
+        for item in self.items:
+            checks = list(item.result.certificate.get("checks", []) or []) if item.result is not None else []
+            failed = [str(c.get("name")) for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"]
+            unknown = [str(c.get("name")) for c in checks
+                       if isinstance(c, dict) and c.get("verdict") not in ("pass", "fail")]
+            margins = [float(c["margin"]) for c in checks
+                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)]
+            first = [float(c["first_violation_time"]) for c in checks if isinstance(c, dict)
+                     and c.get("verdict") == "fail" and isinstance(c.get("first_violation_time"), int | float)]
+            rows.append({
+                "log": item.path, "folder": item.name, "verdict": item.verdict, "exit_code": item.exit_code,
+                "checks": len(checks), "failed_checks": " ".join(failed), "inconclusive_checks": " ".join(unknown),
+                "worst_margin": min(margins) if margins else None,
+                "first_violation_s": min(first) if first else None,
+                "error": item.error or "", "elapsed_s": round(item.elapsed_s, 3),
+            })
+        return rows
+
+
+# ---- the per-log job (module level: picklable for processes and Dask) -----------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _Job:
+    path: str
+    name: str
+    scenario: Scenario
+    spec: str | None
+    time_base: str
+    salvage: bool
+
+
+def _certify_function() -> Callable[..., CertifyResultLike]:
+    from verify import certify_log  # type: ignore[attr-defined,unused-ignore]
+
+    fn: Callable[..., CertifyResultLike] = certify_log
+    return fn
+
+
+def _certify_one(job: _Job) -> BatchItem:
+    start = time.perf_counter()
+    try:
+        result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
+                                     salvage=job.salvage)
+    except VerifyError as err:
+        return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
+    except Exception as err:  # a bug in one log's certification must not take the other logs down
+        message = f"internal error: {err.__class__.__name__}: {err}"
+        return BatchItem(job.path, job.name, EXIT_INTERNAL, "error", message, time.perf_counter() - start, None)
+    code = int(result.exit_code)
+    verdict = _VERDICT_OF_CODE.get(code, "error")
+    if code not in (0, 1, 2):
+        message = f"internal error: certifier returned exit code {code} with a result"
+        return BatchItem(job.path, job.name, EXIT_INTERNAL, "error", message, time.perf_counter() - start, None)
+    return BatchItem(job.path, job.name, code, verdict,  # type: ignore[arg-type]
+                     None, time.perf_counter() - start, result)
+
+
+# ---- executors ----------------------------------------------------------------------------------------------------
+def _show_progress(progress: bool | None) -> bool:
+    return sys.stderr.isatty() if progress is None else progress
+
+
+def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: str | None = None,
+                 progress: bool | None = None, desc: str = "") -> list[R]:
+    """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
+
+    ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"`` or a scheduler address.
+    ``progress``: a tqdm bar on stderr (default: only when stderr is a terminal). Exceptions raised by ``fn``
+    propagate; callers that must not stop (``certify_many``) catch inside ``fn``.
+    """
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers={workers!r} must be at least 1")
+    bar = tqdm(total=len(items), desc=desc or None, unit="job", disable=not _show_progress(progress),
+               file=sys.stderr, leave=False)
+    try:
+        if dask is not None:
+            return _dask_map(fn, items, workers=workers, address=dask, bar=bar)
+        n = min(workers or os.cpu_count() or 1, len(items))
+        if n <= 1:
+            out = []
+            for item in items:
+                out.append(fn(item))
+                bar.update()
+            return out
+        results: dict[int, R] = {}
+        with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                bar.update()
+        return [results[i] for i in range(len(items))]
+    finally:
+        bar.close()
+
+
+def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, address: str, bar: Any) -> list[R]:
+    import importlib
+
+    # distributed is only partly typed; treat it as untyped at this one boundary
+    dist: Any = importlib.import_module("distributed")
+    Client, LocalCluster, dask_completed = dist.Client, dist.LocalCluster, dist.as_completed
+
+    cluster = None
+    try:
+        if address == "local":
+            cluster = LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
+                                   processes=True, host="127.0.0.1", dashboard_address=None,
+                                   silence_logs=logging.ERROR)
+            client = Client(cluster)
+        elif re.fullmatch(r"(tcp|tls|inproc|ucx)://\S+", address):
+            client = Client(address, timeout="20s")
+        else:
+            raise UnusableInputError(f"dask={address!r}: expected 'local' or a scheduler address such as "
+                                     f"tcp://host:8786", path=address)
+    except OSError as err:  # includes connection timeouts
+        raise UnusableInputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
+                                 path=address) from err
+    try:
+        futures = client.map(fn, list(items), pure=False)
+        for _ in dask_completed(futures):
+            bar.update()
+        gathered: list[R] = client.gather(futures)
+        return gathered
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# ---- the batch ----------------------------------------------------------------------------------------------------
+def _folder_names(paths: Sequence[str]) -> list[str]:
+    names: list[str] = []
+    used: set[str] = set()
+    for path in paths:
+        base = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(path).name).strip("._") or "log"
+        name, k = base, 2
+        while name in used:
+            name, k = f"{base}-{k}", k + 1
+        used.add(name)
+        names.append(name)
+    return names
+
+
+def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
+                 time_base: Literal["header", "log"] = "header", salvage: bool = False, workers: int | None = None,
+                 dask: str | None = None, progress: bool | None = None) -> BatchResult:
+    """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
+
+    Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
+    order; unusable logs (and missing paths, empty folders) are items with exit code 3, never exceptions.
+    Raises ``SpecSyntaxError`` for a malformed ``spec`` (it concerns every log) and ``UnusableInputError`` for
+    an unreachable Dask scheduler.
+    """
+    if spec is not None:
+        parse(spec)
+    if time_base not in ("header", "log"):
+        raise ValueError(f"time_base={time_base!r} must be 'header' or 'log'")
+    raw = list(paths)
+    logs, problems = discover_logs(raw)
+    ordered = [str(p) for p in logs] + [p for p, _ in problems]
+    names = dict(zip(ordered, _folder_names(ordered), strict=True))
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage) for p in logs]
+    done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
+    bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
+    return BatchResult(tuple(done) + tuple(bad), scenario, spec)
+
+
+# ---- writing ------------------------------------------------------------------------------------------------------
+def _write_certificate(result: CertifyResultLike, out_dir: Path) -> Path:
+    from verify import write_certificate  # type: ignore[attr-defined,unused-ignore]
+
+    path: Path = write_certificate(result, out_dir)
+    return path
+
+
+def _md_cell(value: Any) -> str:
+    import html
+
+    text = "" if value is None else (f"{value:.6g}" if isinstance(value, float) else str(value))
+    return re.sub(r"([\\`*_|\[\]])", r"\\\1", html.escape(text, quote=False)).replace("\n", " ")
+
+
+def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True) -> dict[str, Path]:
+    """Write ``<out_dir>/<log>/`` (certificate.json + reports, or error.txt) and the summaries.
+
+    Returns the top-level files: ``summary.md``, ``summary.csv``, ``junit.xml`` (one suite per log; an unusable
+    log is a suite with one errored test case).
+    """
+    import xml.etree.ElementTree as ET
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    suites: list[ET.Element] = []
+    for item in batch.items:
+        sub = out / item.name
+        sub.mkdir(parents=True, exist_ok=True)
+        if item.result is not None:
+            _write_certificate(item.result, sub)
+            if reports:
+                write_reports(item.result, batch.scenario, sub, suite_name=item.name)
+            suites.append(junit_xml(item.result, suite_name=item.name))
+        else:
+            (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
+            suite = ET.Element("testsuite", {"name": item.name, "tests": "1", "failures": "0", "errors": "1",
+                                             "skipped": "0", "time": f"{item.elapsed_s:.3f}"})
+            case = ET.SubElement(suite, "testcase", {"classname": item.name, "name": "read log", "time": "0"})
+            ET.SubElement(case, "error", {"message": item.error or "", "type": item.verdict})
+            suites.append(suite)
+    rows = batch.rows()
+    columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
+    with (out / "summary.csv").open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+    counts = batch.counts()
+    lines = [f"# Batch certification: exit code {batch.exit_code}", "",
+             f"Scenario `{_md_cell(batch.scenario.name)}`; {len(batch.items)} log(s): "
+             + ", ".join(f"{n} {k}" for k, n in counts.items() if n) + ".", "",
+             "| log | verdict | exit | failed checks | inconclusive checks | worst margin | first violation [s] "
+             "| error |", "|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        target = "report.md" if reports else "certificate.json"
+        link = (f"[{_md_cell(row['log'])}]({row['folder']}/{target})" if row["exit_code"] in (0, 1, 2)
+                else _md_cell(row["log"]))
+        lines.append(f"| {link} | {row['verdict']} | {row['exit_code']} | {_md_cell(row['failed_checks'])} | "
+                     f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin'])} | "
+                     f"{_md_cell(row['first_violation_s'])} | {_md_cell(row['error'])} |")
+    (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return {"summary.md": out / "summary.md", "summary.csv": out / "summary.csv",
+            "junit.xml": write_junit(suites, out / "junit.xml")}
