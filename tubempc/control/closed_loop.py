@@ -1,0 +1,304 @@
+"""Closed-loop simulation of the tube MPC: nominal FHOCP every h, ancillary law at the MoCap rate.
+
+input: a ``Scenario``, a sequence of ``Target`` (region, optional hold-until time), a disturbance model name and a
+seed -> output: a frozen ``ClosedLoopResult`` with the real, measured and nominal states and the applied inputs
+(world frame and the body-frame command as logged) at every MoCap sample, one ``SolverRecord`` per MPC step,
+one ``Arrival`` per target, and ``ok``/``reason``.
+
+Loop: at t_k = k h the FHOCP is solved from the nominal state x_hat(t_k) (the nominal evolves on its own, it
+is never reset to the measurement, so q = x - x_hat stays in the tube); its first input u_hat is held over h.
+At every MoCap sample ``u = u_hat - sigma (x_meas - x_hat)`` is held over 1/rate; the plant
+``x' = f(x) + g(x) u + delta`` is integrated exactly for the linear world model and with RK4 (4 substeps per
+sample) otherwise. A target is *arrived* when the nominal enters the terminal ball (Algorithm 1, checked at
+multiples of h); the robot then holds position there until ``depart_after_s`` and goes on to the next target.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from tubempc.control.disturbance import InvalidArgumentError, make_disturbance
+from tubempc.control.dynamics import STATE_DIM, DynamicsModel, model_for
+from tubempc.control.fhocp import FAR_AWAY_M, NominalMPC, build_fhocp, discrete_step
+from tubempc.control.guide import GuidePath, guide_path, references
+from tubempc.control.tube import TubeDesign, design_tube
+from tubempc.errors import DesignError
+from tubempc.scenario import Scenario
+
+__all__ = ["Arrival", "ClosedLoopResult", "SolverRecord", "Target", "hold_position", "leg_obstacles",
+           "run_closed_loop"]
+
+LOOKAHEAD_M = 0.5  # guide-path look-ahead of the first reference: far enough to saturate the speed
+GUIDE_MARGIN_M = 0.05  # extra clearance of the guide path around the constraint discs
+MIN_OBSTACLE_SLOTS = 4
+
+
+@dataclass(frozen=True)
+class Target:
+    """Steer to ``region``; once arrived, hold there until ``depart_after_s`` (None: leave at once)."""
+
+    region: str
+    depart_after_s: float | None = None
+
+
+def hold_position(region: str, until_s: float) -> Target:
+    """A dwell: go to (or stay in) ``region`` and hold position there until time ``until_s``."""
+    return Target(region=region, depart_after_s=until_s)
+
+
+@dataclass(frozen=True, slots=True)
+class SolverRecord:
+    t_s: float
+    status: str
+    success: bool
+    iterations: int
+    solve_time_s: float
+    backup: bool
+    target: str
+
+
+@dataclass(frozen=True, slots=True)
+class Arrival:
+    """One target: leg start ``departed_s`` (absolute), Algorithm-1 duration ``t_ij_s`` and absolute times."""
+
+    region: str
+    departed_s: float
+    t_ij_s: float | None  # entered_terminal_s - departed_s
+    entered_terminal_s: float | None  # nominal entered the terminal ball (a multiple of h)
+    inside_s: float | None  # first sample with the robot disc fully inside the region
+    departure_s: float | None  # when it left for the next target (None: held to the end)
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    t_s: np.ndarray  # n, MoCap sample times from 0
+    x: np.ndarray  # n x 3 real state
+    x_measured: np.ndarray  # n x 3 as the MoCap reports it (x plus noise)
+    x_hat: np.ndarray  # n x 3 nominal state
+    u_world: np.ndarray  # n x 3 applied input as a world-frame velocity (without drift f)
+    u_body: np.ndarray  # n x 3 body-frame command (cmd_vel)
+    solver: tuple[SolverRecord, ...]
+    arrivals: tuple[Arrival, ...]
+    targets: tuple[Target, ...]
+    start_region: str
+    tube_radius_m: float
+    sigma: float
+    seed: int
+    disturbance: str
+    disturbance_params: dict[str, Any]
+    mocap_noise_m: float
+    ok: bool
+    reason: str | None
+
+    @property
+    def max_tube_error_m(self) -> float:
+        """max over samples of |x - x_hat| (real state, all three components)."""
+        return float(np.max(np.linalg.norm(self.x - self.x_hat, axis=1))) if len(self.t_s) else 0.0
+
+
+def leg_obstacles(scenario: Scenario, source: str, target: str) -> list[tuple[float, float, float]]:
+    """Regions other than ``source`` and ``target`` as (cx, cy, rho) discs."""
+    return [(r.center[0], r.center[1], r.radius) for r in scenario.regions if r.name not in (source, target)]
+
+
+def _plant_step(model: DynamicsModel, dt_s: float) -> ca.Function | None:
+    if model.linear_world:
+        return None
+    x = ca.SX.sym("x", STATE_DIM)
+    u = ca.SX.sym("u", STATE_DIM)
+    d = ca.SX.sym("d", STATE_DIM)
+    sub = 4
+    dt = dt_s / sub
+    xk = x
+    for _ in range(sub):
+        def rhs(z: ca.SX) -> ca.SX:
+            return model.f(z) + model.g(z) @ u + d
+        k1 = rhs(xk)
+        k2 = rhs(xk + dt / 2 * k1)
+        k3 = rhs(xk + dt / 2 * k2)
+        k4 = rhs(xk + dt * k3)
+        xk = xk + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("plant", [x, u, d], [xk])
+
+
+@dataclass
+class _Leg:
+    index: int
+    target: Target
+    goal: np.ndarray
+    path: GuidePath
+    obstacles: np.ndarray  # K x 3: cx, cy, required distance of the nominal
+    departed_s: float
+    s_m: float = 0.0
+    entered_s: float | None = None
+    inside_s: float | None = None
+    departure_s: float | None = None
+
+
+def _start_leg(scenario: Scenario, tube: TubeDesign, *, index: int, target: Target, source: str, x_hat: np.ndarray,
+               t_s: float, chord_m: float) -> _Leg:
+    region = scenario.region(target.region)
+    if region.unsafe:
+        raise DesignError(f"target {target.region} is an unsafe region")
+    discs = leg_obstacles(scenario, source, target.region)
+    grown = [(cx, cy, rho + tube.clearance_m) for cx, cy, rho in discs]
+    path = guide_path(tuple(float(v) for v in x_hat[:2]), region.center, grown, box_x=tube.workspace_x,
+                      box_y=tube.workspace_y, margin_m=GUIDE_MARGIN_M)
+    obstacles = np.array([(cx, cy, r + chord_m) for cx, cy, r in grown], dtype=float).reshape(-1, 3)
+    goal = np.array([region.center[0], region.center[1], scenario.initial_heading])
+    return _Leg(index=index, target=target, goal=goal, path=path, obstacles=obstacles, departed_s=t_s)
+
+
+def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
+    if len(leg.obstacles):
+        gap = np.hypot(leg.obstacles[:, 0] - pos[0], leg.obstacles[:, 1] - pos[1]) - leg.obstacles[:, 2]
+        active = leg.obstacles[gap <= reach_m]
+    else:
+        active = np.zeros((0, 3))
+    n = max(MIN_OBSTACLE_SLOTS, len(active))
+    slots = np.tile(np.array([[pos[0] + FAR_AWAY_M, pos[1], 0.0]]), (n, 1))  # unused: far, zero radius
+    slots[: len(active)] = active
+    return slots.T.copy()
+
+
+def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
+                    disturbance: str = "random", seed: int = 0, t_end_s: float | None = None,
+                    mocap_noise_m: float = 0.0, model: DynamicsModel | None = None) -> ClosedLoopResult:
+    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring)."""
+    if not targets:
+        raise InvalidArgumentError("targets: at least one target is required")
+    if not (math.isfinite(mocap_noise_m) and mocap_noise_m >= 0):
+        raise InvalidArgumentError(f"mocap_noise_m={mocap_noise_m!r} must be a finite non-negative number")
+    if t_end_s is not None and not (math.isfinite(t_end_s) and t_end_s > 0):
+        raise InvalidArgumentError(f"t_end_s={t_end_s!r} must be a positive number")
+    source = start_region or scenario.initial_region
+    for name in [source, *(t.region for t in targets)]:
+        if name not in {r.name for r in scenario.regions}:
+            raise InvalidArgumentError(f"region={name!r} is not in scenario {scenario.name!r}")
+    if scenario.region(source).unsafe:
+        raise DesignError(f"start region {source} is an unsafe region")
+    model = model or model_for(scenario)
+    tube = design_tube(scenario, model)
+    rng = np.random.default_rng(seed)
+    dist = make_disturbance(disturbance, scenario.disturbance.bound, rng)
+    h = scenario.mpc.h
+    dt = 1.0 / scenario.mocap.rate_hz
+    per_step = round(h / dt)
+    if per_step < 1 or abs(per_step * dt - h) > 1e-9:
+        raise DesignError(f"mpc.h={h!r} s is not a whole number of MoCap samples (mocap.rate_hz="
+                          f"{scenario.mocap.rate_hz!r})")
+    n_stages = scenario.mpc.steps
+    speed = tube.max_planar_speed_mps
+    reach = n_stages * h * speed + 0.2
+    problem = build_fhocp(scenario, model, tube, MIN_OBSTACLE_SLOTS)
+    chord = problem.chord_margin_m
+    mpc_by_slots: dict[int, NominalMPC] = {}
+    nominal_step = discrete_step(model, dt, substeps=4)
+    plant = _plant_step(model, dt)
+
+    start = scenario.region(source)
+    x = np.array([start.center[0], start.center[1], scenario.initial_heading], dtype=float)
+    x_hat = x.copy()
+    if t_end_s is None:
+        budget = 0.0
+        prev = start.center
+        for tg in targets:
+            c = scenario.region(tg.region).center
+            budget += 3.0 * math.dist(prev, c) / speed + 30.0
+            prev = c
+        t_max = max(budget, max((tg.depart_after_s or 0.0) for tg in targets) + 30.0)
+    else:
+        t_max = t_end_s
+    n_max = math.floor(t_max / dt + 1e-9) + 1
+    t_arr = np.arange(n_max) * dt
+    xs = np.zeros((n_max, 3))
+    xms = np.zeros((n_max, 3))
+    xhs = np.zeros((n_max, 3))
+    uw = np.zeros((n_max, 3))
+    ub = np.zeros((n_max, 3))
+    records: list[SolverRecord] = []
+    legs: list[_Leg] = [_start_leg(scenario, tube, index=0, target=targets[0], source=source, x_hat=x_hat, t_s=0.0,
+                                   chord_m=chord)]
+    u_hat = np.zeros(3)
+    terminal = tube.terminal_radius_m
+    eta = scenario.robot.radius
+    done_at: int | None = None
+    for i in range(n_max):
+        t = float(t_arr[i])
+        leg = legs[-1]
+        region = scenario.region(leg.target.region)
+        if i % per_step == 0:
+            if leg.entered_s is None and float(np.linalg.norm(x_hat - leg.goal)) <= terminal:
+                leg.entered_s = t
+            if leg.entered_s is not None and leg.inside_s is not None:
+                ready = leg.target.depart_after_s is None or t >= leg.target.depart_after_s - 1e-9
+                if ready and leg.index + 1 < len(targets):
+                    leg.departure_s = t
+                    leg = _start_leg(scenario, tube, index=leg.index + 1, target=targets[leg.index + 1],
+                                     source=leg.target.region, x_hat=x_hat, t_s=t, chord_m=chord)
+                    legs.append(leg)
+                    region = scenario.region(leg.target.region)
+                elif ready and t_end_s is None:
+                    done_at = i
+            leg.s_m = leg.path.project(x_hat[:2], leg.s_m, 1.0)
+            refs = np.empty((n_stages + 1, 3))
+            refs[:, :2] = references(leg.path, leg.s_m, lookahead_m=LOOKAHEAD_M, step_m=speed * h,
+                                     stages=n_stages + 1)
+            refs[:, 2] = leg.goal[2]
+            slots = _slots(leg, x_hat[:2], reach)
+            m = slots.shape[1]
+            if m not in mpc_by_slots:
+                mpc_by_slots[m] = NominalMPC(build_fhocp(scenario, model, tube, m) if m != MIN_OBSTACLE_SLOTS
+                                             else problem)
+            out = mpc_by_slots[m].solve(x_hat, refs, slots)
+            for other, ctrl in mpc_by_slots.items():  # keep every warm start current
+                if other != m:
+                    ctrl.adopt(out)
+            records.append(SolverRecord(t_s=t, status=out.status, success=out.success, iterations=out.iterations,
+                                        solve_time_s=out.solve_time_s, backup=out.backup, target=leg.target.region))
+            u_hat = out.inputs[0].copy()
+        noise = np.zeros(3)
+        if mocap_noise_m > 0:
+            noise[:2] = rng.normal(scale=mocap_noise_m, size=2)
+        x_meas = x + noise
+        q = x_meas - x_hat
+        u = u_hat - tube.sigma * q
+        xs[i], xms[i], xhs[i] = x, x_meas, x_hat
+        if model.linear_world:
+            uw[i] = u
+        else:
+            uw[i] = np.asarray(model.g(x), dtype=float) @ u
+        ub[i] = model.body_command(x, u)
+        if leg.inside_s is None and math.dist(x[:2], region.center) + eta <= region.radius:
+            leg.inside_s = t
+        if done_at is not None:
+            break
+        delta = dist.sample(t, x - x_hat)
+        if plant is None:
+            x = x + dt * (u + delta)
+            x_hat = x_hat + dt * u_hat
+        else:
+            x = np.asarray(plant(x, u, delta), dtype=float).ravel()
+            x_hat = np.asarray(nominal_step(x_hat, u_hat), dtype=float).ravel()
+    n = (done_at + 1) if done_at is not None else n_max
+    arrivals = tuple(Arrival(region=lg.target.region, departed_s=lg.departed_s,
+                             t_ij_s=None if lg.entered_s is None else round(lg.entered_s - lg.departed_s, 9),
+                             entered_terminal_s=lg.entered_s, inside_s=lg.inside_s, departure_s=lg.departure_s)
+                     for lg in legs)
+    ok, reason = True, None
+    for k, tg in enumerate(targets):
+        if k >= len(legs) or legs[k].entered_s is None or legs[k].inside_s is None:
+            ok = False
+            reason = f"target {tg.region} (#{k + 1}) not reached by t={t_arr[n - 1]:.2f} s"
+            break
+    return ClosedLoopResult(t_s=t_arr[:n].copy(), x=xs[:n].copy(), x_measured=xms[:n].copy(), x_hat=xhs[:n].copy(),
+                            u_world=uw[:n].copy(), u_body=ub[:n].copy(), solver=tuple(records), arrivals=arrivals,
+                            targets=tuple(targets), start_region=source, tube_radius_m=tube.radius_m,
+                            sigma=tube.sigma, seed=seed, disturbance=disturbance, disturbance_params=dist.params,
+                            mocap_noise_m=mocap_noise_m, ok=ok, reason=reason)

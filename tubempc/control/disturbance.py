@@ -1,0 +1,79 @@
+"""Disturbance models for the closed-loop simulation, all seeded from an explicit generator.
+
+input: a model name, the bound delta_bar and a ``numpy.random.Generator`` -> output: a frozen ``Disturbance``
+whose ``sample(t_s, q)`` gives ``delta`` with ``|delta|_2 <= delta_bar`` (held over one MoCap sample), and whose
+``params`` (JSON-ready) go into the log's metadata.
+
+- ``none``: 0;  ``random``: uniform in the ball of radius delta_bar, drawn at every sample;
+- ``worst``: ``delta_bar q / |q|`` (pushes the tube error outward; a fixed random direction while q = 0);
+- ``bias``: a constant vector of norm delta_bar in a random direction;
+- ``sine``: ``delta_bar sin(2 pi f t + phase) d`` with a random unit direction d and phase, f = 0.2 Hz.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tubempc.errors import TubeMPCError
+
+__all__ = ["DISTURBANCE_MODELS", "Disturbance", "InvalidArgumentError", "make_disturbance"]
+
+DISTURBANCE_MODELS = ("none", "random", "worst", "bias", "sine")
+_SINE_FREQUENCY_HZ = 0.2
+
+
+class InvalidArgumentError(TubeMPCError, ValueError):
+    """An argument of a control function is out of its domain; the message names it and its value."""
+
+
+def _unit(rng: np.random.Generator, dim: int) -> np.ndarray:
+    v = rng.normal(size=dim)
+    return np.asarray(v / np.linalg.norm(v), dtype=float)
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    kind: str
+    bound: float
+    direction: np.ndarray
+    phase_rad: float
+    rng: np.random.Generator = field(repr=False, compare=False)
+
+    def sample(self, t_s: float, q: np.ndarray) -> np.ndarray:
+        dim = len(self.direction)
+        if self.kind == "none" or self.bound == 0:
+            return np.zeros(dim, dtype=float)
+        if self.kind == "random":
+            radius = self.bound * float(self.rng.uniform()) ** (1.0 / dim)
+            return radius * _unit(self.rng, dim)
+        if self.kind == "worst":
+            norm = float(np.linalg.norm(q))
+            return self.bound * (q / norm if norm > 1e-15 else self.direction)
+        if self.kind == "bias":
+            return self.bound * self.direction
+        return self.bound * math.sin(2 * math.pi * _SINE_FREQUENCY_HZ * t_s + self.phase_rad) * self.direction
+
+    @property
+    def params(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"model": self.kind, "bound": self.bound}
+        if self.kind in ("worst", "bias", "sine"):
+            out["direction"] = [float(v) for v in self.direction]
+        if self.kind == "sine":
+            out["frequency_hz"] = _SINE_FREQUENCY_HZ
+            out["phase_rad"] = self.phase_rad
+        return out
+
+
+def make_disturbance(kind: str, bound: float, rng: np.random.Generator, dim: int = 3) -> Disturbance:
+    """A disturbance model by name (one of ``DISTURBANCE_MODELS``)."""
+    if kind not in DISTURBANCE_MODELS:
+        raise InvalidArgumentError(f"disturbance={kind!r} is not one of {', '.join(DISTURBANCE_MODELS)}")
+    if not (math.isfinite(bound) and bound >= 0):
+        raise InvalidArgumentError(f"disturbance bound={bound!r} must be a finite non-negative number")
+    direction = _unit(rng, dim)
+    phase = float(rng.uniform(0, 2 * math.pi))
+    return Disturbance(kind=kind, bound=bound, direction=direction, phase_rad=phase, rng=rng)

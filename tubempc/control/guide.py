@@ -1,0 +1,133 @@
+"""Free-space guide paths: the intermediate targets that keep the short-horizon FHOCP feasible and moving.
+
+input: start and goal points, obstacle discs (already grown by eta + r_q), the tightened workspace box ->
+output: a frozen ``GuidePath`` (a polyline of shortest length in a visibility graph around the discs grown by a
+margin), and ``references`` (the per-stage reference points the FHOCP tracks, a look-ahead along that polyline).
+No free path raises ``NoGuidePathError`` (a ``DesignError``).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from tubempc.errors import DesignError
+
+__all__ = ["GuidePath", "NoGuidePathError", "guide_path", "references"]
+
+_RING_POINTS = 16
+
+
+class NoGuidePathError(DesignError):
+    """No collision-free polyline connects the start to the goal."""
+
+
+@dataclass(frozen=True, slots=True)
+class GuidePath:
+    points: np.ndarray  # k x 2, from start to goal
+    cum_length_m: np.ndarray  # k, arc length at each vertex
+
+    @property
+    def length_m(self) -> float:
+        return float(self.cum_length_m[-1])
+
+    def point_at(self, s_m: float) -> np.ndarray:
+        s = min(max(s_m, 0.0), self.length_m)
+        i = int(np.searchsorted(self.cum_length_m, s, side="right")) - 1
+        i = min(max(i, 0), len(self.points) - 2) if len(self.points) > 1 else 0
+        if len(self.points) == 1:
+            return np.array(self.points[0], dtype=float)
+        seg = self.cum_length_m[i + 1] - self.cum_length_m[i]
+        a = 0.0 if seg <= 0 else (s - self.cum_length_m[i]) / seg
+        return np.asarray(self.points[i] + a * (self.points[i + 1] - self.points[i]), dtype=float)
+
+    def project(self, p: np.ndarray, s_from_m: float, window_m: float) -> float:
+        """Arc length of the point of the path nearest to ``p`` within ``[s_from, s_from + window]``."""
+        best_s, best_d = s_from_m, math.inf
+        for i in range(len(self.points) - 1):
+            s0, s1 = float(self.cum_length_m[i]), float(self.cum_length_m[i + 1])
+            if s1 < s_from_m or s0 > s_from_m + window_m or s1 <= s0:
+                continue
+            a, b = self.points[i], self.points[i + 1]
+            t = float(np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0))
+            s = min(max(s0 + t * (s1 - s0), s_from_m), s_from_m + window_m)
+            d = float(np.linalg.norm(self.point_at(s) - p))
+            if d < best_d:
+                best_s, best_d = s, d
+        return best_s
+
+
+def _segment_clear(a: np.ndarray, b: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> bool:
+    if len(centers) == 0:
+        return True
+    ab = b - a
+    denom = float(np.dot(ab, ab))
+    t = np.zeros(len(centers)) if denom == 0 else np.clip((centers - a) @ ab / denom, 0.0, 1.0)
+    nearest = a + t[:, None] * ab
+    return bool(np.all(np.linalg.norm(centers - nearest, axis=1) >= radii - 1e-12))
+
+
+def guide_path(start: Sequence[float], goal: Sequence[float], discs: Sequence[tuple[float, float, float]], *,
+               box_x: tuple[float, float], box_y: tuple[float, float], margin_m: float = 0.05) -> GuidePath:
+    """Shortest polyline from ``start`` to ``goal`` avoiding ``discs`` (cx, cy, r) grown by ``margin_m``.
+
+    Vertices are the start, the goal and ``_RING_POINTS`` points on a circumscribed polygon around each grown
+    disc (so polygon edges stay outside it), kept when inside the box. A disc's margin is reduced where the start
+    or the goal lies within it, so that a start on the edge of the free space still connects.
+    """
+    s = np.asarray(start, dtype=float)[:2]
+    g = np.asarray(goal, dtype=float)[:2]
+    centers = np.array([[d[0], d[1]] for d in discs], dtype=float).reshape(-1, 2)
+    base = np.array([d[2] for d in discs], dtype=float)
+    room = np.minimum(np.linalg.norm(centers - s, axis=1), np.linalg.norm(centers - g, axis=1)) - base
+    margins = np.clip(np.minimum(margin_m, room), 0.0, None)
+    check = base + 0.5 * margins  # the polygon edges stay at >= base + margin; the check allows half of it
+    nodes = [s, g]
+    step = 2 * math.pi / _RING_POINTS
+    for c, r0, m in zip(centers, base, margins, strict=True):
+        ring = (r0 + m) / math.cos(step / 2)
+        for k in range(_RING_POINTS):
+            p = c + ring * np.array([math.cos(k * step), math.sin(k * step)])
+            inside_box = box_x[0] <= p[0] <= box_x[1] and box_y[0] <= p[1] <= box_y[1]
+            if inside_box and bool(np.all(np.linalg.norm(centers - p, axis=1) >= check)):
+                nodes.append(p)
+    pts = np.array(nodes)
+    n = len(pts)
+    dist = np.full(n, math.inf)
+    prev = np.full(n, -1, dtype=int)
+    dist[0] = 0.0
+    heap: list[tuple[float, int]] = [(0.0, 0)]
+    done = np.zeros(n, dtype=bool)
+    while heap:
+        d, i = heapq.heappop(heap)
+        if done[i]:
+            continue
+        done[i] = True
+        if i == 1:
+            break
+        for j in range(n):
+            if done[j]:
+                continue
+            w = float(np.linalg.norm(pts[j] - pts[i]))
+            if d + w < dist[j] and _segment_clear(pts[i], pts[j], centers, check):
+                dist[j] = d + w
+                prev[j] = i
+                heapq.heappush(heap, (d + w, j))
+    if not math.isfinite(dist[1]):
+        raise NoGuidePathError(f"no collision-free path from ({s[0]:.3f}, {s[1]:.3f}) to ({g[0]:.3f}, {g[1]:.3f}) "
+                               f"around {len(discs)} obstacle disc(s) inside the tightened workspace")
+    order = [1]
+    while order[-1] != 0:
+        order.append(int(prev[order[-1]]))
+    poly = pts[order[::-1]]
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poly, axis=0), axis=1))])
+    return GuidePath(points=poly, cum_length_m=cum)
+
+
+def references(path: GuidePath, s_m: float, *, lookahead_m: float, step_m: float, stages: int) -> np.ndarray:
+    """``stages`` planar reference points at arc length ``s + lookahead + k * step`` (clamped at the goal)."""
+    return np.array([path.point_at(s_m + lookahead_m + k * step_m) for k in range(stages)])
