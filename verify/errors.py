@@ -8,6 +8,8 @@ from __future__ import annotations
 __all__ = [
     "LogReadError",
     "MissingTopicError",
+    "ScenarioInputError",
+    "SpecError",
     "TruncatedLogError",
     "UnusableInputError",
     "VerifyError",
@@ -37,3 +39,11 @@ class TruncatedLogError(LogReadError):
 
 class MissingTopicError(UnusableInputError):
     """A topic the scenario names is absent from the log."""
+
+
+class SpecError(UnusableInputError):
+    """The MITL formula given to the certifier is malformed or names unknown propositions."""
+
+
+class ScenarioInputError(UnusableInputError):
+    """The scenario given to the certifier cannot be loaded."""

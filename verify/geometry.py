@@ -1,0 +1,105 @@
+"""Region geometry of the certifier (its own, independent of the planner): positions -> signed margins in metres.
+
+input: sample positions ``x_m, y_m`` (arrays) and a scenario -> output: margins that are 1-Lipschitz in the position
+(so the motion between two samples bounds them), the region containing the robot disc, and the conservative bounds
+of a margin over the gap between two samples given the largest distance the robot can travel in that gap.
+
+Conventions (metres; positive = the proposition holds):
+* safe region R (centre c, radius r): the disc ``M(p, eta)`` is inside R: margin ``r - eta - |p - c|``;
+* unsafe region R: the disc intersects R: margin ``r + eta - |p - c|``;
+* workspace box: the disc is inside the box: margin ``min(x - x0, x1 - x, y - y0, y1 - y) - eta``.
+A margin of exactly 0 is reported as undecided by the monitor (see docs/certifier.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tubempc.scenario import Scenario
+
+__all__ = [
+    "GapBounds",
+    "containing_region",
+    "gap_bounds",
+    "label_margins",
+    "region_margins",
+    "step_bound_m",
+    "workspace_margin",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> FloatArray:
+    """``(n_regions, n)`` margins, one row per region in scenario order (NaN where the position is NaN)."""
+    eta = scenario.robot.radius
+    out = np.empty((len(scenario.regions), x_m.shape[0]), dtype=np.float64)
+    for k, r in enumerate(scenario.regions):
+        d = np.hypot(x_m - r.center[0], y_m - r.center[1])
+        out[k] = (r.radius + eta - d) if r.unsafe else (r.radius - eta - d)
+    return out
+
+
+def label_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario, names: set[str] | frozenset[str]
+                  ) -> dict[str, FloatArray]:
+    """Margin of each atomic proposition in ``names``: the largest margin among the regions carrying the label."""
+    margins = region_margins(x_m, y_m, scenario)
+    out: dict[str, FloatArray] = {}
+    for name in names:
+        rows = [k for k, r in enumerate(scenario.regions) if name in r.labels]
+        if rows:
+            out[name] = np.max(margins[rows], axis=0) if len(rows) > 1 else margins[rows[0]]
+        else:
+            out[name] = np.full(x_m.shape[0], -np.inf)
+    return out
+
+
+def containing_region(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> IntArray:
+    """Index of the region whose ball contains the whole robot disc (``|p - c| + eta <= r``), -1 if none or NaN.
+
+    Regions of a valid scenario do not overlap, so at most one region contains the disc.
+    """
+    eta = scenario.robot.radius
+    idx = np.full(x_m.shape[0], -1, dtype=np.int64)
+    for k, r in enumerate(scenario.regions):
+        inside = np.hypot(x_m - r.center[0], y_m - r.center[1]) + eta <= r.radius
+        idx[inside] = k
+    return idx
+
+
+def workspace_margin(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> FloatArray:
+    ws, eta = scenario.workspace, scenario.robot.radius
+    return np.minimum(np.minimum(x_m - ws.x[0], ws.x[1] - x_m), np.minimum(y_m - ws.y[0], ws.y[1] - y_m)) - eta
+
+
+def step_bound_m(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, max_speed_mps: float) -> FloatArray:
+    """Largest path length between consecutive samples: ``max(v_max * dt, |p_{i+1} - p_i|)`` (NaN-safe: inf)."""
+    dt_s = np.diff(t_ns).astype(np.float64) * 1e-9
+    step = np.hypot(np.diff(x_m), np.diff(y_m))
+    bound = np.fmax(max_speed_mps * dt_s, step)
+    return np.where(np.isnan(step), np.inf, bound)
+
+
+@dataclass(frozen=True, slots=True)
+class GapBounds:
+    """Bounds of a 1-Lipschitz margin over every instant of each open gap between consecutive samples."""
+
+    lo: FloatArray
+    hi: FloatArray
+
+
+def gap_bounds(margin: FloatArray, step_m: FloatArray) -> GapBounds:
+    """A path of length <= D from p_i to p_{i+1}: any point is within s of p_i and D - s of p_{i+1}, so a
+    1-Lipschitz margin m stays in ``[(m_i + m_{i+1} - D) / 2, (m_i + m_{i+1} + D) / 2]``. NaN -> ``[-inf, inf]``."""
+    mid = 0.5 * (margin[:-1] + margin[1:])
+    half = 0.5 * step_m
+    lo = mid - half
+    hi = mid + half
+    nan = np.isnan(lo)
+    lo[nan] = -np.inf
+    hi[np.isnan(hi)] = np.inf
+    return GapBounds(lo, hi)

@@ -1,0 +1,96 @@
+"""Timed runs (paper, Definition 3) and their pointwise MITL check.
+
+input: a trajectory's region indices per sample (``geometry.containing_region``) -> output: the timed run
+``[(region, time_s), ...]`` (``timed_run_of``); input: formula text + timed run + labels -> output: a
+``TimedRunVerdict`` (``check_timed_run``), evaluated with the pointwise semantics of ``verify.monitor``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tubempc.errors import SpecSyntaxError
+from tubempc.mitl import Formula, atoms, parse
+from verify.errors import SpecError
+from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
+
+__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of"]
+
+
+def parse_spec(text: str) -> Formula:
+    """MITL text -> formula; a malformed formula raises ``SpecError`` (exit 3) naming the column."""
+    try:
+        return parse(text)
+    except SpecSyntaxError as err:
+        raise SpecError(f"malformed formula: {err}") from err
+
+
+@dataclass(frozen=True, slots=True)
+class TimedRunVerdict:
+    """Verdict of a formula on a timed run, with the first violation (or the undecided sub-formula) when not pass."""
+
+    verdict: str
+    formula: str
+    subformula: str | None = None
+    time_s: float | None = None
+    reason: str | None = None
+
+    @property
+    def first_violation_time(self) -> float | None:
+        return self.time_s if self.verdict == "fail" else None
+
+
+def _to_ns(t: float) -> int:
+    if not math.isfinite(t):
+        raise ValueError(f"time={t!r} is not finite")
+    return round(t * 1e9)
+
+
+def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
+                    end: float | None = None) -> TimedRunVerdict:
+    """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
+
+    ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
+    (a region missing from ``labels`` has none); ``end``: when observation stopped (default: the last time).
+    Times are compared in integer nanoseconds (``round(t * 1e9)``).
+    """
+    f = parse_spec(formula)
+    if not run:
+        return TimedRunVerdict("inconclusive", str(f), str(f), None, "the timed run is empty")
+    times = np.array([_to_ns(float(t)) for _, t in run], dtype=np.int64)
+    if np.any(np.diff(times) < 0):
+        raise ValueError(f"run times must be non-decreasing, got {[t for _, t in run]}")
+    end_ns = int(times[-1]) if end is None else _to_ns(float(end))
+    if end_ns < int(times[-1]):
+        raise ValueError(f"end={end} is before the last run time {run[-1][1]}")
+    pos = Positions.points(times, end_ns)  # equal times are allowed: distinct positions at the same instant
+    atom_values = {}
+    for name in atoms(f):
+        holds = np.array([name in labels.get(region, ()) for region, _ in run], dtype=bool)
+        atom_values[name] = truth_from_bool(holds)
+    values = evaluate(f, pos, atom_values)
+    root = values[f]
+    verdict = verdict_of(float(root.lo[0]), float(root.hi[0]))
+    if verdict == "pass":
+        return TimedRunVerdict("pass", str(f))
+    why = explain(f, 0, pos, values)
+    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason)
+
+
+def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.float64],
+                 names: Sequence[str]) -> list[tuple[str, float]]:
+    """Definition 3: each maximal stretch of samples whose disc lies in region r starts an entry ``(r, t)``.
+
+    ``region_index[i]`` is the containing region of sample i or -1 (none, or unknown because of NaN).
+    A stretch outside every region separates entries (leaving R1 and re-entering it gives two entries).
+    """
+    if region_index.size == 0:
+        return []
+    change = np.flatnonzero(np.diff(region_index) != 0) + 1
+    starts = np.concatenate(([0], change))
+    return [(names[int(region_index[s])], float(times_s[s])) for s in starts if region_index[s] >= 0]

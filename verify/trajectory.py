@@ -1,0 +1,115 @@
+"""Trajectory semantics (the stricter one): formula + sampled positions -> verdict, robustness signal and witness.
+
+input: an MITL formula, sample times (int ns, strictly increasing), positions ``x_m, y_m`` (NaN = missing), the
+scenario and the speed bound -> output: a ``TrajectoryVerdict``.
+
+Positions of the monitor are the samples *and* the open gaps between them. An atom's value at a sample is its exact
+margin (``[-inf, inf]`` when the sample is NaN); at a gap it is the bound of the margin over every instant of the gap
+(``geometry.gap_bounds``), so a disc that may have touched an obstacle between two samples makes ``G !obs``
+undecided, never true, and a sample inside an obstacle makes it false with that sample as evidence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tubempc.mitl import Formula, atoms
+from tubempc.scenario import Scenario
+from verify.geometry import gap_bounds, label_margins, step_bound_m
+from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
+
+__all__ = ["TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class TrajectoryVerdict:
+    """Verdict at time 0, guaranteed margin (m), witness, and the margin signal at the samples."""
+
+    verdict: str
+    margin_m: float
+    margin_hi_m: float
+    subformula: str | None
+    time_ns: int | None
+    reason: str | None
+    signal_t_ns: IntArray
+    signal_rho_m: FloatArray
+
+
+def trajectory_positions(t_ns: IntArray) -> tuple[Positions, IntArray, IntArray]:
+    """Interleaved sample points and gaps; returns positions, the index of each sample, the index of each gap
+    (-1 where two samples are 1 ns apart and leave no instant between them)."""
+    n = t_ns.shape[0]
+    has_gap = np.diff(t_ns) >= 2
+    before = np.concatenate(([0], np.cumsum(has_gap)))
+    point_at = np.arange(n, dtype=np.int64) + before
+    gap_at = np.where(has_gap, point_at[:-1] + 1, -1)
+    m = n + int(before[-1]) if n else 0
+    start = np.empty(m, dtype=np.int64)
+    stop = np.empty(m, dtype=np.int64)
+    is_point = np.zeros(m, dtype=bool)
+    start[point_at] = t_ns
+    stop[point_at] = t_ns
+    is_point[point_at] = True
+    g = gap_at[has_gap]
+    start[g] = t_ns[:-1][has_gap] + 1
+    stop[g] = t_ns[1:][has_gap] - 1
+    end = int(t_ns[-1]) if n else 0
+    return Positions(start, stop, is_point, end), point_at, gap_at
+
+
+def interleave(point_lo: FloatArray, point_hi: FloatArray, gap_lo: FloatArray, gap_hi: FloatArray, *,
+               point_at: IntArray, gap_at: IntArray, size: int) -> Truth:
+    n = point_at.shape[0]
+    if size == 2 * n - 1:  # every pair of samples leaves a gap: strided interleave, no scatter
+        lo = np.empty(2 * n, dtype=np.float64)
+        hi = np.empty(2 * n, dtype=np.float64)
+        lo[0::2], hi[0::2] = point_lo, point_hi
+        lo[1:-1:2], hi[1:-1:2] = gap_lo, gap_hi
+        return Truth(lo[:size], hi[:size])
+    lo = np.empty(size, dtype=np.float64)
+    hi = np.empty(size, dtype=np.float64)
+    lo[point_at] = point_lo
+    hi[point_at] = point_hi
+    ok = gap_at >= 0
+    lo[gap_at[ok]] = gap_lo[ok]
+    hi[gap_at[ok]] = gap_hi[ok]
+    return Truth(lo, hi)
+
+
+def _sample_truth(margin: FloatArray) -> tuple[FloatArray, FloatArray]:
+    nan = np.isnan(margin)
+    if not nan.any():
+        return margin, margin
+    return np.where(nan, -np.inf, margin), np.where(nan, np.inf, margin)
+
+
+def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario, *,
+                     max_speed_mps: float) -> TrajectoryVerdict:
+    """Evaluate ``formula`` at the first sample under the trajectory semantics (times: ns, strictly increasing)."""
+    n = t_ns.shape[0]
+    if n == 0:
+        empty_i = np.zeros(0, dtype=np.int64)
+        return TrajectoryVerdict("inconclusive", -np.inf, np.inf, str(formula), None, "no pose samples",
+                                 empty_i, np.zeros(0))
+    pos, point_at, gap_at = trajectory_positions(t_ns)
+    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
+    values: dict[str, Truth] = {}
+    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula)).items():
+        plo, phi = _sample_truth(margin)
+        gb = gap_bounds(margin, step)
+        values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
+    result = evaluate_at_points(formula, pos, values)
+    root = result[formula]
+    lo0, hi0 = float(root.lo[0]), float(root.hi[0])
+    verdict = verdict_of(lo0, hi0)
+    signal = root.lo[point_at]
+    if verdict == "pass":
+        return TrajectoryVerdict(verdict, lo0, hi0, None, None, None, t_ns, signal)
+    why = explain(formula, 0, pos, result)
+    return TrajectoryVerdict(verdict, lo0, hi0, why.subformula, why.time_ns, why.reason, t_ns, signal)
