@@ -49,7 +49,8 @@ class Disturbance:
             return np.zeros(dim, dtype=float)
         if self.kind == "random":
             radius = self.bound * float(self.rng.uniform()) ** (1.0 / dim)
-            return radius * _unit(self.rng, dim)
+            out: np.ndarray = radius * _unit(self.rng, dim)
+            return out
         if self.kind == "worst":
             norm = float(np.linalg.norm(q))
             return self.bound * (q / norm if norm > 1e-15 else self.direction)
