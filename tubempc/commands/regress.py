@@ -1,16 +1,76 @@
-"""The `tubempc regress` subcommand (placeholder until its feature lands: exits 4 with one clear line)."""
+"""The `tubempc regress` subcommand: run a suite with the current controller, compare with a baseline.
+
+input: a suite YAML (default: the shipped one), a baseline JSON -> output: a readable diff on stdout, exit 0 when
+nothing regressed and 1 otherwise; ``--update-baseline`` writes the current metrics as the new baseline (exit 0).
+With ``--out DIR``: every run's log and certificate under ``DIR/<run>/``, plus ``diff.txt`` and ``junit.xml``.
+"""
 
 from __future__ import annotations
 
-import click
+import xml.etree.ElementTree as ET
+from pathlib import Path
 
-from tubempc.errors import NotAvailableError
+import click
 
 __all__ = ["regress"]
 
 
-@click.command(context_settings={"ignore_unknown_options": True})
-@click.argument("args", nargs=-1, type=click.UNPROCESSED)
-def regress(args: tuple[str, ...]) -> None:
-    """Not available yet."""
-    raise NotAvailableError("'tubempc regress' is not available yet in this version")
+@click.command()
+@click.option("--suite", "suite_path", type=click.Path(dir_okay=False), default=None,
+              help="Suite YAML (default: the suite shipped for the built-in scenario).")
+@click.option("--baseline", "baseline_path", type=click.Path(dir_okay=False), default=None,
+              help="Baseline JSON (default: the shipped baseline, only with the default suite).")
+@click.option("--update-baseline", is_flag=True, help="Write the current metrics as the new baseline.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Parallel processes (default: CPU count; 1 runs in this process).")
+@click.option("--dask", default=None, metavar="local|tcp://HOST:PORT",
+              help="Run on Dask distributed: a local cluster on loopback, or an existing scheduler.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Keep each run's log and certificate here, with diff.txt and junit.xml.")
+@click.option("--reports", is_flag=True, help="With --out: also write report.md/html per run.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: when stderr is a terminal).")
+def regress(*, suite_path: str | None, baseline_path: str | None, update_baseline: bool, workers: int | None,
+            dask: str | None, out_dir: str | None, reports: bool, progress: bool | None) -> None:
+    """Run a regression suite with the current controller and compare it with a stored baseline."""
+    from tubempc.regress import (
+        compare,
+        comparison_junit,
+        default_baseline_path,
+        expand_suite,
+        format_diff,
+        load_suite,
+        read_baseline,
+        run_cases,
+        write_baseline,
+    )
+    from tubempc.regress.compare import BaselineError
+
+    loaded = load_suite(suite_path)
+    if baseline_path is None:
+        if suite_path is not None:
+            raise BaselineError("--baseline is required with --suite (the shipped baseline belongs to the "
+                                "default suite)")
+        baseline_path = default_baseline_path()
+    if out_dir is None and reports:
+        raise click.UsageError("--reports needs --out DIR")
+    cases = expand_suite(loaded)
+    if update_baseline:
+        click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+        outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
+        path = write_baseline(baseline_path, loaded.suite, outcomes)
+        click.echo(f"regress: baseline written to {path} ({len(outcomes)} runs)")
+        return
+    baseline = read_baseline(baseline_path)  # before the runs: a missing baseline fails fast
+    click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+    outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
+    comparison = compare(baseline, outcomes, loaded.suite.tolerances)
+    text = format_diff(comparison)
+    click.echo(text)
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "diff.txt").write_text(text + "\n", encoding="utf-8")
+        ET.ElementTree(comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)).write(
+            out / "junit.xml", encoding="utf-8", xml_declaration=True)
+    if comparison.regressed:
+        raise click.exceptions.Exit(1)
