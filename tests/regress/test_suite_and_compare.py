@@ -54,7 +54,7 @@ def test_default_suite_expands() -> None:
 def test_malformed_suite_names_the_field(tmp_path: Path, patch: str, field: str, words: str) -> None:
     text = ("name: s\nscenarios:\n  - {name: a, scenario: nexus-sml, runs: [{name: r, start: R1, targets: [R3]}]}\n"
             "seeds: [0]\ndisturbances: [random]\n")
-    key = patch.split(":")[0]
+    key = patch.split(":", maxsplit=1)[0]
     lines = [ln for ln in text.splitlines() if not ln.startswith(key + ":")] + [patch]
     path = tmp_path / "suite.yaml"
     path.write_text("\n".join(lines) + "\n")
