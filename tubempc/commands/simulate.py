@@ -1,16 +1,61 @@
-"""The `tubempc simulate` subcommand (placeholder until its feature lands: exits 4 with one clear line)."""
+"""The ``tubempc simulate`` subcommand: one closed-loop transition -> a ROS log and a printed summary.
+
+input: a scenario (file or built-in name), source and target regions, disturbance model, seed, output path ->
+output: the log at ``--out`` (``.mcap`` ROS2 by default, ``.bag`` ROS1, ``.db3``, or a bag directory) and a
+summary on stdout: t_ij (Algorithm 1), arrival time, max |q| against r_q, largest body-frame command, solver
+statistics. Exit 0 when the target was reached, 1 when it was not, 3 for unusable input.
+"""
 
 from __future__ import annotations
 
 import click
 
-from tubempc.errors import NotAvailableError
-
 __all__ = ["simulate"]
 
+EXIT_NOT_REACHED = 1
 
-@click.command(context_settings={"ignore_unknown_options": True})
-@click.argument("args", nargs=-1, type=click.UNPROCESSED)
-def simulate(args: tuple[str, ...]) -> None:
-    """Not available yet."""
-    raise NotAvailableError("'tubempc simulate' is not available yet in this version")
+
+@click.command()
+@click.option("--scenario", "scenario_path", default="nexus-sml", show_default=True,
+              help="Scenario YAML file or built-in scenario name.")
+@click.option("--from", "source", default=None, help="Start region (default: the scenario's initial region).")
+@click.option("--to", "target", required=True, help="Target region.")
+@click.option("--disturbance", type=click.Choice(["none", "random", "worst", "bias", "sine"]), default="random",
+              show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--mocap-noise", "mocap_noise_m", type=float, default=0.0, show_default=True,
+              help="Standard deviation (m) of simulated MoCap position noise.")
+@click.option("--hold", "hold_s", type=float, default=None,
+              help="Keep simulating until this time (s), holding position in the target.")
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=True, writable=True),
+              help="Output log: .mcap (ROS2), .bag (ROS1), .db3, or a directory name for a ROS2 bag.")
+def simulate(*, scenario_path: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
+             hold_s: float | None, out_path: str) -> None:
+    """Simulate the tube MPC from one region to another and write the robot's log."""
+    import numpy as np
+
+    from tubempc.control import Target, run_closed_loop
+    from tubempc.rosio import write_log
+    from tubempc.scenario import load_scenario
+
+    scenario = load_scenario(scenario_path)
+    result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
+                             t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    path = write_log(result, scenario, out_path)
+    arrival = result.arrivals[0]
+    times_ms = np.array([r.solve_time_s for r in result.solver]) * 1e3
+    iters = np.array([r.iterations for r in result.solver])
+    t_ij = "not reached" if arrival.t_ij_s is None else f"{arrival.t_ij_s:.1f} s"
+    inside = "never" if arrival.inside_s is None else f"{arrival.inside_s:.2f} s"
+    click.echo(f"{result.start_region} -> {target}: t_ij = {t_ij} (Algorithm 1), robot inside {target} at {inside}")
+    click.echo(f"tube: max |x - x_hat| = {result.max_tube_error_m:.5f} m vs r_q = {result.tube_radius_m:.5f} m "
+               f"(sigma = {result.sigma:.4g}, disturbance {disturbance}, seed {seed})")
+    click.echo(f"input: max |u_body| per axis = {np.round(np.max(np.abs(result.u_body), axis=0), 4).tolist()}")
+    click.echo(f"solver: {len(result.solver)} solves, {sum(r.success for r in result.solver)} succeeded, "
+               f"{sum(r.backup for r in result.solver)} backups; solve time median {np.median(times_ms):.3f} ms, "
+               f"p95 {np.percentile(times_ms, 95):.3f} ms, max {np.max(times_ms):.3f} ms; iterations median "
+               f"{np.median(iters):.0f}, max {np.max(iters)}")
+    click.echo(f"log: {path}")
+    if not result.ok:
+        click.echo(f"tubempc: {result.reason}", err=True)
+        raise click.exceptions.Exit(EXIT_NOT_REACHED)

@@ -64,7 +64,10 @@ def metadata_document(result: ClosedLoopResult, scenario: Scenario,
     return doc
 
 
-def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, serialize: Callable[[Any, str], bytes | memoryview],
+_Serialize = Callable[[Any, str], bytes | memoryview]
+
+
+def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, serialize: _Serialize,
               *, extra: Mapping[str, Any] | None, ros1: bool) -> list[tuple[str, str, int, bytes | memoryview]]:
     """(topic, msgtype, log time ns, serialized bytes), in time order per topic."""
     types = typestore.types
