@@ -1,0 +1,462 @@
+"""MITL -> an on-the-fly alternating timed automaton with clock copies, made nondeterministic state by state.
+
+input: a ``Formula`` (``tubempc.mitl``) and the tick (seconds per integer time unit) -> output: a ``TimedAutomaton``
+whose states are canonical sets of *obligations* ``(node, age)``: "the sub-formula ``node`` was anchored ``age``
+ticks ago and is still pending". ``step(state, delta, label_class)`` gives the successor states (a disjunction)
+after ``delta`` ticks, at a new position whose labels are ``label_class``.
+
+Construction (documented with its complexity in ``docs/planner.md``):
+
+* the formula is put in negation normal form over ``F_I, G_I, U_I, R_I`` (release, the dual of until), strong
+  ``X_I`` and weak ``Xw_I`` (the dual of next); ``->`` and ``!`` on temporal operators are pushed to the atoms;
+* a temporal node anchored at the current position has age 0 and is *processed* at once (pointwise semantics:
+  ``F_I a`` at ``i`` can be met at ``i`` itself when ``0 in I``); at each later position its age grows by the
+  elapsed ticks and it is processed again: ``in`` (age in ``I``), ``before`` (age below ``I``), ``future`` (a later
+  tick age can still lie in ``I``) decide whether it is met, stays pending or fails;
+* each pending obligation is a clock copy; ages are capped one tick above the largest constant that matters (an
+  unbounded interval's lower end), so a state is a finite value and the product with a WTS is a finite graph;
+* canonical form (hash-consed sorted tuples) with subsumption: two copies of the same ``F``/``U`` node that are both
+  inside their window keep only the older one (it implies the younger); two such ``G``/``R`` copies keep the
+  younger; a disjunct that is implied by another disjunct of the same successor set is dropped;
+* generalized Büchi acceptance: one set per unbounded ``F_[l,inf)`` / ``U_[l,inf)`` node; a state is in the set
+  when no copy of that node *inside its window* is pending. Copies still too young (age below ``l``) are ignored,
+  which is what makes ``G(p -> F[2,inf) q)`` acceptable on a run that keeps alternating ``p`` and ``q``.
+
+Times are integers (ticks); the caller scales every weight and interval endpoint exactly (``fractions.Fraction``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from fractions import Fraction
+from math import gcd, lcm
+
+from tubempc.mitl import (
+    Always,
+    And,
+    Atom,
+    Const,
+    Eventually,
+    Formula,
+    Implies,
+    Interval,
+    Next,
+    Not,
+    Or,
+    Until,
+)
+
+__all__ = [
+    "KIND_NAMES",
+    "Node",
+    "Obligation",
+    "State",
+    "TimedAutomaton",
+    "compile_formula",
+    "tick_of",
+]
+
+# Node kinds of the negation normal form.
+TRUE, FALSE, ATOM, NATOM, AND, OR, EV, ALW, UNT, REL, NXT, WNXT = range(12)
+KIND_NAMES = ("true", "false", "atom", "!atom", "and", "or", "F", "G", "U", "R", "X", "Xw")
+_TEMPORAL = frozenset({EV, ALW, UNT, REL, NXT, WNXT})
+_EXISTENTIAL = frozenset({EV, UNT})  # in-window copies: the older implies the younger
+_UNIVERSAL = frozenset({ALW, REL})  # in-window copies: the younger implies the older
+
+Obligation = tuple[int, int]  # (node id, age in ticks)
+State = tuple[Obligation, ...]  # sorted, canonical; () = nothing pending (accepting, absorbing)
+Dnf = tuple[State, ...]
+
+
+def tick_of(values: Iterable[Fraction], *, refine: int = 1) -> Fraction:
+    """Largest ``q`` such that every value is an integer multiple of ``q``, divided by ``refine``.
+
+    ``refine = 2`` makes every constant even, so that "strictly after a constant" is one tick after it.
+    """
+    nums = [v for v in values if v != 0]
+    if refine < 1:
+        raise ValueError(f"refine={refine} must be a positive integer")
+    if not nums:
+        return Fraction(1, refine)
+    if any(v < 0 for v in nums):
+        raise ValueError("times must not be negative")
+    den = lcm(*(v.denominator for v in nums))
+    g = 0
+    for v in nums:
+        g = gcd(g, int(v * den))
+    return Fraction(g, den) / refine
+
+
+@dataclass(frozen=True, slots=True)
+class Node:
+    """One node of the negation normal form. Interval endpoints in ticks; ``hi is None`` means unbounded."""
+
+    kind: int
+    text: str
+    atom: str = ""
+    children: tuple[int, ...] = ()
+    lo: int = 0
+    hi: int | None = None
+    lo_closed: bool = True
+    hi_closed: bool = False
+
+    def inside(self, age: int) -> bool:
+        if age < self.lo or (age == self.lo and not self.lo_closed):
+            return False
+        return self.hi is None or age < self.hi or (age == self.hi and self.hi_closed)
+
+    def before(self, age: int) -> bool:
+        return age < self.lo or (age == self.lo and not self.lo_closed)
+
+    def reached(self, age: int) -> bool:
+        """At or past the lower end: the copy is 'inside its window' for subsumption and acceptance."""
+        return not self.before(age)
+
+    def future(self, age: int) -> bool:
+        """Whether a later position (at least one tick later) can have an age inside the interval."""
+        if self.hi is None:
+            return True
+        nxt = age + 1
+        return nxt < self.hi or (nxt == self.hi and self.hi_closed)
+
+    @property
+    def cap(self) -> int:
+        """Ages at or above the cap behave alike."""
+        return (self.lo if self.hi is None else self.hi) + 1
+
+
+class TimedAutomaton:
+    """The compiled formula and the memo tables of its progression (real state: caches, no behaviour change)."""
+
+    def __init__(self, nodes: list[Node], root: int, tick: Fraction, formula: Formula,
+                 sources: dict[int, Formula]) -> None:
+        self.nodes = nodes
+        self.root = root
+        self.tick = tick
+        self.formula = formula
+        self.sources = sources  # node id -> the sub-formula of the input it came from (for messages)
+        self.label_classes: list[frozenset[str]] = []
+        self._class_ids: dict[frozenset[str], int] = {}
+        self._expand_memo: dict[tuple[int, int, int], Dnf] = {}
+        self._step_memo: dict[tuple[State, int, int], Dnf] = {}
+        self._accept_memo: dict[State, tuple[bool, ...]] = {}
+        self.buchi = tuple(i for i, n in enumerate(nodes) if n.kind in _EXISTENTIAL and n.hi is None)
+        self.atoms = frozenset(n.atom for n in nodes if n.kind in (ATOM, NATOM))
+
+    # ---- labels -------------------------------------------------------------------------------------------
+    def label_class(self, labels: Iterable[str]) -> int:
+        """Id of the class of label sets that agree on the formula's atoms."""
+        key = frozenset(labels) & self.atoms
+        cid = self._class_ids.get(key)
+        if cid is None:
+            cid = len(self.label_classes)
+            self.label_classes.append(key)
+            self._class_ids[key] = cid
+        return cid
+
+    # ---- progression --------------------------------------------------------------------------------------
+    def initial(self, label_class: int) -> Dnf:
+        """States after the first position (age 0 of the root), one per disjunct; ``()`` if none."""
+        return self._minimize(self._canon(d) for d in self._expand(self.root, 0, label_class))
+
+    def step(self, state: State, delta: int, label_class: int) -> Dnf:
+        """Successor states after ``delta >= 1`` ticks at a new position with the given label class."""
+        key = (state, delta, label_class)
+        out = self._step_memo.get(key)
+        if out is not None:
+            return out
+        acc: Dnf = ((),)
+        for node_id, age in state:
+            node = self.nodes[node_id]
+            new_age = min(age + delta, node.cap)
+            acc = self._and(acc, self._expand(node_id, new_age, label_class))
+            if not acc:
+                break
+        out = self._minimize(self._canon(d) for d in acc)
+        self._step_memo[key] = out
+        return out
+
+    def _expand(self, node_id: int, age: int, cls: int) -> Dnf:
+        key = (node_id, age, cls)
+        out = self._expand_memo.get(key)
+        if out is None:
+            out = self._expand_uncached(node_id, age, cls)
+            self._expand_memo[key] = out
+        return out
+
+    def _expand_uncached(self, node_id: int, age: int, cls: int) -> Dnf:
+        n = self.nodes[node_id]
+        k = n.kind
+        true: Dnf = ((),)
+        false: Dnf = ()
+        pending: Dnf = (((node_id, age),),)
+        if k == TRUE:
+            return true
+        if k == FALSE:
+            return false
+        if k == ATOM:
+            return true if n.atom in self.label_classes[cls] else false
+        if k == NATOM:
+            return false if n.atom in self.label_classes[cls] else true
+        if k == AND:
+            acc = true
+            for c in n.children:
+                acc = self._and(acc, self._expand(c, 0, cls))
+            return acc
+        if k == OR:
+            return self._or(*(self._expand(c, 0, cls) for c in n.children))
+        if k in (NXT, WNXT):
+            if age == 0:
+                return pending
+            if n.inside(age):
+                return self._expand(n.children[0], 0, cls)
+            return false if k == NXT else true
+        later = pending if n.future(age) else None
+        if k == EV:
+            a = self._expand(n.children[0], 0, cls) if n.inside(age) else false
+            return self._or(a, later or false)
+        if k == ALW:
+            if n.inside(age):
+                return self._and(self._expand(n.children[0], 0, cls), later or true)
+            return pending if n.before(age) else true
+        left = self._expand(n.children[0], 0, cls)
+        right = self._expand(n.children[1], 0, cls)
+        if k == UNT:
+            if n.inside(age):
+                return self._or(right, self._and(left, later or false))
+            return self._and(left, pending) if n.before(age) else false
+        # REL: for all j with age in I: right(j) or left(k) for some k in [anchor, j)
+        if n.inside(age):
+            return self._and(right, self._or(left, later or true))
+        return self._or(left, pending) if n.before(age) else true
+
+    # ---- boolean algebra on DNFs --------------------------------------------------------------------------
+    @staticmethod
+    def _and(a: Dnf, b: Dnf) -> Dnf:
+        if not a or not b:
+            return ()
+        if a == ((),):
+            return b
+        if b == ((),):
+            return a
+        return tuple(tuple(sorted(set(x) | set(y))) for x in a for y in b)
+
+    @staticmethod
+    def _or(*parts: Dnf) -> Dnf:
+        out: list[State] = []
+        for p in parts:
+            out.extend(p)
+        return tuple(out)
+
+    def _canon(self, disjunct: Iterable[Obligation]) -> State:
+        """Subsumption inside one conjunction: keep the strongest in-window copy of each F/U/G/R node."""
+        best: dict[int, int] = {}
+        rest: set[Obligation] = set()
+        nodes = self.nodes
+        for node_id, age in disjunct:
+            n = nodes[node_id]
+            if (n.kind in _EXISTENTIAL or n.kind in _UNIVERSAL) and n.reached(age):
+                old = best.get(node_id)
+                if old is None:
+                    best[node_id] = age
+                elif n.kind in _EXISTENTIAL:
+                    best[node_id] = max(old, age)
+                else:
+                    best[node_id] = min(old, age)
+            else:
+                rest.add((node_id, age))
+        rest.update(best.items())
+        return tuple(sorted(rest))
+
+    def implies(self, strong: Obligation, weak: Obligation) -> bool:
+        """Whether meeting obligation ``strong`` also meets ``weak`` (same node, both in window, or equal)."""
+        if strong == weak:
+            return True
+        if strong[0] != weak[0]:
+            return False
+        n = self.nodes[strong[0]]
+        if not (n.reached(strong[1]) and n.reached(weak[1])):
+            return False
+        if n.kind in _EXISTENTIAL:
+            return strong[1] >= weak[1]
+        if n.kind in _UNIVERSAL:
+            return strong[1] <= weak[1]
+        return False
+
+    def weaker(self, weak: State, strong: State) -> bool:
+        """Whether every obligation of ``weak`` is implied by one of ``strong`` (so ``weak`` is at least as easy)."""
+        if len(weak) > len(strong):
+            # subsumption keeps one in-window copy per node, so a weaker state cannot have more obligations
+            return False
+        sset = set(strong)
+        for o in weak:
+            if o in sset:
+                continue
+            if not any(self.implies(s, o) for s in strong if s[0] == o[0]):
+                return False
+        return True
+
+    def _minimize(self, disjuncts: Iterable[State]) -> Dnf:
+        """Drop duplicates and every disjunct that is harder than another one."""
+        uniq = sorted(set(disjuncts), key=len)
+        kept: list[State] = []
+        for d in uniq:
+            if not any(self.weaker(k, d) for k in kept):
+                kept.append(d)
+        return tuple(kept)
+
+    # ---- acceptance and events ----------------------------------------------------------------------------
+    def accepting(self, state: State) -> tuple[bool, ...]:
+        """Membership of ``state`` in each generalized Büchi set (one per unbounded F/U node)."""
+        out = self._accept_memo.get(state)
+        if out is None:
+            pending = {nid for nid, age in state if self.nodes[nid].reached(age)}
+            out = tuple(b not in pending for b in self.buchi)
+            self._accept_memo[state] = out
+        return out
+
+    def event_delays(self, state: State) -> set[int]:
+        """Dwell durations (ticks) after which some pending obligation changes status at the dwell position."""
+        out = {1}
+        for nid, age in state:
+            n = self.nodes[nid]
+            ends: tuple[int, ...] = (n.lo,) if n.hi is None else (n.lo, n.hi)
+            base = 0 if n.kind in (NXT, WNXT) else age
+            for c in ends:
+                for d in (c - base, c - base + 1):
+                    if d >= 1:
+                        out.add(d)
+        return out
+
+    def targeted_delays(self, state: State, arrivals: Iterable[tuple[int, int]]) -> set[int]:
+        """Dwell durations that make the *next arrival* (after ``weight`` ticks, into ``label_class``) land on the
+        lower end of a pending F/U window (or just after the upper end of a G/R window) whose child can change
+        value in that class. ``arrivals`` yields ``(weight, label_class)``."""
+        targets: list[tuple[int, int, int]] = []  # (node, age, target age)
+        for nid, age in state:
+            n = self.nodes[nid]
+            if n.kind in _EXISTENTIAL and n.before(age):
+                targets.append((nid, age, n.lo if n.lo_closed else n.lo + 1))
+            elif n.kind in _UNIVERSAL and n.hi is not None:
+                targets.append((nid, age, n.hi + 1 if n.hi_closed else n.hi))
+        out: set[int] = set()
+        if not targets:
+            return out
+        for weight, cls in arrivals:
+            for nid, age, goal in targets:
+                if self._triggers(nid, cls):
+                    d = goal - age - weight
+                    if d >= 1:
+                        out.add(d)
+        return out
+
+    def _triggers(self, node_id: int, cls: int) -> bool:
+        n = self.nodes[node_id]
+        child = n.children[-1]
+        val = self._expand(child, 0, cls)
+        if n.kind in _EXISTENTIAL:
+            return val != ()
+        if n.kind == REL:
+            return val != ((),) or self._expand(n.children[0], 0, cls) != ()
+        return val != ((),)
+
+    # ---- inspection ---------------------------------------------------------------------------------------
+    def describe(self, state: State) -> str:
+        """Readable text of a state: ``{F[30,50] mission_2 @12, ...}`` with ages in seconds."""
+        parts = [f"{self.nodes[nid].text} @{float(age * self.tick):g}s" for nid, age in state]
+        return "{" + ", ".join(parts) + "}"
+
+
+class _Compiler:
+    def __init__(self, tick: Fraction) -> None:
+        self.tick = tick
+        self.nodes: list[Node] = []
+        self.index: dict[Node, int] = {}
+        self.sources: dict[int, Formula] = {}
+
+    def add(self, node: Node, source: Formula) -> int:
+        nid = self.index.get(node)
+        if nid is None:
+            nid = len(self.nodes)
+            self.nodes.append(node)
+            self.index[node] = nid
+            self.sources[nid] = source
+        return nid
+
+    def ticks(self, value: Fraction, what: Interval) -> int:
+        q = value / self.tick
+        if q.denominator != 1:
+            raise ValueError(f"interval {what}: endpoint {value} is not a multiple of the tick {self.tick} s")
+        return int(q)
+
+    def _temporal(self, kind: int, text: str, kids: tuple[int, ...], f: Next | Eventually | Always | Until) -> int:
+        iv = f.interval
+        hi = None if iv.hi is None else self.ticks(iv.hi, iv)
+        node = Node(kind, text, children=kids, lo=self.ticks(iv.lo, iv), hi=hi, lo_closed=iv.lo_closed,
+                    hi_closed=iv.hi_closed)
+        return self.add(node, f)
+
+    def nnf(self, f: Formula, positive: bool) -> int:
+        if isinstance(f, Const):
+            val = f.value == positive
+            return self.add(Node(TRUE if val else FALSE, "true" if val else "false"), f)
+        if isinstance(f, Atom):
+            if positive:
+                return self.add(Node(ATOM, f.name, atom=f.name), f)
+            return self.add(Node(NATOM, "!" + f.name, atom=f.name), f)
+        if isinstance(f, Not):
+            return self.nnf(f.arg, not positive)
+        if isinstance(f, Implies):
+            return self._junction(OR if positive else AND, (self.nnf(f.left, not positive),
+                                                           self.nnf(f.right, positive)), f)
+        if isinstance(f, And | Or):
+            kind = (AND if isinstance(f, And) else OR) if positive else (OR if isinstance(f, And) else AND)
+            return self._junction(kind, tuple(self.nnf(a, positive) for a in f.args), f)
+        text = str(f) if positive else "!" + _paren(str(f))
+        if isinstance(f, Next):
+            return self._temporal(NXT if positive else WNXT, text, (self.nnf(f.arg, positive),), f)
+        if isinstance(f, Eventually):
+            return self._temporal(EV if positive else ALW, text, (self.nnf(f.arg, positive),), f)
+        if isinstance(f, Always):
+            return self._temporal(ALW if positive else EV, text, (self.nnf(f.arg, positive),), f)
+        if isinstance(f, Until):
+            # !(a U_I b) = (!a) R_I (!b)
+            kids = (self.nnf(f.left, positive), self.nnf(f.right, positive))
+            return self._temporal(UNT if positive else REL, text, kids, f)
+        raise TypeError(f"formula={f!r} is not an MITL formula")
+
+    def _junction(self, kind: int, kids: tuple[int, ...], source: Formula) -> int:
+        neutral, absorbing = (TRUE, FALSE) if kind == AND else (FALSE, TRUE)
+        flat: list[int] = []
+        for k in kids:
+            node = self.nodes[k]
+            if node.kind == absorbing:
+                return k
+            if node.kind == neutral:
+                continue
+            if node.kind == kind:
+                flat.extend(c for c in node.children if c not in flat)
+            elif k not in flat:
+                flat.append(k)
+        if not flat:
+            return self.add(Node(neutral, "true" if neutral == TRUE else "false"), source)
+        if len(flat) == 1:
+            return flat[0]
+        flat.sort()
+        sep = " & " if kind == AND else " | "
+        text = sep.join(_paren(self.nodes[c].text) for c in flat)
+        return self.add(Node(kind, text, children=tuple(flat)), source)
+
+
+def _paren(text: str) -> str:
+    return text if text.replace("_", "").isalnum() else f"({text})"
+
+
+def compile_formula(formula: Formula, tick: Fraction) -> TimedAutomaton:
+    """Negation normal form of ``formula`` with every interval endpoint in ticks (they must be exact multiples)."""
+    if tick <= 0:
+        raise ValueError(f"tick={tick} must be positive")
+    comp = _Compiler(tick)
+    root = comp.nnf(formula, True)
+    return TimedAutomaton(comp.nodes, root, tick, formula, comp.sources)

@@ -1,0 +1,217 @@
+"""Re-timing: a found run skeleton -> the same regions with dwell durations that maximise the timing margin.
+
+input: the search's ``LassoRun`` with the kind of each position (``move`` durations are fixed WTS weights; prefix
+``dwell`` durations are free), the formula and the labels -> output: a ``Retimed`` run (times rounded to the
+millisecond, re-checked exactly) and its margin: the smallest distance, in seconds, between a time difference the
+verdict depends on and the interval endpoint it must stay on the right side of.
+
+Which differences matter is read off the exact truth table of the skeleton: for an existential operator
+(``F``, ``U``, ``!G``) that holds at an anchor, one witness (the one with the most slack) must stay inside its
+window; when it does not hold, every candidate must stay outside; ``X`` keeps the membership of its successor.
+The children are kept where these choices use them, recursively. Keeping those memberships keeps the truth of every
+sub-formula that the verdict uses, so the re-timed run satisfies the formula (and it is re-checked exactly).
+A linear program (cvxpy) maximises the smallest slack, then minimises the total dwell time at that margin.
+Dwells of the repeating part keep their durations (the suffix is periodic).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from tubempc.mitl import Always, And, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, subformulas
+from tubempc.planning.semantics import LassoRun, holds, truth_table
+
+__all__ = ["Retimed", "retime"]
+
+_MARGIN_CAP_S = 1e4  # bounds the LP when nothing limits the margin
+_ROUND = Fraction(1, 1000)  # re-timed dwells are rounded to the millisecond
+
+
+@dataclass(frozen=True, slots=True)
+class Retimed:
+    """``margin_s`` is ``inf`` when no time difference matters to the verdict."""
+
+    run: LassoRun
+    margin_s: float
+    retimed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class _Keep:
+    """Keep ``t_j - t_i`` inside (``inside=True``) or on its current side outside of ``interval``."""
+
+    i: int
+    j: int
+    interval: Interval
+    inside: bool
+
+
+def _max_constant(formula: Formula) -> Fraction:
+    out = Fraction(0)
+    for f in subformulas(formula):
+        if isinstance(f, Next | Eventually | Always | Until):
+            out = max(out, f.interval.lo if f.interval.hi is None else f.interval.hi)
+    return out
+
+
+def _slack(d: Fraction | float, keep: _Keep, original: Fraction) -> float:
+    iv = keep.interval
+    if keep.inside:
+        s = float(d - iv.lo)
+        return s if iv.hi is None else min(s, float(iv.hi - d))
+    if original < iv.lo:
+        return float(iv.lo - d)
+    if iv.hi is None:
+        raise ValueError("a difference outside an unbounded window must lie below it")
+    return float(d - iv.hi)
+
+
+def _keeps(formula: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]], horizon: int) -> list[_Keep]:
+    table = truth_table(formula, run, labels)
+    loop = run.loop_start if run.loop_start is not None else run.size
+    keeps: list[_Keep] = []
+    seen: set[tuple[Formula, int]] = set()
+    todo: list[tuple[Formula, int]] = [(formula, 0)]
+
+    def val(f: Formula, k: int) -> bool:
+        return table[f][run.canon(k)]
+
+    while todo:
+        f, i = todo.pop()
+        if (f, i) in seen or i >= loop or i >= horizon:
+            continue  # anchors in the repeating part only look at fixed differences
+        seen.add((f, i))
+        if isinstance(f, Not):
+            todo.append((f.arg, i))
+        elif isinstance(f, And | Or):
+            todo.extend((a, i) for a in f.args)
+        elif isinstance(f, Implies):
+            todo.extend(((f.left, i), (f.right, i)))
+        elif isinstance(f, Next):
+            j = i + 1
+            if run.exists(j):
+                todo.append((f.arg, j))
+                if val(f.arg, j):
+                    keeps.append(_Keep(i, j, f.interval, f.interval.contains(run.time(j) - run.time(i))))
+        elif isinstance(f, Eventually | Always | Until):
+            if isinstance(f, Until):
+                left: Formula | None = f.left
+                right, want = f.right, True
+            else:
+                left, right, want = None, f.arg, isinstance(f, Eventually)
+            iv = f.interval
+            t0 = run.time(i)
+            holds_now = val(f, i) if isinstance(f, Eventually | Until) else not val(f, i)
+            cands: list[int] = []
+            for k in range(i, horizon):
+                if val(right, k) == want:
+                    cands.append(k)
+                if left is not None and not val(left, k):
+                    break
+            if holds_now:
+                inside = [k for k in cands if iv.contains(run.time(k) - t0)]
+                if not inside:
+                    continue  # the witness lies beyond the horizon: differences there are fixed
+                # prefer a witness before the repeating part: its time is the plan's, not a far copy's
+                pool = [k for k in inside if k <= loop] or inside
+                best = max(pool, key=lambda k: _slack(run.time(k) - t0, _Keep(i, k, iv, True), run.time(k) - t0))
+                keeps.append(_Keep(i, best, iv, True))
+                todo.append((right, best))
+                if left is not None:
+                    todo.extend((left, k) for k in range(i, best))
+            else:
+                for k in range(i, horizon):
+                    todo.append((right, k))
+                    if left is not None:
+                        todo.append((left, k))
+                for k in cands:
+                    keeps.append(_Keep(i, k, iv, False))
+    return keeps
+
+
+def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mapping[str, Sequence[str]], *,
+           min_dwell_s: Fraction) -> Retimed:
+    """Maximise the margin over the prefix dwells of ``run`` (see the module docstring)."""
+    loop = run.loop_start if run.loop_start is not None else run.size - 1
+    span = _max_constant(formula) + (run.period or 0) + 1
+    horizon = 0
+    while run.exists(horizon) and run.time(horizon) <= run.time(loop) + span:
+        horizon += 1
+    keeps = _keeps(formula, run, labels, horizon)
+    if not keeps:
+        return Retimed(run, math.inf, False)
+    originals = [run.time(k.j) - run.time(k.i) for k in keeps]
+    margin0 = min(_slack(d, k, d) for d, k in zip(originals, keeps, strict=True))
+    dwells = [p for p in range(1, loop + 1) if kinds[p] == "dwell"]
+    if not dwells:
+        return Retimed(run, margin0, False)
+    new = _solve(run, keeps, originals, dwells, loop=loop, min_dwell_s=min_dwell_s)
+    if new is None:
+        return Retimed(run, margin0, False)
+    durations = {p: max(min_dwell_s, round(Fraction(x) / _ROUND) * _ROUND) for p, x in zip(dwells, new, strict=True)}
+    times = [Fraction(0)]
+    for p in range(1, run.size):
+        step = durations.get(p, run.times[p] - run.times[p - 1])
+        times.append(times[-1] + step)
+    candidate = LassoRun(run.regions, tuple(times), run.loop_start, run.period)
+    if not holds(formula, candidate, labels):
+        return Retimed(run, margin0, False)
+    margin = min(_slack(candidate.time(k.j) - candidate.time(k.i), k, d) for d, k in zip(originals, keeps, strict=True))
+    if margin < margin0:
+        return Retimed(run, margin0, False)
+    return Retimed(candidate, margin, True)
+
+
+def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], dwells: list[int], *, loop: int,
+           min_dwell_s: Fraction) -> list[float] | None:
+    import cvxpy as cp
+
+    col = {p: c for c, p in enumerate(dwells)}
+    x0 = np.array([float(run.times[p] - run.times[p - 1]) for p in dwells])
+    rows: list[np.ndarray] = []
+    consts: list[float] = []
+    for keep, d0 in zip(keeps, originals, strict=True):
+        # d = d0 + sum over free dwells between i (exclusive) and j (inclusive, capped at the loop start) of (x - x0)
+        coeff = np.zeros(len(dwells))
+        for p in range(keep.i + 1, min(keep.j, loop) + 1):
+            c = col.get(p)
+            if c is not None:
+                coeff[c] = 1.0
+        base = float(d0) - float(coeff @ x0)
+        iv = keep.interval
+        sides: list[tuple[float, float]] = []  # slack = sign * d + offset
+        if keep.inside:
+            sides.append((1.0, -float(iv.lo)))
+            if iv.hi is not None:
+                sides.append((-1.0, float(iv.hi)))
+        elif d0 < iv.lo:
+            sides.append((-1.0, float(iv.lo)))
+        elif iv.hi is not None:
+            sides.append((1.0, -float(iv.hi)))
+        for sign, offset in sides:
+            rows.append(sign * coeff)
+            consts.append(sign * base + offset)
+    a = np.array(rows)
+    b = np.array(consts)
+    x = cp.Variable(len(dwells))
+    m = cp.Variable()
+    base_cons = [x >= float(min_dwell_s), m <= _MARGIN_CAP_S]
+    try:
+        p1 = cp.Problem(cp.Maximize(m), [*base_cons, a @ x + b >= m])
+        p1.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
+        if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None or float(m.value) <= 1e-6:
+            return None
+        best = float(m.value)
+        total = cp.sum(x)  # type: ignore[attr-defined]
+        p2 = cp.Problem(cp.Minimize(total), [*base_cons, a @ x + b >= best * (1 - 1e-6) - 1e-9])
+        p2.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
+        if p2.status not in ("optimal", "optimal_inaccurate") or x.value is None:
+            return None
+        return [float(v) for v in x.value]
+    except cp.error.SolverError:
+        return None

@@ -1,0 +1,360 @@
+"""Product search: WTS x formula automaton -> a time-optimal accepting lasso timed run (exact, in ticks).
+
+input: a WTS (``tubempc.planning.wts``: nodes = safe regions with ``LABELS``, edges with exact ``WEIGHT``), a
+``Formula`` and whether the robot may wait (dwell) in a region -> output: a ``SearchResult`` with a ``LassoRun``
+(prefix + repeating suffix) and the explored product graph; ``NoAcceptingRunError`` naming the obligation that
+cannot be met when no run exists.
+
+Times are scaled to integer ticks (the gcd of all weights and interval endpoints, halved when waiting is allowed
+so that "strictly after a constant" is one tick after it); every clock value is then an integer and the product is
+a finite graph. The search is Dijkstra over product states ``(region, automaton state)`` by (time, travel time):
+* moves follow WTS edges (one new position at the arrival);
+* a dwell creates one new position in the same region after an *event-driven* duration: until a pending
+  obligation changes status at the dwell position, or so that the next arrival in a region where the obligation
+  can change value lands exactly on its window's lower end (or just past the upper end of a G/R window), or one
+  tick (see ``TimedAutomaton.event_delays`` / ``targeted_delays``);
+* with waiting allowed, a state is pruned when an earlier state in the same region, after one dwell up to the
+  same time, has a weaker obligation set (it can do all the pruned state can);
+* the first state (in time order) with an accepting dwell self-loop ends the search; then the strongly connected
+  components of the explored graph that contain a cycle through every Büchi set give the accepting lassos, and the
+  one entered earliest is returned (the cycle visits one accepting state per Büchi set). Without waiting, the
+  finite product is explored completely.
+If the pruned search finds nothing, it is repeated without pruning before reporting that no run exists.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import networkx as nx
+
+from tubempc.errors import NoAcceptingRunError, TubeMPCError
+from tubempc.mitl import And, Formula, Interval, subformulas
+from tubempc.mitl.ast import Always, Eventually, Next, Until
+from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, tick_of
+from tubempc.planning.semantics import LassoRun
+from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
+
+__all__ = ["DEFAULT_MAX_STATES", "SearchLimitError", "SearchResult", "export_dot", "find_run"]
+
+DEFAULT_MAX_STATES = 2_000_000
+MOVE, DWELL = "move", "dwell"
+_DOMINANCE_WINDOW = 16  # how many earlier states of the same region and obligation skeleton are compared
+
+
+class SearchLimitError(TubeMPCError, RuntimeError):
+    """The product grew past ``max_states`` before the search could decide."""
+
+
+@dataclass(frozen=True, slots=True)
+class SearchResult:
+    """A lasso run in exact seconds; ``kinds[i]`` is ``start``, ``move`` or ``dwell``."""
+
+    run: LassoRun
+    kinds: tuple[str, ...]
+    tick_s: Fraction
+    states: int
+    expanded: int
+    seconds: float
+    explored: nx.DiGraph = field(compare=False, repr=False)
+    automaton: TimedAutomaton = field(compare=False, repr=False)
+
+
+def _intervals(formula: Formula) -> list[Interval]:
+    return [f.interval for f in subformulas(formula) if isinstance(f, Next | Eventually | Always | Until)]
+
+
+class _Product:
+    """Explored part of the product (real state of one search)."""
+
+    def __init__(self) -> None:
+        self.index: dict[tuple[int, State], int] = {}
+        self.region: list[int] = []
+        self.obl: list[State] = []
+        self.best: list[tuple[int, int]] = []
+        self.parent: list[tuple[int, int, str] | None] = []
+        self.settled: list[bool] = []
+        self.pruned: list[bool] = []
+        self.edges: list[list[tuple[int, int, str]]] = []
+        self.classes: list[int] = []  # label class of each region index
+
+    def get(self, region: int, obl: State) -> tuple[int, bool]:
+        key = (region, obl)
+        sid = self.index.get(key)
+        if sid is not None:
+            return sid, False
+        sid = len(self.region)
+        self.index[key] = sid
+        self.region.append(region)
+        self.obl.append(obl)
+        self.best.append((1 << 62, 1 << 62))
+        self.parent.append(None)
+        self.settled.append(False)
+        self.pruned.append(False)
+        self.edges.append([])
+        return sid, True
+
+
+def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
+             max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True) -> SearchResult:
+    """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring)."""
+    start = time.perf_counter()
+    init = initial if initial is not None else wts.graph.get(INITIAL)
+    if init is None or init not in wts:
+        raise ValueError(f"initial region {init!r} is not a state of the WTS (safe regions: {sorted(wts.nodes)})")
+    weights = [d[WEIGHT] for _, _, d in wts.edges(data=True)]
+    for a, b, d in wts.edges(data=True):
+        w = d[WEIGHT]
+        if not isinstance(w, Fraction | int) or w <= 0:
+            raise ValueError(f"WTS edge {a}->{b}: {WEIGHT}={w!r} must be a positive exact number (Fraction)")
+    consts = [c for iv in _intervals(formula) for c in (iv.lo, iv.hi) if c is not None]
+    tick = tick_of([Fraction(w) for w in weights] + consts, refine=2 if wait else 1)
+    aut = compile_formula(formula, tick)
+    result = _search(wts, aut, init, wait=wait, prune=wait, max_states=max_states)
+    if result is None and wait:
+        result = _search(wts, aut, init, wait=wait, prune=False, max_states=max_states)
+    if result is None:
+        if diagnose:
+            raise _no_run_error(wts, formula, wait=wait, initial=init, max_states=max_states)
+        raise NoAcceptingRunError(f"no timed run of the WTS satisfies {formula}", obligation=str(formula))
+    run, kinds, prod, expanded = result
+    return SearchResult(run=run, kinds=kinds, tick_s=tick, states=len(prod.region), expanded=expanded,
+                        seconds=time.perf_counter() - start, explored=_explored_graph(prod, aut, wts, tick),
+                        automaton=aut)
+
+
+def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prune: bool,
+            max_states: int) -> tuple[LassoRun, tuple[str, ...], _Product, int] | None:
+    names = sorted(wts.nodes)
+    idx = {n: i for i, n in enumerate(names)}
+    cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
+    adj: list[list[tuple[int, int]]] = [[] for _ in names]
+    for a, b, d in wts.edges(data=True):
+        if a == b:
+            continue
+        q = Fraction(d[WEIGHT]) / aut.tick
+        adj[idx[a]].append((idx[b], int(q)))
+    arrivals = [[(w, cls[j]) for j, w in row] for row in adj]
+    prod = _Product()
+    prod.classes = cls
+    heap: list[tuple[int, int, int]] = []
+    r0 = idx[init]
+    for obl in aut.initial(cls[r0]):
+        sid, _ = prod.get(r0, obl)
+        prod.best[sid] = (0, 0)
+        heapq.heappush(heap, (0, 0, sid))
+    buckets: dict[tuple[int, tuple[int, ...]], list[int]] = {}
+    stop_at: int | None = None
+    expanded = 0
+    nb = len(aut.buchi)
+    while heap:
+        t, travel, sid = heapq.heappop(heap)
+        if prod.settled[sid] or prod.best[sid] != (t, travel):
+            continue
+        if stop_at is not None and t > stop_at:
+            break
+        prod.settled[sid] = True
+        r, obl = prod.region[sid], prod.obl[sid]
+        if prune and _dominated(aut, prod, buckets, sid=sid, t=t, cls=cls[r]):
+            prod.pruned[sid] = True
+            continue
+        expanded += 1
+        succs: list[tuple[int, State, int, int, str]] = []
+        for j, w in adj[r]:
+            for o2 in aut.step(obl, w, cls[j]):
+                succs.append((j, o2, w, w, MOVE))
+        if wait:
+            delays = aut.event_delays(obl) | aut.targeted_delays(obl, arrivals[r])
+            for d in sorted(delays):
+                for o2 in aut.step(obl, d, cls[r]):
+                    succs.append((r, o2, d, 0, DWELL))
+                    if o2 == obl and stop_at is None and all(aut.accepting(obl)):
+                        stop_at = t
+        for j, o2, d, moved, kind in succs:
+            v, _ = prod.get(j, o2)
+            prod.edges[sid].append((v, d, kind))
+            cand = (t + d, travel + moved)
+            if cand < prod.best[v] and not prod.settled[v]:
+                prod.best[v] = cand
+                prod.parent[v] = (sid, d, kind)
+                heapq.heappush(heap, (cand[0], cand[1], v))
+        if len(prod.region) > max_states:
+            raise SearchLimitError(f"the product grew past max_states={max_states} states while searching for "
+                                   f"{aut.formula}; raise the limit or simplify the formula")
+    return _best_lasso(prod, aut, nb=nb, names=names, tick=aut.tick, expanded=expanded)
+
+
+def _dominated(aut: TimedAutomaton, prod: _Product, buckets: dict[tuple[int, tuple[int, ...]], list[int]], *,
+               sid: int, t: int, cls: int) -> bool:
+    r, obl = prod.region[sid], prod.obl[sid]
+    key = (r, tuple(sorted({nid for nid, _ in obl})))
+    bucket = buckets.setdefault(key, [])
+    for other in bucket[-_DOMINANCE_WINDOW:]:
+        t_other = prod.best[other][0]
+        if t_other == t:
+            if aut.weaker(prod.obl[other], obl):
+                return True
+        elif t_other < t and any(aut.weaker(o, obl) for o in aut.step(prod.obl[other], t - t_other, cls)):
+            return True
+    bucket.append(sid)
+    return False
+
+
+def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str], tick: Fraction,
+                expanded: int) -> tuple[LassoRun, tuple[str, ...], _Product, int] | None:
+    g = nx.DiGraph()
+    live = [s for s in range(len(prod.region)) if prod.settled[s] and not prod.pruned[s]]
+    alive = set(live)
+    for s in live:
+        g.add_node(s)
+        for v, d, kind in prod.edges[s]:
+            if v in alive and (not g.has_edge(s, v) or g.edges[s, v]["d"] > d):
+                g.add_edge(s, v, d=d, kind=kind)
+    best: tuple[tuple[int, int], int, set[int]] | None = None
+    for comp in nx.strongly_connected_components(g):
+        if len(comp) == 1:
+            (only,) = comp
+            if not g.has_edge(only, only):
+                continue
+        covered = [any(aut.accepting(prod.obl[s])[b] for s in comp) for b in range(nb)]
+        if not all(covered):
+            continue
+        entry = min(comp, key=lambda s: prod.best[s])
+        if best is None or prod.best[entry] < best[0]:
+            best = (prod.best[entry], entry, comp)
+    if best is None:
+        return None
+    _, entry, comp = best
+    sub = g.subgraph(comp)
+    cycle = _accepting_cycle(sub, entry, aut, prod, nb)
+    if len(cycle) == 1 and cycle[0][2] == DWELL:
+        # staying put: prefer one long dwell period (ages saturate at the caps) over a one-tick repetition
+        slow = max([n.cap for n in aut.nodes] + [1])
+        obl = prod.obl[entry]
+        cls = prod.classes[prod.region[entry]]
+        if obl in aut.step(obl, slow, cls):
+            cycle = [(entry, slow, DWELL)]
+    prefix: list[tuple[int, int, str]] = []  # (state, delta, kind) back to the initial state
+    cur = entry
+    while (p := prod.parent[cur]) is not None:
+        prefix.append((cur, p[1], p[2]))
+        cur = p[0]
+    prefix.reverse()
+    regions = [names[prod.region[cur]]]
+    times = [Fraction(0)]
+    kinds = ["start"]
+    t = 0
+    for s, d, kind in prefix:
+        t += d
+        regions.append(names[prod.region[s]])
+        times.append(t * tick)
+        kinds.append(kind)
+    loop_start = len(regions) - 1
+    period = 0
+    for k, (s, d, kind) in enumerate(cycle):
+        period += d
+        if k == len(cycle) - 1:
+            break  # the last step returns to the loop's first position
+        t += d
+        regions.append(names[prod.region[s]])
+        times.append(t * tick)
+        kinds.append(kind)
+    run = LassoRun(tuple(regions), tuple(times), loop_start=loop_start, period=period * tick)
+    return run, tuple(kinds), prod, expanded
+
+
+def _accepting_cycle(sub: nx.DiGraph, entry: int, aut: TimedAutomaton, prod: _Product,
+                     nb: int) -> list[tuple[int, int, str]]:
+    """A cycle from ``entry`` back to it through one accepting state per Büchi set: [(state, delta, kind)]."""
+    steps: list[tuple[int, int, str]] = []
+    cur = entry
+    for b in range(nb):
+        if aut.accepting(prod.obl[cur])[b] or any(aut.accepting(prod.obl[s])[b] for s, _, _ in steps):
+            continue
+        dist, paths = nx.single_source_dijkstra(sub, cur, weight="d")
+        target = min((s for s in sub if aut.accepting(prod.obl[s])[b]), key=lambda s: (dist.get(s, 1 << 62), s))
+        steps.extend(_path_steps(sub, paths[target]))
+        cur = target
+    if cur != entry or not steps:
+        if not steps:
+            best: tuple[int, list[int]] | None = None
+            for v in sub.successors(entry):
+                if v == entry:
+                    cand = (sub.edges[entry, entry]["d"], [entry, entry])
+                else:
+                    d, back = nx.single_source_dijkstra(sub, v, entry, weight="d")
+                    cand = (sub.edges[entry, v]["d"] + d, [entry, *back])
+                if best is None or cand[0] < best[0]:
+                    best = cand
+            if best is None:
+                raise RuntimeError("an accepting component without a cycle")  # excluded by the caller
+            steps.extend(_path_steps(sub, best[1]))
+        else:
+            steps.extend(_path_steps(sub, nx.dijkstra_path(sub, cur, entry, weight="d")))
+    return steps
+
+
+def _path_steps(sub: nx.DiGraph, path: list[int]) -> list[tuple[int, int, str]]:
+    return [(b, sub.edges[a, b]["d"], sub.edges[a, b]["kind"]) for a, b in itertools.pairwise(path)]
+
+
+def _explored_graph(prod: _Product, aut: TimedAutomaton, wts: nx.DiGraph, tick: Fraction) -> nx.DiGraph:
+    names = sorted(wts.nodes)
+    g = nx.DiGraph()
+    for s in range(len(prod.region)):
+        if not prod.settled[s]:
+            continue
+        t = prod.best[s][0]
+        g.add_node(s, region=names[prod.region[s]], time_s=t * tick, obligations=aut.describe(prod.obl[s]),
+                   pruned=prod.pruned[s], accepting=all(aut.accepting(prod.obl[s])))
+    for s in list(g.nodes):
+        for v, d, kind in prod.edges[s]:
+            if v in g:
+                g.add_edge(s, v, delta_s=d * tick, kind=kind)
+    return g
+
+
+def export_dot(explored: nx.DiGraph) -> str:
+    """The explored product as Graphviz DOT text (node: region, time, pending obligations)."""
+    lines = ["digraph product {", "  rankdir=LR;", "  node [shape=box, fontsize=10];"]
+    for s, d in explored.nodes(data=True):
+        label = f"{d['region']} t={float(d['time_s']):g}s\\n{d['obligations']}".replace('"', "'")
+        style = ", style=dashed" if d["pruned"] else (", peripheries=2" if d["accepting"] else "")
+        lines.append(f'  s{s} [label="{label}"{style}];')
+    for a, b, d in explored.edges(data=True):
+        lines.append(f'  s{a} -> s{b} [label="{d["kind"]} {float(d["delta_s"]):g}s"];')
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, initial: str,
+                  max_states: int) -> NoAcceptingRunError:
+    """Name the conjunct that cannot be met (alone, or together with the ones before it)."""
+    conjuncts = list(formula.args) if isinstance(formula, And) else [formula]
+    mode = "with waiting" if wait else "without waiting (--no-wait)"
+
+    def satisfiable(f: Formula) -> bool:
+        try:
+            find_run(wts, f, wait=wait, initial=initial, max_states=max_states, diagnose=False)
+        except NoAcceptingRunError:
+            return False
+        return True
+
+    if len(conjuncts) > 1:
+        for c in conjuncts:
+            if not satisfiable(c):
+                return NoAcceptingRunError(f"no timed run of the WTS {mode} satisfies {formula}: the obligation "
+                                           f"{c} cannot be met from {initial}", obligation=str(c))
+        for k in range(2, len(conjuncts) + 1):
+            part = And(tuple(conjuncts[:k]))
+            if not satisfiable(part):
+                others = " & ".join(str(c) for c in conjuncts[: k - 1])
+                return NoAcceptingRunError(f"no timed run of the WTS {mode} satisfies {formula}: the obligation "
+                                           f"{conjuncts[k - 1]} cannot be met together with {others}",
+                                           obligation=str(conjuncts[k - 1]))
+    return NoAcceptingRunError(f"no timed run of the WTS {mode} satisfies {formula} from {initial}",
+                               obligation=str(formula))

@@ -1,0 +1,309 @@
+"""Abstraction: scenario + a transition oracle (Algorithm 1 by default) -> weighted transition system (WTS).
+
+input: a ``Scenario`` and a ``TransitionOracle`` (``tubempc.control.algorithm1.transition_time`` unless another is
+given) -> output: a networkx ``DiGraph`` whose nodes are the *safe* regions (attribute ``LABELS``; unsafe regions
+are never entered, so they are not states of the WTS) and whose edge ``i -> j`` carries the exact rational
+``WEIGHT`` t_ij (seconds, a ``Fraction``) when the tube-MPC closed loop drives the robot from region ``i`` into the
+terminal set of ``j`` without violating the tightened constraints. Pairs that fail are listed with the oracle's
+reason in the graph attribute ``FAILED``.
+
+The pairs are evaluated in parallel (a process pool, or a Dask cluster when a client or address is given), with a
+progress bar on a terminal, and the result is cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under
+the sha256 of the scenario, the oracle, its settings and its code.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import importlib
+import inspect
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Protocol
+
+import networkx as nx
+
+import tubempc
+from tubempc.errors import TubeMPCError
+from tubempc.scenario import Scenario
+
+__all__ = [
+    "CACHE_ENV",
+    "FAILED",
+    "INITIAL",
+    "LABELS",
+    "ORACLE",
+    "SCENARIO_SHA",
+    "WEIGHT",
+    "AbstractionError",
+    "PairResult",
+    "TransitionOracle",
+    "TransitionOutcome",
+    "build_wts",
+    "cache_dir",
+    "default_oracle",
+    "make_wts",
+    "wts_from_weights",
+    "wts_summary",
+]
+
+WEIGHT = "t_ij"  # edge attribute: Algorithm 1 time (Fraction, seconds)
+LABELS = "labels"  # node attribute: tuple of atomic propositions
+FAILED = "failed"  # graph attribute: {(i, j): reason} of pairs the controller cannot drive
+INITIAL = "initial"  # graph attribute: the initial region
+SCENARIO_SHA = "scenario_sha256"  # graph attribute
+ORACLE = "oracle"  # graph attribute: which oracle built the weights
+CACHE_ENV = "TUBEMPC_CACHE"
+_FORMAT = 1
+
+
+class AbstractionError(TubeMPCError, RuntimeError):
+    """The abstraction could not be built (an oracle crashed or returned a malformed result)."""
+
+
+class TransitionOutcome(Protocol):
+    """What an oracle returns (``tubempc.control.algorithm1.TransitionResult`` has these fields)."""
+
+    @property
+    def ok(self) -> bool: ...
+
+    @property
+    def reason(self) -> str | None: ...
+
+    @property
+    def t_ij_s(self) -> float | None: ...
+
+
+class TransitionOracle(Protocol):
+    """A picklable module-level function ``(scenario, source, target, *, disturbance, seed) -> outcome``."""
+
+    def __call__(self, scenario: Scenario, source: str, target: str, *, disturbance: str = ...,
+                 seed: int = ...) -> TransitionOutcome: ...
+
+
+@dataclass(frozen=True, slots=True)
+class PairResult:
+    """One evaluated pair: ``t_ij`` exact (seconds) when ``ok``."""
+
+    source: str
+    target: str
+    ok: bool
+    t_ij: Fraction | None
+    reason: str | None
+
+
+def default_oracle() -> TransitionOracle:
+    """The controller's Algorithm 1 (imported lazily: casadi loads only when the abstraction is built)."""
+    try:
+        module = importlib.import_module("tubempc.control.algorithm1")
+    except ImportError as err:
+        raise tubempc.NotAvailableError(
+            f"the controller's Algorithm 1 (tubempc.control.algorithm1) is not available: {err}") from err
+    oracle: TransitionOracle = module.transition_time
+    return oracle
+
+
+def cache_dir() -> Path:
+    """``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``."""
+    env = os.environ.get(CACHE_ENV)
+    return Path(env) if env else Path.home() / ".cache" / "tubempc"
+
+
+def _oracle_identity(oracle: Callable[..., Any]) -> dict[str, str]:
+    module = getattr(oracle, "__module__", "?")
+    name = getattr(oracle, "__qualname__", repr(oracle))
+    code = ""
+    try:
+        mod = sys.modules.get(module)
+        src = inspect.getsourcefile(mod) if mod is not None else None
+        if src:
+            # the whole package of the oracle: Algorithm 1 depends on the MPC and tube modules next to it
+            pkg = Path(src).parent
+            digest = hashlib.sha256()
+            for path in sorted(pkg.glob("*.py")):
+                digest.update(path.name.encode())
+                digest.update(path.read_bytes())
+            code = digest.hexdigest()
+    except (OSError, TypeError):
+        code = ""
+    return {"oracle": f"{module}.{name}", "code": code}
+
+
+def _cache_key(scenario: Scenario, oracle: Callable[..., Any], disturbance: str, seed: int) -> str:
+    blob = json.dumps({"scenario": scenario.sha256(), "disturbance": disturbance, "seed": seed,
+                       "version": tubempc.__version__, "format": _FORMAT, **_oracle_identity(oracle)},
+                      sort_keys=True).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+def _exact(t_s: float) -> Fraction:
+    """Algorithm 1 times are multiples of h: the millisecond rounding removes float noise only."""
+    return Fraction(str(round(t_s, 3)))
+
+
+@dataclass(frozen=True, slots=True)
+class _Job:
+    oracle: TransitionOracle
+    scenario: Scenario
+    source: str
+    target: str
+    disturbance: str
+    seed: int
+
+
+def _evaluate(job: _Job) -> PairResult:
+    source, target = job.source, job.target
+    out = job.oracle(job.scenario, source, target, disturbance=job.disturbance, seed=job.seed)
+    if out.ok:
+        if out.t_ij_s is None or not out.t_ij_s > 0:
+            return PairResult(source, target, False, None, f"oracle returned ok with t_ij_s={out.t_ij_s!r}")
+        return PairResult(source, target, True, _exact(out.t_ij_s), None)
+    return PairResult(source, target, False, None, out.reason or "the controller did not reach the target")
+
+
+def wts_from_weights(scenario: Scenario, pairs: Iterable[PairResult], *, oracle_name: str) -> nx.DiGraph:
+    """Assemble the WTS from evaluated pairs (also used to rebuild it from the cache)."""
+    g = nx.DiGraph()
+    g.graph[INITIAL] = scenario.initial_region
+    g.graph[SCENARIO_SHA] = scenario.sha256()
+    g.graph[ORACLE] = oracle_name
+    g.graph[FAILED] = {}
+    for r in scenario.safe_regions:
+        g.add_node(r.name, **{LABELS: tuple(r.labels)})
+    for p in pairs:
+        if p.ok and p.t_ij is not None:
+            g.add_edge(p.source, p.target, **{WEIGHT: p.t_ij})
+        else:
+            g.graph[FAILED][(p.source, p.target)] = p.reason or "failed"
+    return g
+
+
+def _load_cache(path: Path) -> list[PairResult] | None:
+    try:
+        data = json.loads(path.read_text())
+        return [PairResult(d["source"], d["target"], bool(d["ok"]),
+                           None if d["t_ij"] is None else Fraction(d["t_ij"]), d["reason"]) for d in data["pairs"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # a missing or corrupt cache entry is rebuilt
+
+
+def _store_cache(path: Path, pairs: list[PairResult], key_info: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = {"key": key_info, "pairs": [{"source": p.source, "target": p.target, "ok": p.ok,
+                                        "t_ij": None if p.t_ij is None else str(p.t_ij), "reason": p.reason}
+                                       for p in pairs]}
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".wts-", suffix=".json")
+    with os.fdopen(fd, "w") as fh:
+        json.dump(data, fh, indent=1)
+    os.replace(tmp, path)
+
+
+def _progress(total: int, enabled: bool | None) -> Any:
+    from tqdm import tqdm
+
+    show = sys.stderr.isatty() if enabled is None else enabled
+    return tqdm(total=total, desc="abstraction (Algorithm 1 per region pair)", unit="pair", disable=not show,
+                file=sys.stderr)
+
+
+def build_wts(
+    scenario: Scenario,
+    *,
+    oracle: TransitionOracle | None = None,
+    disturbance: str = "none",
+    seed: int = 0,
+    workers: int | None = None,
+    dask: Any = None,
+    use_cache: bool = True,
+    cache_path: Path | None = None,
+    progress: bool | None = None,
+) -> nx.DiGraph:
+    """Evaluate every ordered pair of safe regions with the oracle and return the WTS.
+
+    ``workers``: processes (default: CPU count; 1 evaluates in this process). ``dask``: a
+    ``dask.distributed.Client`` or a scheduler address; when given, the pairs run on that cluster instead.
+    ``cache_path``: a directory (default ``cache_dir()``).
+    """
+    fn: TransitionOracle = default_oracle() if oracle is None else oracle
+    ident = _oracle_identity(fn)
+    key = _cache_key(scenario, fn, disturbance, seed)
+    path = (cache_path or cache_dir()) / f"wts-{key}.json"
+    if use_cache:
+        cached = _load_cache(path)
+        if cached is not None:
+            g = wts_from_weights(scenario, cached, oracle_name=ident["oracle"])
+            g.graph["cache"] = str(path)
+            return g
+    names = [r.name for r in scenario.safe_regions]
+    todo = [_Job(fn, scenario, a, b, disturbance, seed) for a in names for b in names if a != b]
+    results: list[PairResult] = []
+    bar = _progress(len(todo), progress)
+    try:
+        if dask is not None:
+            results = _run_dask(dask, todo, bar)
+        elif workers == 1 or len(todo) <= 1:
+            for job in todo:
+                results.append(_evaluate(job))
+                bar.update(1)
+        else:
+            with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+                futures = [pool.submit(_evaluate, job) for job in todo]
+                for fut in futures:
+                    results.append(fut.result())
+                    bar.update(1)
+    except (TubeMPCError, OSError) as err:
+        raise AbstractionError(f"building the WTS of scenario {scenario.name!r} failed: {err}") from err
+    finally:
+        bar.close()
+    if use_cache:
+        with contextlib.suppress(OSError):  # an unwritable cache directory only costs time on the next run
+            _store_cache(path, results, {"scenario": scenario.sha256(), **ident})
+    g = wts_from_weights(scenario, results, oracle_name=ident["oracle"])
+    g.graph["cache"] = str(path) if use_cache else None
+    return g
+
+
+def _run_dask(dask: Any, todo: list[_Job], bar: Any) -> list[PairResult]:
+    from dask.distributed import Client, as_completed
+
+    client = dask if isinstance(dask, Client) else Client(dask)  # type: ignore[no-untyped-call]
+    try:
+        futures = client.map(_evaluate, todo, pure=False)
+        for _ in as_completed(futures):  # type: ignore[no-untyped-call]
+            bar.update(1)
+        return list(client.gather(futures))  # type: ignore[no-untyped-call]
+    finally:
+        if client is not dask:
+            client.close()  # type: ignore[no-untyped-call]
+
+
+def make_wts(labels: dict[str, Iterable[str]], weights: dict[tuple[str, str], Fraction | int | str], *,
+             initial: str, oracle_name: str = "given") -> nx.DiGraph:
+    """A WTS from explicit labels and exact weights (seconds), e.g. for tests or hand-made abstractions."""
+    g = nx.DiGraph()
+    g.graph.update({INITIAL: initial, SCENARIO_SHA: None, ORACLE: oracle_name, FAILED: {}})
+    for name, labs in labels.items():
+        g.add_node(name, **{LABELS: tuple(labs)})
+    for (a, b), w in weights.items():
+        if a not in g or b not in g:
+            raise ValueError(f"weights: edge {a}->{b} names a region without labels")
+        wf = Fraction(w)
+        if wf <= 0:
+            raise ValueError(f"weights[{a}->{b}]={w!r} must be positive")
+        g.add_edge(a, b, **{WEIGHT: wf})
+    if initial not in g:
+        raise ValueError(f"initial={initial!r} is not a region of the WTS")
+    return g
+
+
+def wts_summary(wts: nx.DiGraph) -> list[tuple[str, str, Fraction]]:
+    """Edges as ``(source, target, t_ij)`` sorted by name."""
+    return sorted((a, b, d[WEIGHT]) for a, b, d in wts.edges(data=True))
