@@ -216,7 +216,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     else:
         t_max = t_end_s
     n_max = math.floor(t_max / dt + 1e-9) + 1
-    t_arr = np.arange(n_max) * dt
+    t_arr = np.round(np.arange(n_max) * dt, 9)  # sample times without accumulated float noise
     xs = np.zeros((n_max, 3))
     xms = np.zeros((n_max, 3))
     xhs = np.zeros((n_max, 3))
