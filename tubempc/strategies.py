@@ -140,14 +140,18 @@ def robot_radii(max_radius_m: float, min_radius_m: float = 0.05) -> st.SearchStr
 def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, max_unsafe: int = 3,
               cell_m: float = 1.2, grid: tuple[int, int] = (4, 4), region_radius_m: tuple[float, float] = (0.3, 0.5),
               delta_bar: tuple[float, float] = (0.0, 0.03), spec: st.SearchStrategy[str] | None = None,
+              room_m: float = 0.15, models: Sequence[Literal["world", "body"]] = ("world",),
               ) -> Scenario:
     """Scenarios with ``min_regions..max_regions`` non-overlapping circular regions in a box, some unsafe.
 
     The box is a ``grid`` of square cells of side ``cell_m``; each region sits in its own cell (distinct cells,
     jittered centre), so regions never overlap and always fit. At least one region is safe (the initial one), at
     most ``max_unsafe`` are unsafe; safe region ``k`` carries label ``mission_k``, unsafe region ``k`` label
-    ``obs_k``. The robot radius is strictly smaller than every safe region's. ``spec`` draws the MITL text (it
-    may only use those labels); by default: always avoid every obstacle and eventually visit ``mission_1``.
+    ``obs_k``. The robot radius is at most the smallest safe region's radius minus ``room_m`` (room for the
+    terminal ball and the tube, so that the controller's design check usually passes; 0 allows any radius that
+    fits). ``models`` lists the dynamics models to draw from (``body`` gets a heading restriction in [0.3, 1.2]
+    rad). ``spec`` draws the MITL text (it may only use those labels); by default: always avoid every obstacle
+    and eventually visit ``mission_1``.
     The value is built through ``scenario_from_dict``, so the scenario model's own validation applies.
     """
     nx, ny = grid
@@ -182,7 +186,7 @@ def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, ma
             "radius": radius, "labels": labels, "unsafe": unsafe,
         })
     smallest_safe = min(r["radius"] for r in regions if not r["unsafe"])
-    eta = draw(robot_radii(min(smallest_safe, 0.35)))
+    eta = draw(robot_radii(max(min(smallest_safe - room_m, 0.35), 0.06)))
     obstacles = [f"obs_{k}" for k in range(1, n_obs + 1)]
     if spec is None:
         avoid = f"G[0,inf) !({' | '.join(obstacles)}) & " if obstacles else ""
@@ -202,6 +206,9 @@ def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, ma
         "initial_region": "R1",
         "spec": text,
     }
+    model = draw(st.sampled_from(list(models)))
+    if model == "body":
+        data["dynamics"] = {"model": "body", "theta_max": draw(_centi(0.3, 1.2))}
     return scenario_from_dict(data, source="<tubempc.strategies.scenarios>")
 
 
