@@ -3,6 +3,29 @@
 It judges any log, whoever produced it; it shares only the MITL language and the scenario model with ``tubempc``.
 """
 
-from verify.errors import LogReadError, MissingTopicError, TruncatedLogError, UnusableInputError, VerifyError
+from verify.certify import CertifyResult, certify_log, write_certificate
+from verify.errors import (
+    LogReadError,
+    MissingTopicError,
+    ScenarioInputError,
+    SpecError,
+    TruncatedLogError,
+    UnusableInputError,
+    VerifyError,
+)
+from verify.timedrun import TimedRunVerdict, check_timed_run
 
-__all__ = ["LogReadError", "MissingTopicError", "TruncatedLogError", "UnusableInputError", "VerifyError"]
+__all__ = [
+    "CertifyResult",
+    "LogReadError",
+    "MissingTopicError",
+    "ScenarioInputError",
+    "SpecError",
+    "TimedRunVerdict",
+    "TruncatedLogError",
+    "UnusableInputError",
+    "VerifyError",
+    "certify_log",
+    "check_timed_run",
+    "write_certificate",
+]

@@ -1,0 +1,206 @@
+"""Certify one log: log path + scenario (+ formula) -> ``CertifyResult`` (certificate dict, exit code, tables).
+
+input: a log path, a scenario (value, file path or built-in name), an optional MITL formula, the time base, the
+salvage flag and an optional time 0 -> output: a frozen ``CertifyResult``; ``write_certificate`` writes its JSON.
+
+``certify_log`` is a module-level, picklable function that never writes files (the batch runner calls it in worker
+processes). The overall verdict is "fail" if any check fails, else "inconclusive" if any check is inconclusive or
+the log is partial (salvaged), else "pass".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from tubempc.errors import ScenarioError
+from tubempc.mitl import atoms
+from tubempc.scenario import Scenario, load_scenario
+from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
+from verify.errors import ScenarioInputError, SpecError
+from verify.geometry import containing_region
+from verify.ingest import LogData, read_log
+from verify.timedrun import check_timed_run, parse_spec, timed_run_of
+from verify.trajectory import check_trajectory
+
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "certify_log", "resolve_scenario",
+           "write_certificate"]
+
+CERTIFICATE_VERSION = 1
+EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
+
+
+@dataclass(frozen=True, slots=True)
+class CertifyResult:
+    """The certificate (JSON-ready dict), the exit code, and tables for reports (times in seconds from time 0)."""
+
+    certificate: dict[str, Any]
+    exit_code: int
+    trajectory: pd.DataFrame  # t_s, x_m, y_m, theta_rad
+    nominal: pd.DataFrame | None  # t_s, x_m, y_m, theta_rad
+    inputs: pd.DataFrame | None  # t_s, u1, u2, u3
+    robustness: pd.DataFrame | None  # t_s, rho_m
+
+    @property
+    def verdict(self) -> str:
+        return str(self.certificate["verdict"])
+
+
+def resolve_scenario(scenario: Scenario | str | Path) -> Scenario:
+    if isinstance(scenario, Scenario):
+        return scenario
+    try:
+        return load_scenario(scenario)
+    except ScenarioError as err:
+        raise ScenarioInputError(f"scenario: {err}") from err
+
+
+def _num(v: float | None) -> float | None:
+    """JSON numbers only: infinities and NaN become null."""
+    if v is None or not math.isfinite(v):
+        return None
+    return round(float(v), 9)
+
+
+def _rel_s(t_ns: int | None, time0_ns: int) -> float | None:
+    return None if t_ns is None else round((t_ns - time0_ns) * 1e-9, 9)
+
+
+def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
+    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin),
+            "first_violation_time": _rel_s(c.first_violation_ns, time0_ns),
+            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin")}}
+
+
+def _overall(checks: list[dict[str, Any]], partial: bool) -> tuple[str, str | None]:
+    verdicts = [c["verdict"] for c in checks]
+    if "fail" in verdicts:
+        return "fail", None
+    if "inconclusive" in verdicts:
+        names = [c["name"] for c in checks if c["verdict"] == "inconclusive"]
+        return "inconclusive", f"check(s) not decided: {', '.join(names)}"
+    if partial:
+        return "inconclusive", "the log is partial (salvaged): a partial log is never certified as pass"
+    return "pass", None
+
+
+def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
+                time_base: str = "header", salvage: bool = False, time0_ns: int | None = None) -> CertifyResult:
+    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files."""
+    sc = resolve_scenario(scenario)
+    formula = parse_spec(spec if spec is not None else sc.spec)
+    known = {lab for r in sc.regions for lab in r.labels}
+    unknown = sorted(atoms(formula) - known)
+    if unknown:
+        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
+                        f"{sc.name!r}")
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
+    return _judge(log, sc, formula_text=str(formula))
+
+
+def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
+    formula = parse_spec(formula_text)
+    t0 = log.time0_ns
+    pose = log.pose
+    t_rel = pose.t_ns - t0
+    v_max = sc.max_speed_mps
+
+    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max)
+    spec_traj = CheckResult(
+        "spec_trajectory", traj.verdict, traj.margin_m if traj.verdict != "inconclusive" else None,
+        traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
+        {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
+                      "bounded by the speed bound)",
+         "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
+         **({"subformula": traj.subformula, "reason": traj.reason,
+             "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
+            if traj.verdict != "pass" else {})})
+
+    regions = containing_region(pose.x_m, pose.y_m, sc)
+    names = [r.name for r in sc.regions]
+    run = timed_run_of(regions, t_rel.astype(np.float64) * 1e-9, names)
+    end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
+    tr = check_timed_run(formula_text, run, {r.name: list(r.labels) for r in sc.regions}, end=end_s)
+    spec_run = CheckResult(
+        "spec_timed_run", tr.verdict, None,
+        round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
+        {"semantics": "timed run (paper, Definition 3; pointwise)",
+         **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
+
+    nominal = None
+    if log.nominal is not None:
+        nominal = (log.nominal.t_ns, log.nominal.x_m, log.nominal.y_m)
+    period_ns = round(1e9 / sc.mocap.rate_hz)
+    tol_m = 3.0 * sc.mocap.noise_std
+    tube = check_tube(pose.t_ns, pose.x_m, pose.y_m, nominal, radius_m=sc.tube_radius_m, tolerance_m=tol_m,
+                      match_ns=period_ns // 2)
+    checks = [spec_traj, spec_run, tube, check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs.max_abs),
+              check_workspace(pose.t_ns, pose.x_m, pose.y_m, sc), check_clearance(pose.t_ns, pose.x_m, pose.y_m, sc)]
+    entries = [_check_entry(c, t0) for c in checks]
+    verdict, why = _overall(entries, log.partial)
+    cert: dict[str, Any] = {
+        "certificate_version": CERTIFICATE_VERSION,
+        "verdict": verdict,
+        **({"verdict_reason": why} if why else {}),
+        "formula": formula_text,
+        "scenario": sc.name,
+        "scenario_sha256": sc.sha256(),
+        "log": log.path,
+        "log_format": log.format,
+        "log_sha256": log.log_sha256,
+        "partial": log.partial,
+        "time_base": log.time_base,
+        "time0_ns": t0,
+        "duration_s": round(end_s, 9),
+        "pose_source": log.pose_source,
+        "speed_bound_mps": v_max,
+        "robot_radius_m": sc.robot.radius,
+        "tube": {"radius_m": sc.tube_radius_m, "noise_tolerance_m": tol_m,
+                 "noise_tolerance_rule": "3 * scenario.mocap.noise_std"},
+        "checks": entries,
+        "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
+        "data_quality": log.data_quality,
+        "generator": log.metadata,
+    }
+    if log.metadata and log.metadata.get("scenario_sha256") not in (None, sc.sha256()):
+        log.data_quality.setdefault("notes", []).append(
+            "the log's metadata names a different scenario_sha256 than the scenario given to the certifier")
+    t_s = t_rel * 1e-9
+    trajectory = pd.DataFrame({"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad})
+    nominal_df = None
+    if log.nominal is not None:
+        nominal_df = pd.DataFrame({"t_s": (log.nominal.t_ns - t0) * 1e-9, "x_m": log.nominal.x_m,
+                                   "y_m": log.nominal.y_m, "theta_rad": log.nominal.theta_rad})
+    inputs_df = None
+    if log.cmd_t_ns is not None and log.cmd_u is not None:
+        inputs_df = pd.DataFrame({"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
+                                  "u3": log.cmd_u[:, 2]})
+    rob = pd.DataFrame({"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}) if t_rel.size else None
+    return CertifyResult(_jsonable(cert), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return _jsonable(obj.item())
+    if isinstance(obj, float):
+        return _num(obj)
+    return obj
+
+
+def write_certificate(result: CertifyResult, out_dir: str | Path) -> Path:
+    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "certificate.json"
+    path.write_text(json.dumps(result.certificate, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    return path

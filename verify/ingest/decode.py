@@ -1,0 +1,230 @@
+"""Bulk decoding: raw payloads of one topic -> numpy columns, without one ``deserialize`` call per message.
+
+input: a ``RawTopic`` (message type, raw CDR or ROS1 payloads) -> output: ``PoseColumns`` (header stamp, x, y,
+quaternion) or ``TwistColumns`` (vx, vy, wz).
+
+Fast path for fixed-layout types (geometry_msgs PoseStamped and Twist, nav_msgs Odometry): the payloads are joined
+into one buffer and the fields are read with ``np.frombuffer`` at per-message offsets computed from the frame-id
+string lengths (CDR alignment is relative to the end of the 4-byte encapsulation header). When all messages have one
+length (the usual case: a constant frame id) the buffer is viewed as an ``(n, size)`` byte matrix and the columns
+are sliced directly. Anything else (big-endian CDR, TFMessage, a type whose definition differs from the standard
+one) goes through ``rosbags``' typestore ``deserialize_*`` (``decode_slow``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from verify.errors import LogReadError
+from verify.ingest.raw import RawTopic
+
+__all__ = [
+    "FAST_TYPES",
+    "PoseColumns",
+    "TwistColumns",
+    "decode_pose",
+    "decode_strings",
+    "decode_twist",
+    "typestore",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+ODOMETRY = "nav_msgs/msg/Odometry"
+TWIST = "geometry_msgs/msg/Twist"
+TF = "tf2_msgs/msg/TFMessage"
+TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
+FAST_TYPES = frozenset({POSE_STAMPED, ODOMETRY, TWIST})
+
+
+@dataclass(frozen=True, slots=True)
+class PoseColumns:
+    """Poses in reading order: header stamp (ns), log time (ns), position and orientation quaternion."""
+
+    stamp_ns: IntArray
+    log_ns: IntArray
+    x_m: FloatArray
+    y_m: FloatArray
+    quat_xyzw: FloatArray  # (n, 4)
+    fast: bool
+
+
+@dataclass(frozen=True, slots=True)
+class TwistColumns:
+    log_ns: IntArray
+    u: FloatArray  # (n, 3): linear.x, linear.y, angular.z
+    fast: bool
+
+
+@lru_cache(maxsize=2)
+def typestore(ros1: bool) -> Any:
+    """Our own type store (used when a bag lacks a definition, and for non-fixed-layout types).
+
+    ROS1 Noetic's store lacks tf2_msgs; its one-line definition is registered here.
+    """
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if TF not in store.types:
+        store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF))
+    return store
+
+
+def _joined(payloads: Sequence[bytes]) -> tuple[npt.NDArray[np.uint8], IntArray, IntArray]:
+    lens = np.fromiter(map(len, payloads), dtype=np.int64, count=len(payloads))
+    offs = np.zeros(len(payloads), dtype=np.int64)
+    if len(payloads) > 1:
+        np.cumsum(lens[:-1], out=offs[1:])
+    return np.frombuffer(b"".join(payloads), dtype=np.uint8), offs, lens
+
+
+def _u32(u8: npt.NDArray[np.uint8], at: IntArray) -> IntArray:
+    cols = u8[at[:, None] + np.arange(4)]
+    return np.ascontiguousarray(cols).view("<u4").ravel().astype(np.int64)
+
+
+def _f64_block(u8: npt.NDArray[np.uint8], at: IntArray, count: int) -> FloatArray:
+    cols = u8[at[:, None] + np.arange(8 * count)]
+    return np.ascontiguousarray(cols).view("<f8").reshape(at.shape[0], count)
+
+
+def _f64_block_uniform(u8: npt.NDArray[np.uint8], size: int, start: int, count: int) -> FloatArray:
+    mat = u8.reshape(-1, size)
+    return np.ascontiguousarray(mat[:, start : start + 8 * count]).view("<f8").reshape(mat.shape[0], count)
+
+
+def _align(pos: IntArray, base: int, to: int) -> IntArray:
+    rel = pos - base
+    return base + (rel + (to - 1)) // to * to
+
+
+def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
+    """Vectorized PoseStamped/Odometry decode; None when the layout check fails (then use the slow path)."""
+    n = len(raw.payloads)
+    u8, offs, lens = _joined(raw.payloads)
+    base = 0 if ros1 else 4
+    if np.any(lens < base + 16):
+        return None
+    if not ros1:
+        # CDR little-endian encapsulation header: 0x00 0x01
+        enc = u8[offs[:, None] + np.arange(2)]
+        if not (np.all(enc[:, 0] == 0) and np.all(enc[:, 1] == 1)):
+            return None
+    sec_at = offs + 4  # ROS1: after seq; CDR: after the encapsulation header
+    len_at = offs + 12
+    str_len = _u32(u8, len_at)
+    pos = len_at + 4 + str_len  # after header.frame_id
+    if raw.msgtype == ODOMETRY:
+        if not ros1:
+            pos = offs + _align(pos - offs, base, 4)
+        if np.any(pos + 4 > offs + lens):
+            return None
+        child_len = _u32(u8, pos)
+        pos = pos + 4 + child_len
+    if not ros1:
+        pos = offs + _align(pos - offs, base, 8)
+    if np.any(pos + 56 > offs + lens):
+        return None
+    start_rel = pos - offs
+    if np.all(lens == lens[0]) and np.all(start_rel == start_rel[0]):
+        size = int(lens[0])
+        block = _f64_block_uniform(u8, size, int(start_rel[0]), 7)
+        mat = u8.reshape(-1, size)
+        s0 = int(sec_at[0] - offs[0])
+        stamps = np.ascontiguousarray(mat[:, s0 : s0 + 8]).view("<u4").reshape(n, 2).astype(np.int64)
+    else:
+        block = _f64_block(u8, pos, 7)
+        stamps = np.stack([_u32(u8, sec_at), _u32(u8, sec_at + 4)], axis=1)
+    sec = stamps[:, 0]
+    if not ros1:
+        sec = np.where(sec >= 2**31, sec - 2**32, sec)  # builtin_interfaces/Time.sec is int32
+    stamp_ns = sec * 10**9 + stamps[:, 1]
+    return PoseColumns(stamp_ns, np.asarray(raw.log_ns, dtype=np.int64), block[:, 0].copy(), block[:, 1].copy(),
+                       block[:, 3:7].copy(), True)
+
+
+def _stamp(header: Any) -> int:
+    return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
+
+
+def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fast: bool = True) -> PoseColumns:
+    """PoseStamped / Odometry (fast path) or TFMessage / TransformStamped filtered by ``child_frame`` (slow path)."""
+    if fast and raw.msgtype in (POSE_STAMPED, ODOMETRY) and raw.payloads:
+        out = _pose_fast(raw, ros1)
+        if out is not None:
+            return out
+    store = typestore(ros1)
+    deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
+    stamps: list[int] = []
+    logs: list[int] = []
+    rows: list[tuple[float, float, float, float, float, float]] = []
+    try:
+        for log_ns, payload in zip(raw.log_ns, raw.payloads, strict=True):
+            msg = deser(payload, raw.msgtype)
+            if raw.msgtype == POSE_STAMPED:
+                items = [(msg.header, msg.pose.position, msg.pose.orientation)]
+            elif raw.msgtype == ODOMETRY:
+                items = [(msg.header, msg.pose.pose.position, msg.pose.pose.orientation)]
+            elif raw.msgtype in (TF, TRANSFORM_STAMPED):
+                tfs = msg.transforms if raw.msgtype == TF else [msg]
+                items = [(tf.header, tf.transform.translation, tf.transform.rotation) for tf in tfs
+                         if child_frame is None or tf.child_frame_id.lstrip("/") == child_frame.lstrip("/")]
+            else:
+                raise LogReadError(f"topic {raw.topic} has type {raw.msgtype}, which is not a pose type "
+                                   f"(PoseStamped, Odometry, TFMessage)", path=None)
+            for header, p, q in items:
+                stamps.append(_stamp(header))
+                logs.append(log_ns)
+                rows.append((p.x, p.y, q.x, q.y, q.z, q.w))
+    except (ValueError, KeyError, IndexError, AttributeError) as err:
+        if isinstance(err, LogReadError):
+            raise
+        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({err.__class__.__name__}: {err})"
+                           ) from err
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 6)
+    return PoseColumns(np.asarray(stamps, dtype=np.int64), np.asarray(logs, dtype=np.int64), arr[:, 0].copy(),
+                       arr[:, 1].copy(), arr[:, 2:6].copy(), False)
+
+
+def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool = True) -> TwistColumns:
+    log_ns = np.asarray(raw.log_ns, dtype=np.int64)
+    size = 48 if ros1 else 52
+    if fast and raw.msgtype == TWIST and raw.payloads:
+        u8, _offs, lens = _joined(raw.payloads)
+        ok = bool(np.all(lens == size))
+        if ok and not ros1:
+            mat = u8.reshape(-1, size)
+            ok = bool(np.all(mat[:, 0] == 0) and np.all(mat[:, 1] == 1))
+        if ok:
+            block = _f64_block_uniform(u8, size, 0 if ros1 else 4, 6)
+            return TwistColumns(log_ns, block[:, [0, 1, 5]].copy(), True)
+    if raw.msgtype != TWIST:
+        raise LogReadError(f"topic {raw.topic} has type {raw.msgtype}, expected geometry_msgs/msg/Twist")
+    store = typestore(ros1)
+    deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
+    try:
+        msgs = [deser(p, raw.msgtype) for p in raw.payloads]
+    except (ValueError, KeyError, IndexError) as err:
+        raise LogReadError(f"topic {raw.topic}: cannot decode Twist ({err})") from err
+    u = np.array([(m.linear.x, m.linear.y, m.angular.z) for m in msgs], dtype=np.float64).reshape(-1, 3)
+    return TwistColumns(log_ns, u, False)
+
+
+def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:
+    """std_msgs/String payloads -> (log time ns, text); undecodable messages are skipped."""
+    store = typestore(ros1)
+    deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
+    out: list[tuple[int, str]] = []
+    for log_ns, payload in zip(raw.log_ns, raw.payloads, strict=True):
+        try:
+            out.append((log_ns, str(deser(payload, raw.msgtype).data)))
+        except (ValueError, KeyError, IndexError, AttributeError, UnicodeDecodeError):
+            continue
+    return out

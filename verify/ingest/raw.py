@@ -1,0 +1,175 @@
+"""Raw message access for every log format: a path -> the raw payloads of the wanted topics, never modifying input.
+
+input: a log path (ROS1 ``.bag``, bare ``.mcap`` / ``.db3``, or a ROS2 bag directory) and topic names -> output: a
+``RawLog`` (per topic: message type, whether the bag carries its definition, log times in ns, raw payloads).
+
+Opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; the latter reads bare
+``.mcap`` and ``.db3`` files directly, sqlite3 with ``immutable=1`` so a ``-wal`` file is neither read nor
+checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with ``salvage=True`` the complete records
+are read by a stream walk (``verify.ingest.salvage``) and the result is marked partial.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import struct
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rosbags.interfaces import Connection, MessageDefinitionFormat
+from rosbags.rosbag1 import Reader as Reader1
+from rosbags.rosbag1 import ReaderError as ReaderError1
+from rosbags.rosbag2 import Reader as Reader2
+from rosbags.rosbag2 import ReaderError as ReaderError2
+
+from verify.errors import LogReadError, TruncatedLogError
+from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
+
+__all__ = ["RawLog", "RawTopic", "detect_format", "read_raw"]
+
+_ROS1_TRUNCATION_HINTS = ("not indexed", "index looks damaged", "Got only", "could not be read", "Could not read")
+_MCAP_TRUNCATION_HINTS = ("end magic", "Truncated record", "footer", "summary offset", "seems to be empty")
+
+
+@dataclass(slots=True)
+class RawTopic:
+    """Raw payloads of one topic in log-time order of reading (not necessarily sorted)."""
+
+    topic: str
+    msgtype: str
+    has_definition: bool
+    log_ns: list[int] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class RawLog:
+    """What a log holds for the wanted topics, plus how it was read."""
+
+    path: str
+    format: str  # "ros1", "mcap", "sqlite3"
+    ros1: bool
+    topics: dict[str, RawTopic]  # wanted topics that exist in the log
+    available: dict[str, str]  # every topic in the log -> its message type
+    partial: bool
+    notes: tuple[str, ...]
+
+
+def detect_format(path: Path) -> str:
+    if path.is_dir():
+        meta = path / "metadata.yaml"
+        if not meta.exists():
+            raise LogReadError("a directory without metadata.yaml is not a ROS2 bag", path=str(path))
+        text = meta.read_text(encoding="utf-8", errors="replace")
+        return "sqlite3" if "storage_identifier: sqlite3" in text else "mcap"
+    suffix = path.suffix.lower()
+    if suffix == ".bag":
+        return "ros1"
+    if suffix == ".mcap":
+        return "mcap"
+    if suffix == ".db3":
+        return "sqlite3"
+    raise LogReadError(f"unrecognized log type {suffix or '(no extension)'!r}: expected .bag, .mcap, .db3 or a "
+                       f"ROS2 bag directory", path=str(path))
+
+
+def _storage_files(path: Path, fmt: str) -> list[Path]:
+    if not path.is_dir():
+        return [path]
+    ext = ".mcap" if fmt == "mcap" else ".db3"
+    return sorted(p for p in path.iterdir() if p.suffix == ext)
+
+
+def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) -> RawLog:
+    """Read the raw payloads of ``topics`` (those present) from the log at ``path``."""
+    p = Path(path)
+    if not p.exists():
+        raise LogReadError("no such file or directory", path=str(p))
+    fmt = detect_format(p)
+    wanted = set(topics)
+    notes: list[str] = []
+    if fmt == "sqlite3":
+        for db in _storage_files(p, fmt):
+            wal = db.with_name(db.name + "-wal")
+            if wal.exists() and wal.stat().st_size > 0:
+                notes.append(f"un-checkpointed write-ahead log {wal.name} ({wal.stat().st_size} bytes) beside "
+                             f"{db.name}: the database is opened read-only and immutable, so messages still in the "
+                             f"-wal file are not read")
+    try:
+        return _read_indexed(p, fmt, wanted, notes)
+    except TruncatedLogError as err:
+        if not salvage:
+            raise
+        if fmt == "sqlite3":
+            raise TruncatedLogError(f"{err.reason}; --salvage supports ROS1 and MCAP logs only", path=str(p)) from err
+        return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
+
+
+def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
+    text = str(err) or err.__class__.__name__
+    hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
+    if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
+        return TruncatedLogError(f"truncated or unindexed log ({text})", path=str(path))
+    if isinstance(err, sqlite3.DatabaseError):
+        return TruncatedLogError(f"unreadable sqlite3 database ({text})", path=str(path))
+    return LogReadError(f"unreadable {fmt} log ({text})", path=str(path))
+
+
+def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
+    reader: Reader1 | Reader2
+    try:
+        reader = Reader1(path) if fmt == "ros1" else Reader2(path)
+        reader.open()
+    except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
+            KeyError, IndexError) as err:
+        raise _wrap_error(path, fmt, err) from err
+    try:
+        conns = list(reader.connections)
+        available = {c.topic: c.msgtype for c in conns}
+        selected = [c for c in conns if c.topic in wanted]
+        out = _topics_from(selected)
+        if selected:
+            try:
+                for conn, log_ns, raw in reader.messages(connections=selected):
+                    t = out[conn.topic]
+                    t.log_ns.append(log_ns)
+                    t.payloads.append(bytes(raw) if not isinstance(raw, bytes) else raw)
+            except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
+                    KeyError, IndexError) as err:
+                raise _wrap_error(path, fmt, err) from err
+    finally:
+        reader.close()
+    return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _topics_from(conns: Iterable[Connection]) -> dict[str, RawTopic]:
+    out: dict[str, RawTopic] = {}
+    for c in conns:
+        has_def = c.msgdef.format != MessageDefinitionFormat.NONE and bool(c.msgdef.data.strip())
+        if c.topic not in out:
+            out[c.topic] = RawTopic(c.topic, c.msgtype, has_def)
+        elif not has_def:
+            out[c.topic].has_definition = False
+    return out
+
+
+def _salvage(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
+    messages: Iterator[SalvagedMessage]
+    out: dict[str, RawTopic] = {}
+    available: dict[str, str] = {}
+    stops: list[str] = []
+    files = _storage_files(path, fmt)
+    for file in files:
+        walk = walk_ros1(file) if fmt == "ros1" else walk_mcap(file)
+        messages = walk.messages
+        for m in messages:
+            available[m.topic] = m.msgtype
+            if m.topic not in wanted:
+                continue
+            if m.topic not in out:
+                out[m.topic] = RawTopic(m.topic, m.msgtype, m.has_definition)
+            out[m.topic].log_ns.append(m.log_ns)
+            out[m.topic].payloads.append(m.payload)
+        stops.append(f"{file.name}: {walk.stop_reason()}")
+    return RawLog(str(path), fmt, fmt == "ros1", out, available, True, tuple(notes + stops))
