@@ -1,0 +1,128 @@
+"""The product search against brute force: every short lasso run with every dwell duration on the tick grid.
+
+Small random WTSs (3 regions, integer weights) and random formulas over the whole grammar (next, eventually,
+always, until, open/closed/unbounded intervals, nesting). The planner's run must satisfy the formula under the
+exact reference semantics, and whenever brute force finds a satisfying lasso, the planner must find one too
+(event-driven waits lose nothing against every grid dwell duration). Time-optimality is checked on windows in
+``test_search.py``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from tubempc.errors import NoAcceptingRunError
+from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interval, Next, Not, Or, Until
+from tubempc.planning import LassoRun, find_run, holds, make_wts
+
+HALF = Fraction(1, 2)
+
+
+def random_interval(rng: np.random.Generator) -> Interval:
+    lo = int(rng.integers(0, 3))
+    if rng.random() < 0.3:
+        return Interval(Fraction(lo), None, lo_closed=bool(rng.random() < 0.7))
+    hi = lo + int(rng.integers(0, 3))
+    lc, hc = bool(rng.random() < 0.7), bool(rng.random() < 0.7)
+    if hi == lo:
+        lc = hc = True
+    return Interval(Fraction(lo), Fraction(hi), lo_closed=lc, hi_closed=hc)
+
+
+def random_formula(rng: np.random.Generator, depth: int) -> Formula:
+    if depth == 0 or rng.random() < 0.25:
+        a = Atom(str(rng.choice(["p", "q"])))
+        return Not(a) if rng.random() < 0.3 else a
+    op = int(rng.integers(0, 8))
+    sub = random_formula(rng, depth - 1)
+    if op == 0:
+        return Eventually(random_interval(rng), sub)
+    if op == 1:
+        return Always(random_interval(rng), sub)
+    if op == 2:
+        return Until(random_interval(rng), sub, random_formula(rng, depth - 1))
+    if op == 3:
+        return Next(random_interval(rng), sub)
+    if op == 4:
+        return And((sub, random_formula(rng, depth - 1)))
+    if op == 5:
+        return Or((sub, random_formula(rng, depth - 1)))
+    if op == 6:
+        return Implies(sub, random_formula(rng, depth - 1))
+    return Not(sub)
+
+
+def random_wts(rng: np.random.Generator):  # type: ignore[no-untyped-def]
+    labels = {"A": ("p",), "B": ("q",), "C": ()}
+    if rng.random() < 0.5:
+        labels["C"] = ("p", "q")
+    weights = {}
+    for a, b in itertools.permutations(labels, 2):
+        if rng.random() < 0.8:
+            weights[(a, b)] = int(rng.integers(1, 4))
+    return make_wts(labels, weights, initial="A"), labels, weights
+
+
+def brute_force(labels, weights, formula: Formula, *, wait: bool, max_pos: int = 4,  # type: ignore[no-untyped-def]
+                max_dwell: int = 6) -> Fraction | None:
+    """Earliest loop entry time over all lassos with at most ``max_pos`` positions (dwells: 1..max_dwell ticks)."""
+    dwells = [HALF * k for k in range(1, max_dwell + 1)] if wait else []
+
+    def steps(region: str) -> list[tuple[str, Fraction]]:
+        out = [(b, Fraction(w)) for (a, b), w in weights.items() if a == region]
+        out.extend((region, d) for d in dwells)
+        return out
+
+    best: Fraction | None = None
+    stack: list[tuple[tuple[str, ...], tuple[Fraction, ...]]] = [(("A",), (Fraction(0),))]
+    while stack:
+        regions, times = stack.pop()
+        for loop in range(len(regions)):
+            if best is not None and times[loop] >= best:
+                continue
+            for nxt, d in steps(regions[-1]):
+                if nxt != regions[loop]:
+                    continue
+                period = times[-1] - times[loop] + d
+                run = LassoRun(regions, times, loop_start=loop, period=period)
+                if holds(formula, run, labels):
+                    best = times[loop]
+        if len(regions) < max_pos:
+            for nxt, d in steps(regions[-1]):
+                stack.append(((*regions, nxt), (*times, times[-1] + d)))
+    return best
+
+
+def _check(seed: int, *, wait: bool) -> None:
+    rng = np.random.default_rng(seed)
+    wts, labels, weights = random_wts(rng)
+    formula = random_formula(rng, 2)
+    try:
+        found = find_run(wts, formula, wait=wait)
+    except NoAcceptingRunError:
+        found = None
+    if found is not None:
+        assert holds(formula, found.run, labels), (formula, found.run)
+    bf = brute_force(labels, weights, formula, wait=wait)
+    if bf is not None:
+        assert found is not None, f"seed {seed}: planner found no run for {formula}, brute force entered at {bf}"
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_against_brute_force_with_waits(seed: int) -> None:
+    _check(seed, wait=True)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_against_brute_force_without_waits(seed: int) -> None:
+    _check(1000 + seed, wait=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(40, 400))
+def test_against_brute_force_many(seed: int) -> None:
+    _check(seed, wait=bool(seed % 2))

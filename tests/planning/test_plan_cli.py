@@ -1,0 +1,47 @@
+"""``tubempc plan``: table, JSON, exit 1 with the obligation when no run exists (synthetic weights via the oracle
+hook, so that the test does not run the MPC)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+import tubempc.planning.wts as wts_module
+from tubempc.cli import main
+from tubempc.planning.synthetic import straight_line_oracle
+
+
+@pytest.fixture(autouse=True)
+def synthetic(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setattr(wts_module, "default_oracle", lambda: straight_line_oracle)
+    monkeypatch.setenv(wts_module.CACHE_ENV, str(tmp_path / "cache"))
+
+
+def run(args: list[str]) -> int:
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    code = info.value.code
+    return code if isinstance(code, int) else 70
+
+
+def test_plan_table_and_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "plan.json"
+    assert run(["plan", "--scenario", "nexus-sml", "--json", str(out), "--workers", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "R3" in text and "margin" in text
+    data = json.loads(out.read_text())
+    assert data["run"][0]["region"] == "R1" and data["run"][0]["time"] == 0.0
+    times = [e["time"] for e in data["run"]]
+    assert times == sorted(times)
+
+
+def test_no_run_exits_1_naming_the_obligation(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(["plan", "--scenario", "nexus-sml", "--no-wait", "--workers", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "F[30,50] mission_2" in err
+
+
+def test_bad_spec_exits_3(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(["plan", "--spec", "F[3,1] p", "--workers", "1"]) == 3

@@ -1,0 +1,131 @@
+"""Product search on hand-made WTSs: each operator, open/closed endpoints, nesting, waiting, lasso, no run."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import pytest
+
+from tubempc.errors import NoAcceptingRunError
+from tubempc.mitl import parse
+from tubempc.planning import export_dot, find_run, holds, make_wts
+
+LABELS = {"A": ("p",), "B": ("q",), "C": ("r",)}
+# A <-> B 2 s, B <-> C 3 s, A <-> C 4 s
+WEIGHTS = {("A", "B"): 2, ("B", "A"): 2, ("B", "C"): 3, ("C", "B"): 3, ("A", "C"): 4, ("C", "A"): 4}
+WTS = make_wts(LABELS, WEIGHTS, initial="A")
+
+
+def plan(text: str, *, wait: bool = True):  # type: ignore[no-untyped-def]
+    f = parse(text)
+    found = find_run(WTS, f, wait=wait)
+    assert holds(f, found.run, LABELS), found.run  # the independent reference semantics agrees
+    return found
+
+
+def first_time(found, region: str) -> Fraction:  # type: ignore[no-untyped-def]
+    return next(t for r, t in zip(found.run.regions, found.run.times, strict=True) if r == region)
+
+
+def test_eventually_is_time_optimal() -> None:
+    found = plan("F[0,10] r")
+    assert first_time(found, "C") == 4  # direct A->C (4 s) beats A->B->C (5 s)
+
+
+def test_eventually_lower_bound_uses_a_wait() -> None:
+    found = plan("F[7,8] r")
+    assert any(k == "dwell" for k in found.kinds)
+    times = [t for r, t in zip(found.run.regions, found.run.times, strict=True) if r == "C" and 7 <= t <= 8]
+    assert times
+
+
+def test_eventually_lower_bound_without_wait_needs_a_detour() -> None:
+    found = plan("F[7,8] r", wait=False)
+    assert "dwell" not in found.kinds
+    assert any(r == "C" and 7 <= t <= 8 for r, t in zip(found.run.regions, found.run.times, strict=True))
+
+
+@pytest.mark.parametrize(("text", "ok"), [("F[0,4] r", True), ("F[0,4) r", False), ("F(4,5] r", True),
+                                          ("F[0,3] r", False)])
+def test_closed_and_open_endpoints_without_wait(text: str, ok: bool) -> None:
+    f = parse(text)
+    if ok:
+        found = find_run(WTS, f, wait=False)
+        assert holds(f, found.run, LABELS)
+    else:
+        with pytest.raises(NoAcceptingRunError):
+            find_run(WTS, f, wait=False)
+
+
+def test_open_lower_endpoint_with_wait_lands_strictly_inside() -> None:
+    found = plan("F(4,5) r")
+    t = next(t for r, t in zip(found.run.regions, found.run.times, strict=True) if r == "C" and 4 < t < 5)
+    assert 4 < t < 5
+
+
+def test_always_forbids_a_region_inside_its_window() -> None:
+    found = plan("G[0,6] !q & F[0,10] r")
+    for r, t in zip(found.run.regions, found.run.times, strict=True):
+        assert not (r == "B" and t <= 6)
+
+
+def test_until() -> None:
+    found = plan("p U[3,6] r")
+    # p holds only in A: wait in A until the move to C arrives in [3,6]
+    c = first_time(found, "C")
+    assert 3 <= c <= 6
+    assert all(r == "A" for r, t in zip(found.run.regions, found.run.times, strict=True) if t < c)
+
+
+def test_next() -> None:
+    found = plan("X[2,2] q")
+    assert found.run.regions[1] == "B" and found.run.times[1] == 2
+    with pytest.raises(NoAcceptingRunError):
+        find_run(WTS, parse("X[0,1] q"), wait=True)
+    found = plan("X[0,1] p")  # only a dwell in A can be the next position within 1 s
+    assert found.kinds[1] == "dwell"
+
+
+def test_nested_response_with_lasso() -> None:
+    found = plan("G(p -> F[0,5] r) & G(r -> F[0,5] p)", wait=False)
+    assert found.run.loop_start is not None and found.run.period is not None
+    cycle = set(found.run.regions[found.run.loop_start:])
+    assert {"A", "C"} <= cycle
+
+
+def test_infinitely_often_needs_a_cycle_through_both() -> None:
+    found = plan("G F p & G F r")
+    loop = found.run.loop_start
+    assert loop is not None
+    cycle = set(found.run.regions[loop:])
+    assert {"A", "C"} <= cycle
+
+
+def test_young_obligations_do_not_block_acceptance() -> None:
+    # every p spawns F[2,inf) q; a run alternating A and B keeps young copies pending forever
+    found = plan("G(p -> F[2,inf) q) & G F p", wait=False)
+    assert found.run.loop_start is not None
+
+
+def test_unsatisfiable_names_the_obligation() -> None:
+    with pytest.raises(NoAcceptingRunError) as info:
+        find_run(WTS, parse("G !r & F[0,10] q & F[0,20] r"), wait=True)
+    assert info.value.obligation == "F[0,20] r"
+    with pytest.raises(NoAcceptingRunError) as info:
+        find_run(WTS, parse("F[0,3] r & F[0,1] q"), wait=True)
+    assert info.value.obligation == "F[0,3] r"
+
+
+def test_wait_and_no_wait_differ() -> None:
+    f = parse("F[5,6] p")
+    # without waiting A is re-entered at 4, 8, 9, ... (A->B->A, twice that, A->B->C->A): never in [5,6]
+    with pytest.raises(NoAcceptingRunError):
+        find_run(WTS, f, wait=False)
+    found = plan("F[5,6] p")
+    assert any(r == "A" and 5 <= t <= 6 for r, t in zip(found.run.regions, found.run.times, strict=True))
+
+
+def test_export_dot() -> None:
+    found = plan("F[0,10] r")
+    text = export_dot(found.explored)
+    assert text.startswith("digraph product {") and "->" in text

@@ -1,0 +1,41 @@
+"""Abstraction: nodes are the safe regions, failed pairs keep their reason, cache and parallel builds agree."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+from tubempc.planning.synthetic import straight_line_oracle
+from tubempc.planning.wts import FAILED, LABELS, WEIGHT, build_wts
+from tubempc.scenario import builtin_scenario
+
+CALLS: list[tuple[str, str]] = []
+
+
+def test_nodes_are_safe_regions_with_labels(tmp_path: Path) -> None:
+    s = builtin_scenario()
+    g = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
+    assert set(g.nodes) == {r.name for r in s.safe_regions}
+    assert g.nodes["R1"][LABELS] == ("mission_1",)
+    for _, _, d in g.edges(data=True):
+        assert isinstance(d[WEIGHT], Fraction) and d[WEIGHT] > 0
+    n = len(s.safe_regions)
+    assert g.number_of_edges() + len(g.graph[FAILED]) == n * (n - 1)
+    assert all("passes region" in why for why in g.graph[FAILED].values())
+
+
+def test_cache_and_process_pool_agree(tmp_path: Path) -> None:
+    s = builtin_scenario()
+    cold = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=2)
+    assert list(tmp_path.glob("wts-*.json"))
+    warm = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
+    assert sorted(cold.edges(data=WEIGHT)) == sorted(warm.edges(data=WEIGHT))
+    assert cold.graph[FAILED] == warm.graph[FAILED]
+
+
+def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:
+    s = builtin_scenario()
+    build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
+    other = s.model_copy(update={"initial_region": "R2"})
+    build_wts(other, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
+    assert len(list(tmp_path.glob("wts-*.json"))) == 2
