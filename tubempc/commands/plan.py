@@ -27,7 +27,7 @@ __all__ = ["plan"]
 @click.option("--dask", "dask_address", default=None, help="Dask scheduler address for the abstraction.")
 @click.option("--dot", "dot_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the explored product graph as Graphviz DOT.")
-def plan(scenario_name: str, spec_text: str | None, no_wait: bool, json_out: str | None, no_cache: bool,
+def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, json_out: str | None, no_cache: bool,
          workers: int | None, dask_address: str | None, dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
     from tubempc.mitl import parse
