@@ -155,6 +155,11 @@ def _start_leg(scenario: Scenario, tube: TubeDesign, *, index: int, target: Targ
     return _Leg(index=index, target=target, goal=goal, path=path, obstacles=obstacles, departed_s=t_s)
 
 
+def _disc(scenario: Scenario, name: str) -> tuple[float, float, float]:
+    region = scenario.region(name)
+    return float(region.center[0]), float(region.center[1]), float(region.radius)
+
+
 def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
     if len(leg.obstacles):
         gap = np.hypot(leg.obstacles[:, 0] - pos[0], leg.obstacles[:, 1] - pos[1]) - leg.obstacles[:, 2]
@@ -229,10 +234,11 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     terminal = tube.terminal_radius_m
     eta = scenario.robot.radius
     done_at: int | None = None
+    sigma = tube.sigma
+    cx, cy, rho = _disc(scenario, targets[0].region)
     for i in range(n_max):
         t = float(t_arr[i])
         leg = legs[-1]
-        region = scenario.region(leg.target.region)
         if i % per_step == 0:
             if leg.entered_s is None and float(np.linalg.norm(x_hat - leg.goal)) <= terminal:
                 leg.entered_s = t
@@ -243,7 +249,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
                     leg = _start_leg(scenario, tube, index=leg.index + 1, target=targets[leg.index + 1],
                                      source=leg.target.region, x_hat=x_hat, t_s=t, chord_m=chord)
                     legs.append(leg)
-                    region = scenario.region(leg.target.region)
+                    cx, cy, rho = _disc(scenario, leg.target.region)
                 elif ready and t_end_s is None:
                     done_at = i
             leg.s_m = leg.path.project(x_hat[:2], leg.s_m, 1.0)
@@ -263,19 +269,14 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             records.append(SolverRecord(t_s=t, status=out.status, success=out.success, iterations=out.iterations,
                                         solve_time_s=out.solve_time_s, backup=out.backup, target=leg.target.region))
             u_hat = out.inputs[0].copy()
-        noise = np.zeros(3)
         if mocap_noise_m > 0:
-            noise[:2] = rng.normal(scale=mocap_noise_m, size=2)
-        x_meas = x + noise
-        q = x_meas - x_hat
-        u = u_hat - tube.sigma * q
-        xs[i], xms[i], xhs[i] = x, x_meas, x_hat
-        if model.linear_world:
-            uw[i] = u
+            x_meas = x.copy()
+            x_meas[:2] += rng.normal(scale=mocap_noise_m, size=2)
         else:
-            uw[i] = np.asarray(model.g(x), dtype=float) @ u
-        ub[i] = model.body_command(x, u)
-        if leg.inside_s is None and math.dist(x[:2], region.center) + eta <= region.radius:
+            x_meas = x
+        u = u_hat - sigma * (x_meas - x_hat)
+        xs[i], xms[i], xhs[i], uw[i] = x, x_meas, x_hat, u
+        if leg.inside_s is None and math.hypot(float(x[0]) - cx, float(x[1]) - cy) + eta <= rho:
             leg.inside_s = t
         if done_at is not None:
             break
@@ -287,6 +288,16 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             x = np.asarray(plant(x, u, delta), dtype=float).ravel()
             x_hat = np.asarray(nominal_step(x_hat, u_hat), dtype=float).ravel()
     n = (done_at + 1) if done_at is not None else n_max
+    # uw holds the applied input u; as a world-frame velocity (g(x) u) and as the body-frame command (cmd_vel)
+    if model.input_frame == "world" and model.linear_world:
+        cos, sin = np.cos(xs[:n, 2]), np.sin(xs[:n, 2])
+        ub[:n, 0] = cos * uw[:n, 0] + sin * uw[:n, 1]
+        ub[:n, 1] = -sin * uw[:n, 0] + cos * uw[:n, 1]
+        ub[:n, 2] = uw[:n, 2]
+    else:
+        for k in range(n):
+            ub[k] = model.body_command(xs[k], uw[k])
+            uw[k] = np.asarray(model.g(xs[k]), dtype=float) @ uw[k]
     arrivals = tuple(Arrival(region=lg.target.region, departed_s=lg.departed_s,
                              t_ij_s=None if lg.entered_s is None else round(lg.entered_s - lg.departed_s, 9),
                              entered_terminal_s=lg.entered_s, inside_s=lg.inside_s, departure_s=lg.departure_s)

@@ -90,6 +90,14 @@ class FhocpProblem:
     tube: TubeDesign
     chord_margin_m: float
     weights: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # Q, R, P diagonals
+    linear_world: bool  # x+ = x + h u: rollouts in numpy
+
+    def roll(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+        """Nominal states (N+1 x 3) of a plan (N x 3) from ``x0``, with the FHOCP's own discretisation."""
+        if self.linear_world:
+            out: np.ndarray = np.vstack([x0, x0 + self.h_s * np.cumsum(inputs, axis=0)])
+            return out
+        return np.asarray(self.rollout(x0, inputs.T), dtype=float).T
 
     @property
     def n_x(self) -> int:
@@ -162,7 +170,7 @@ def build_fhocp(scenario: Scenario, model: DynamicsModel, tube: TubeDesign, obst
         solver=ca.nlpsol("fhocp", "sqpmethod", nlp, _SQP_OPTIONS),
         fallback=ca.nlpsol("fhocp_ipopt", "ipopt", nlp, _IPOPT_OPTIONS),
         rollout=rollout, lbx=lbx, ubx=ubx, lbg=np.asarray(lbg), ubg=np.asarray(ubg), tube=tube,
-        chord_margin_m=chord, weights=(tuple(Q), tuple(R), tuple(P)),
+        chord_margin_m=chord, weights=(tuple(Q), tuple(R), tuple(P)), linear_world=model.linear_world,
     )
     _CACHE[key] = problem
     return problem
@@ -229,7 +237,7 @@ class NominalMPC:
             backup = np.zeros((n, STATE_DIM))
         else:
             backup = np.vstack([self._prev_inputs[1:], np.zeros((1, STATE_DIM))])
-        states = np.asarray(prob.rollout(x_hat, backup.T), dtype=float).T
+        states = prob.roll(x_hat, backup)
         self._prev_inputs = backup
         return SolveOutcome(inputs=backup, states=states, status=status, success=False, iterations=iters,
                             solve_time_s=elapsed, backup=True)
@@ -245,7 +253,7 @@ class NominalMPC:
             inputs = np.zeros((n, STATE_DIM))
         else:
             inputs = np.vstack([self._prev_inputs[1:], self._prev_inputs[-1:]])
-        states = np.asarray(prob.rollout(x_hat, inputs.T), dtype=float).T
+        states = prob.roll(x_hat, inputs)
         return np.concatenate([states.ravel(), inputs.ravel()])
 
     def _attempt(self, solver: ca.Function, w0: np.ndarray, p: np.ndarray, obstacles: np.ndarray,
@@ -265,7 +273,7 @@ class NominalMPC:
         w = np.asarray(out["x"], dtype=float).ravel()
         inputs = w[prob.n_x:].reshape(n, STATE_DIM)
         # the applied nominal is the rollout of the inputs from x_hat, never the solver's state iterate
-        states = np.asarray(prob.rollout(x_hat, inputs.T), dtype=float).T
+        states = prob.roll(x_hat, inputs)
         success = bool(stats.get("success", False)) and np.all(np.isfinite(w))
         if success:
             viol = _violation(prob, states, inputs, obstacles)

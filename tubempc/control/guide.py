@@ -61,14 +61,18 @@ class GuidePath:
         return best_s
 
 
-def _segment_clear(a: np.ndarray, b: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> bool:
+def _visible(a: np.ndarray, ends: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """For each segment a -> ends[j]: does it keep every disc (centers, radii) at a distance >= its radius?"""
     if len(centers) == 0:
-        return True
-    ab = b - a
-    denom = float(np.dot(ab, ab))
-    t = np.zeros(len(centers)) if denom == 0 else np.clip((centers - a) @ ab / denom, 0.0, 1.0)
-    nearest = a + t[:, None] * ab
-    return bool(np.all(np.linalg.norm(centers - nearest, axis=1) >= radii - 1e-12))
+        return np.ones(len(ends), dtype=bool)
+    ab = ends - a  # J x 2
+    denom = np.einsum("ij,ij->i", ab, ab)  # J
+    ac = centers - a  # K x 2
+    t = np.divide(ab @ ac.T, denom[:, None], out=np.zeros((len(ends), len(centers))), where=denom[:, None] > 0)
+    t = np.clip(t, 0.0, 1.0)  # J x K
+    nearest = a + t[..., None] * ab[:, None, :]  # J x K x 2
+    gap = np.linalg.norm(centers[None, :, :] - nearest, axis=2) - radii[None, :]
+    return np.asarray(np.all(gap >= -1e-12, axis=1))
 
 
 def guide_path(start: Sequence[float], goal: Sequence[float], discs: Sequence[tuple[float, float, float]], *,
@@ -109,14 +113,17 @@ def guide_path(start: Sequence[float], goal: Sequence[float], discs: Sequence[tu
         done[i] = True
         if i == 1:
             break
-        for j in range(n):
-            if done[j]:
-                continue
-            w = float(np.linalg.norm(pts[j] - pts[i]))
-            if d + w < dist[j] and _segment_clear(pts[i], pts[j], centers, check):
-                dist[j] = d + w
-                prev[j] = i
-                heapq.heappush(heap, (d + w, j))
+        cand = np.flatnonzero(~done)
+        w = np.linalg.norm(pts[cand] - pts[i], axis=1)
+        better = d + w < dist[cand]
+        cand, w = cand[better], w[better]
+        if len(cand) == 0:
+            continue
+        clear = _visible(pts[i], pts[cand], centers, check)
+        for j, wj in zip(cand[clear].tolist(), w[clear].tolist(), strict=True):
+            dist[j] = d + wj
+            prev[j] = i
+            heapq.heappush(heap, (d + wj, j))
     if not math.isfinite(dist[1]):
         raise NoGuidePathError(f"no collision-free path from ({s[0]:.3f}, {s[1]:.3f}) to ({g[0]:.3f}, {g[1]:.3f}) "
                                f"around {len(discs)} obstacle disc(s) inside the tightened workspace")
@@ -130,4 +137,6 @@ def guide_path(start: Sequence[float], goal: Sequence[float], discs: Sequence[tu
 
 def references(path: GuidePath, s_m: float, *, lookahead_m: float, step_m: float, stages: int) -> np.ndarray:
     """``stages`` planar reference points at arc length ``s + lookahead + k * step`` (clamped at the goal)."""
-    return np.array([path.point_at(s_m + lookahead_m + k * step_m) for k in range(stages)])
+    s = np.clip(s_m + lookahead_m + step_m * np.arange(stages), 0.0, path.length_m)
+    return np.column_stack([np.interp(s, path.cum_length_m, path.points[:, 0]),
+                            np.interp(s, path.cum_length_m, path.points[:, 1])])
