@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+
 import casadi as ca
 import nlopt
 import numpy as np
@@ -116,10 +117,7 @@ class NloptFhocp:
         opt.set_ftol_rel(1e-8)
         opt.set_xtol_rel(1e-6)
         opt.set_maxeval(500)
-        if self.prev is None:
-            u0 = np.zeros(3 * self.n)
-        else:
-            u0 = np.concatenate([self.prev[3:], self.prev[-3:]])
+        u0 = np.zeros(3 * self.n) if self.prev is None else np.concatenate([self.prev[3:], self.prev[-3:]])
         u0 = np.clip(u0, lo, -lo)
         start = time.perf_counter()
         try:
