@@ -14,7 +14,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
@@ -29,7 +29,7 @@ from verify.ingest import LogData, read_log
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of
 from verify.trajectory import check_trajectory
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "certify_log", "resolve_scenario",
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "resolve_scenario",
            "write_certificate"]
 
 CERTIFICATE_VERSION = 1
@@ -197,7 +197,12 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
-def write_certificate(result: CertifyResult, out_dir: str | Path) -> Path:
+class HasCertificate(Protocol):
+    @property
+    def certificate(self) -> dict[str, Any]: ...
+
+
+def write_certificate(result: HasCertificate, out_dir: str | Path) -> Path:
     """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -94,10 +94,14 @@ def write_log(path: Path, fmt: str, traj: Traj, scenario: Scenario, *, pose_type
     pose_topic = "/tf" if pose_type == "TF" else topics.pose
     samples = [(int(t), float(x), float(y), float(th)) for t, x, y, th in zip(t_ns, traj.x, traj.y, traj.theta,
                                                                                  strict=True)]
-    if extra_pose:
-        samples += [(time0_ns + round(t * 1e9), x, y, th) for t, x, y, th in extra_pose]
-    for t, x, y, th in samples:
-        ps = pose_msg(t, x, y, th)
+    late: dict[int, int] = {}
+    if extra_pose:  # header stamp t, received (log time) after the last sample: out of order in reading order
+        for k, (t, x, y, th) in enumerate(extra_pose):
+            late[len(samples)] = int(t_ns[-1]) + 1_000_000 * (k + 1)
+            samples.append((time0_ns + round(t * 1e9), x, y, th))
+    for k, (t_stamp, x, y, th) in enumerate(samples):
+        ps = pose_msg(t_stamp, x, y, th)
+        t = late.get(k, t_stamp)
         if pose_type == "PoseStamped":
             msgs.append((pose_topic, "geometry_msgs/msg/PoseStamped", t, ps))
         elif pose_type == "Odometry":
@@ -155,7 +159,7 @@ def write_log(path: Path, fmt: str, traj: Traj, scenario: Scenario, *, pose_type
         for topic, typ, t, msg in msgs:
             if topic not in conns:
                 if omit_definition and topic == pose_topic:
-                    conns[topic] = w.add_connection(topic, typ, msgdef="", rihs01="")
+                    conns[topic] = w.add_connection(topic, typ, msgdef="", rihs01="RIHS01_" + "0" * 64)
                 else:
                     conns[topic] = w.add_connection(topic, typ, typestore=store)
             w.write(conns[topic], t, ser(msg, typ))
@@ -183,3 +187,13 @@ def make_log(tmp_path: Path, scenario: Scenario) -> Callable[..., Path]:
         return write_log(folder / FORMAT_PATHS[fmt], fmt, traj, kwargs.pop("scenario", scenario), **kwargs)
 
     return make
+
+
+@pytest.fixture
+def paper_traj() -> Callable[..., Traj]:
+    return paper_like_traj
+
+
+@pytest.fixture
+def traj_cls() -> type[Traj]:
+    return Traj

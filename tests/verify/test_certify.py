@@ -1,0 +1,210 @@
+"""certify_log on generated logs: every format and pose type, each verdict, each data-quality fault, the CLI."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tubempc.scenario import Scenario
+from verify import (
+    LogReadError,
+    MissingTopicError,
+    SpecError,
+    TruncatedLogError,
+    certify_log,
+    write_certificate,
+)
+
+MakeLog = Callable[..., Path]
+TIME0_NS = 1_767_225_600 * 10**9  # the log contract's time 0 of simulated runs (conftest writes it)
+
+
+def _check(cert: dict, name: str) -> dict:
+    return next(c for c in cert["checks"] if c["name"] == name)
+
+
+@pytest.fixture
+def good(scenario: Scenario, paper_traj: Callable[..., Any]) -> Any:
+    return paper_traj(scenario, rate_hz=10.0)
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap", "db3", "dir-mcap", "dir-sqlite3"])
+@pytest.mark.parametrize("pose_type", ["PoseStamped", "Odometry", "TF"])
+def test_every_format_and_pose_type_passes(make_log: MakeLog, scenario: Scenario, good: Any, fmt: str,
+                                           pose_type: str) -> None:
+    sc = scenario.model_copy(update={"topics": scenario.topics.model_copy(update={"tf_child_frame": "nexus"})})
+    log = make_log(fmt, good, pose_type=pose_type, scenario=sc)
+    res = certify_log(log, sc)
+    cert = res.certificate
+    assert cert["verdict"] == "pass", cert["checks"]
+    assert res.exit_code == 0
+    assert [e["region"] for e in cert["timed_run"]] == ["R1", "R3", "R1"]
+    assert cert["data_quality"]["pose"]["fast_decode"] is (pose_type != "TF")
+    assert list(res.trajectory.columns) == ["t_s", "x_m", "y_m", "theta_rad"]
+    assert res.trajectory["x_m"].to_numpy() == pytest.approx(good.x, abs=1e-12)
+    assert cert["log_sha256"] and cert["scenario_sha256"] == sc.sha256()
+
+
+def test_result_pickles_and_certificate_is_json(make_log: MakeLog, scenario: Scenario, good: Any,
+                                                tmp_path: Path) -> None:
+    res = certify_log(make_log("mcap", good), scenario)
+    again = pickle.loads(pickle.dumps(res))
+    assert again.certificate == res.certificate
+    path = write_certificate(res, tmp_path / "out")
+    assert json.loads(path.read_text())["verdict"] == "pass"
+    assert set(res.robustness.columns) == {"t_s", "rho_m"}
+    assert set(res.inputs.columns) == {"t_s", "u1", "u2", "u3"}
+
+
+def test_obstacle_violation_fails_with_evidence(traj_cls: Any, make_log: MakeLog,
+                                                scenario: Scenario, good: Any) -> None:
+    r6 = scenario.region("R6")
+    x, y = good.x.copy(), good.y.copy()
+    k = 300  # 30 s: put one sample inside obstacle R6
+    x[k], y[k] = r6.center
+    bad = traj_cls(good.t_s, x, y, good.theta, nominal=good.nominal, cmd=good.cmd)
+    res = certify_log(make_log("bag", bad), scenario)
+    cert = res.certificate
+    assert cert["verdict"] == "fail" and res.exit_code == 1
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "fail" and spec["first_violation_time"] == pytest.approx(30.0)
+    assert "obs" in spec["subformula"]
+    assert _check(cert, "obstacle_clearance")["region"] == "R6"
+    assert _check(cert, "tube")["verdict"] == "fail"  # the nominal stayed on the planned path
+
+
+def test_missing_nominal_makes_tube_inconclusive(traj_cls: Any, make_log: MakeLog,
+                                                 scenario: Scenario, good: Any) -> None:
+    traj = traj_cls(good.t_s, good.x, good.y, good.theta, nominal=None, cmd=good.cmd)
+    cert = certify_log(make_log("mcap", traj), scenario).certificate
+    assert _check(cert, "tube")["verdict"] == "inconclusive"
+    assert cert["verdict"] == "inconclusive"
+    assert "tube" in cert["verdict_reason"]
+
+
+def test_input_box_violation(traj_cls: Any, make_log: MakeLog, scenario: Scenario, good: Any) -> None:
+    cmd = good.cmd.copy()
+    cmd[50, 1] = 0.25
+    traj = traj_cls(good.t_s, good.x, good.y, good.theta, nominal=good.nominal, cmd=cmd)
+    cert = certify_log(make_log("db3", traj), scenario).certificate
+    box = _check(cert, "input_box")
+    assert box["verdict"] == "fail" and box["first_violation_time"] == pytest.approx(5.0)
+    assert box["margin"] == pytest.approx(-0.05)
+
+
+def test_log_ending_inside_a_window_is_inconclusive(make_log: MakeLog, scenario: Scenario,
+                                                      paper_traj: Callable[..., Any]) -> None:
+    short = paper_traj(scenario, rate_hz=10.0, end_s=60.0)
+    cert = certify_log(make_log("mcap", short), scenario).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "inconclusive" and "mission_1" in spec["subformula"]
+    assert certify_log(make_log("mcap", short), scenario, spec="F[30,50] mission_2").certificate["verdict"] == \
+        "pass"
+
+
+def test_data_quality_faults_are_reported(traj_cls: Any, make_log: MakeLog, scenario: Scenario, good: Any) -> None:
+    x, theta = good.x.copy(), good.theta.copy()
+    x[400] = np.nan
+    theta[10] = np.nan  # NaN quaternion
+    x[700] += 0.5  # a jump faster than the robot can move
+    t = good.t_s.copy()
+    keep = (t < 20.0) | (t > 21.0)  # a dropout: samples 19.9 s and 21.1 s are neighbours
+    traj = traj_cls(t[keep], x[keep], good.y[keep], theta[keep], nominal=None, cmd=None)
+    extra = [(5.0, float(good.x[50]), float(good.y[50]), 0.0)]  # a duplicate stamp, written out of order
+    log = make_log("bag", traj, extra_pose=extra, header_offset_ns=-2_000_000)
+    cert = certify_log(log, scenario).certificate
+    dq = cert["data_quality"]["pose"]
+    assert dq["nan_positions"] == 1 and dq["first_nan_s"] == pytest.approx(40.0)
+    assert dq["bad_quaternions"] == 1
+    assert dq["jumps"]["count"] >= 1
+    assert dq["dropouts"]["count"] == 1 and dq["dropouts"]["longest_gap_s"] == pytest.approx(1.2)
+    assert dq["duplicate_stamps"] == 1 and dq["out_of_order_stamps"] == 1
+    assert dq["header_vs_log_offset_s"]["median"] == pytest.approx(0.002)
+    assert cert["verdict"] != "pass"
+
+
+def test_stamps_near_1970_and_log_time_base(make_log: MakeLog, scenario: Scenario, good: Any) -> None:
+    log = make_log("mcap", good, time0_ns=5 * 10**9)
+    cert = certify_log(log, scenario, time_base="log").certificate
+    assert cert["data_quality"]["pose"]["stamps_near_1970"] == len(good.t_s)
+    assert cert["time_base"] == "log" and cert["time0_ns"] == 5 * 10**9
+    custom = certify_log(log, scenario, time0_ns=5 * 10**9 - 10**9).certificate
+    assert custom["timed_run"][0]["time"] == pytest.approx(1.0)
+
+
+def test_wal_file_and_missing_definition(make_log: MakeLog, scenario: Scenario, good: Any) -> None:
+    log = make_log("db3", good)
+    wal = log.with_name(log.name + "-wal")
+    wal.write_bytes(b"\0" * 128)
+    before = log.read_bytes()
+    cert = certify_log(log, scenario).certificate
+    assert any("-wal" in n for n in cert["data_quality"]["notes"])
+    assert log.read_bytes() == before and wal.read_bytes() == b"\0" * 128  # inputs never modified
+    nodef = make_log("dir-mcap", good, omit_definition=True)
+    cert2 = certify_log(nodef, scenario).certificate
+    assert any(scenario.topics.pose in m for m in cert2["data_quality"]["missing_definitions"])
+    assert cert2["verdict"] == "pass"
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_truncated_log_exit3_and_salvage_partial(make_log: MakeLog, scenario: Scenario, good: Any,
+                                                 fmt: str) -> None:
+    log = make_log(fmt, good)
+    data = log.read_bytes()
+    cut = log.with_name("cut" + log.suffix)
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    with pytest.raises(TruncatedLogError, match=str(cut.name)):
+        certify_log(cut, scenario)
+    res = certify_log(cut, scenario, salvage=True)
+    cert = res.certificate
+    assert cert["partial"] is True and cert["verdict"] != "pass"
+    assert 0 < len(res.trajectory) < len(good.t_s)
+
+
+def test_unusable_inputs(traj_cls: Any, make_log: MakeLog, scenario: Scenario, good: Any, tmp_path: Path) -> None:
+    traj = traj_cls(good.t_s, good.x, good.y, good.theta)
+    log = make_log("mcap", traj)
+    with pytest.raises(MissingTopicError, match="/nope"):
+        certify_log(log, scenario.model_copy(update={"topics": scenario.topics.model_copy(
+            update={"pose": "/nope"})}))
+    with pytest.raises(SpecError):
+        certify_log(log, scenario, spec="F[0,1] unknown_label")
+    junk = tmp_path / "junk.bag"
+    junk.write_bytes(b"not a bag at all")
+    with pytest.raises(LogReadError, match=r"junk\.bag"):
+        certify_log(junk, scenario)
+
+
+def test_cli_exit_codes_and_out_folders(traj_cls: Any, make_log: MakeLog, scenario: Scenario, good: Any,
+                                        tmp_path: Path) -> None:
+    ok = make_log("mcap", good)
+    nonom = make_log("bag", traj_cls(good.t_s, good.x, good.y, good.theta, nominal=None, cmd=good.cmd))
+    out = tmp_path / "out"
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "tubempc", "certify", *args], capture_output=True, text=True,
+                              check=False)
+
+    r = run(str(ok), "--scenario", "nexus-sml", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "certificate.json").read_text())["verdict"] == "pass"
+    r = run(str(ok), str(nonom), "--scenario", "nexus-sml", "--out", str(out / "many"))
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert len(list((out / "many").glob("*/certificate.json"))) == 2
+    r = run(str(tmp_path / "missing.mcap"), "--scenario", "nexus-sml")
+    assert r.returncode == 3 and r.stderr.count("\n") == 1 and "missing.mcap" in r.stderr
+    r = run(str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1")
+    assert r.returncode == 1
+
+
+def test_time0_default_is_first_pose(make_log: MakeLog, scenario: Scenario, good: Any) -> None:
+    cert = certify_log(make_log("dir-sqlite3", good), scenario).certificate
+    assert cert["time0_ns"] == TIME0_NS
