@@ -519,9 +519,11 @@ def disturbances(draw: st.DrawFn, dim: int, bound: tuple[float, float] = (0.0, 0
 # ---------------------------------------------------------------------------------------------------- timed runs
 @st.composite
 def label_maps(draw: st.DrawFn, *, max_regions: int = 4, atoms: tuple[str, ...] = ("p", "q", "r"),
-               ) -> dict[str, tuple[str, ...]]:
-    """``{region name: labels}`` for 1..max_regions regions ``R1, R2, ...`` with labels from ``atoms``."""
-    n = draw(st.integers(1, max_regions))
+               min_regions: int = 1) -> dict[str, tuple[str, ...]]:
+    """``{region name: labels}`` for min_regions..max_regions regions ``R1, R2, ...`` with labels from ``atoms``."""
+    if not 1 <= min_regions <= max_regions:
+        raise ValueError(f"need 1 <= min_regions={min_regions} <= max_regions={max_regions}")
+    n = draw(st.integers(min_regions, max_regions))
     return {f"R{i + 1}": tuple(sorted(draw(st.sets(st.sampled_from(atoms), max_size=len(atoms)))))
             for i in range(n)}
 
