@@ -23,7 +23,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from tubempc.control.disturbance import InvalidArgumentError, make_disturbance
+from tubempc.control.disturbance import Disturbance, InvalidArgumentError, make_disturbance
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel, model_for
 from tubempc.control.fhocp import FAR_AWAY_M, NominalMPC, build_fhocp, discrete_step
 from tubempc.control.guide import GuidePath, guide_path, references
@@ -172,6 +172,38 @@ def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
     return slots.T.copy()
 
 
+def _world_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np.ndarray, *, xs: np.ndarray,
+                 xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t_arr: np.ndarray, dist: Disturbance,
+                 rng: np.random.Generator, sigma: float, dt: float, noise_m: float, powers: np.ndarray,
+                 lower: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``m_blk`` samples of the linear world model in closed form (exactly the per-sample recursion).
+
+    q_k = x_k - x_hat_k obeys ``q+ = a q + dt (delta - sigma n)`` with a = 1 - sigma dt. Under ``worst`` (no
+    noise) q keeps its direction e and ``|q|+ = a |q| + dt delta_bar``.
+    """
+    ks = np.arange(m_blk + 1)
+    nominal = x_hat + (ks * dt)[:, None] * u_hat  # m+1 x 3
+    q0 = x - x_hat
+    noise = np.zeros((m_blk, 3))
+    if noise_m > 0:
+        noise[:, :2] = rng.normal(scale=noise_m, size=(m_blk, 2))
+    if dist.kind == "worst":
+        r0 = float(np.linalg.norm(q0))
+        e = q0 / r0 if r0 > 1e-15 else dist.direction
+        a_pow = powers[: m_blk + 1]
+        radius = r0 * a_pow + dt * dist.bound * (1.0 - a_pow) / (sigma * dt)
+        q = radius[:, None] * e[None, :]
+    else:
+        w = dt * (dist.batch(t_arr[i:i + m_blk]) - sigma * noise)
+        q = powers[: m_blk + 1, None] * q0[None, :] + lower[: m_blk + 1, :m_blk] @ w
+    states = nominal + q
+    xs[i:i + m_blk] = states[:m_blk]
+    xms[i:i + m_blk] = states[:m_blk] + noise
+    xhs[i:i + m_blk] = nominal[:m_blk]
+    uw[i:i + m_blk] = u_hat - sigma * (q[:m_blk] + noise)
+    return states[m_blk].copy(), nominal[m_blk].copy()
+
+
 def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
                     disturbance: str = "random", seed: int = 0, t_end_s: float | None = None,
                     mocap_noise_m: float = 0.0, model: DynamicsModel | None = None) -> ClosedLoopResult:
@@ -236,7 +268,13 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     done_at: int | None = None
     sigma = tube.sigma
     cx, cy, rho = _disc(scenario, targets[0].region)
-    for i in range(n_max):
+    a_step = 1.0 - sigma * dt  # q+ = a q + dt (delta - sigma noise) for the linear world model
+    fast = plant is None and not (disturbance == "worst" and mocap_noise_m > 0)
+    powers = a_step ** np.arange(per_step + 1)  # a^k, k = 0..m
+    lower = np.array([[a_step ** (k - 1 - j) if j < k else 0.0 for j in range(per_step)]
+                      for k in range(per_step + 1)])  # (m+1) x m: q_k = a^k q_0 + sum_j a^(k-1-j) w_j
+    i = 0
+    while i < n_max:
         t = float(t_arr[i])
         leg = legs[-1]
         if i % per_step == 0:
@@ -269,6 +307,17 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             records.append(SolverRecord(t_s=t, status=out.status, success=out.success, iterations=out.iterations,
                                         solve_time_s=out.solve_time_s, backup=out.backup, target=leg.target.region))
             u_hat = out.inputs[0].copy()
+        if fast and done_at is None and i % per_step == 0:
+            m_blk = min(per_step, n_max - i)
+            x, x_hat = _world_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t_arr=t_arr,
+                                    dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,
+                                    powers=powers, lower=lower)
+            if leg.inside_s is None:
+                gap = np.hypot(xs[i:i + m_blk, 0] - cx, xs[i:i + m_blk, 1] - cy) + eta <= rho
+                if gap.any():
+                    leg.inside_s = float(t_arr[i + int(np.argmax(gap))])
+            i += m_blk
+            continue
         if mocap_noise_m > 0:
             x_meas = x.copy()
             x_meas[:2] += rng.normal(scale=mocap_noise_m, size=2)
@@ -287,6 +336,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
         else:
             x = np.asarray(plant(x, u, delta), dtype=float).ravel()
             x_hat = np.asarray(nominal_step(x_hat, u_hat), dtype=float).ravel()
+        i += 1
     n = (done_at + 1) if done_at is not None else n_max
     # uw holds the applied input u; as a world-frame velocity (g(x) u) and as the body-frame command (cmd_vel)
     if model.input_frame == "world" and model.linear_world:

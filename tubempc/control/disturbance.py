@@ -58,6 +58,24 @@ class Disturbance:
             return self.bound * self.direction
         return self.bound * math.sin(2 * math.pi * _SINE_FREQUENCY_HZ * t_s + self.phase_rad) * self.direction
 
+    def batch(self, t_s: np.ndarray) -> np.ndarray:
+        """Samples (len(t_s) x dim) of a state-independent model (every model but ``worst``)."""
+        n, dim = len(t_s), len(self.direction)
+        if self.kind == "worst":
+            raise InvalidArgumentError("disturbance 'worst' depends on the state: use sample(t_s, q)")
+        if self.kind == "none" or self.bound == 0:
+            return np.zeros((n, dim))
+        if self.kind == "random":
+            radius = self.bound * self.rng.uniform(size=n) ** (1.0 / dim)
+            dirs = self.rng.normal(size=(n, dim))
+            out: np.ndarray = radius[:, None] * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+            return out
+        if self.kind == "bias":
+            return np.tile(self.bound * self.direction, (n, 1))
+        wave = self.bound * np.sin(2 * math.pi * _SINE_FREQUENCY_HZ * np.asarray(t_s) + self.phase_rad)
+        sine: np.ndarray = wave[:, None] * self.direction[None, :]
+        return sine
+
     @property
     def params(self) -> dict[str, Any]:
         out: dict[str, Any] = {"model": self.kind, "bound": self.bound}

@@ -91,6 +91,16 @@ class FhocpProblem:
     chord_margin_m: float
     weights: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # Q, R, P diagonals
     linear_world: bool  # x+ = x + h u: rollouts in numpy
+    u_box_arr: np.ndarray = field(init=False)
+    ws_lo: np.ndarray = field(init=False)
+    ws_hi: np.ndarray = field(init=False)
+    bounds_dm: tuple[ca.DM, ca.DM, ca.DM, ca.DM] = field(init=False)  # lbx, ubx, lbg, ubg converted once
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "u_box_arr", np.asarray(self.tube.u_box, dtype=float))
+        object.__setattr__(self, "ws_lo", np.array([self.tube.workspace_x[0], self.tube.workspace_y[0]]))
+        object.__setattr__(self, "ws_hi", np.array([self.tube.workspace_x[1], self.tube.workspace_y[1]]))
+        object.__setattr__(self, "bounds_dm", tuple(ca.DM(v) for v in (self.lbx, self.ubx, self.lbg, self.ubg)))
 
     def roll(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """Nominal states (N+1 x 3) of a plan (N x 3) from ``x0``, with the FHOCP's own discretisation."""
@@ -190,19 +200,24 @@ class SolveOutcome:
 
 
 def _violation(problem: FhocpProblem, states: np.ndarray, inputs: np.ndarray, obstacles: np.ndarray) -> float:
-    """Largest constraint violation of a plan (m or m/s); 0 when the plan is feasible."""
+    """Largest constraint violation of a plan (m, m/s or rad); 0 when the plan is in the tightened sets."""
     tube = problem.tube
-    worst = float(np.max(np.abs(inputs) - np.asarray(tube.u_box), initial=0.0))
-    if tube.planar_disc_mps is not None:
-        worst = max(worst, float(np.max(np.linalg.norm(inputs[:, :2], axis=1))) - tube.planar_disc_mps)
     pos = states[1:, :2]
-    for lo_hi, col in ((tube.workspace_x, 0), (tube.workspace_y, 1)):
-        worst = max(worst, float(np.max(lo_hi[0] - pos[:, col])), float(np.max(pos[:, col] - lo_hi[1])))
+    parts = [
+        np.abs(inputs) - problem.u_box_arr,
+        problem.ws_lo - pos,
+        pos - problem.ws_hi,
+        # obstacles: required distance minus the distance, per node and slot
+        obstacles[2][None, :] - np.sqrt((pos[:, :1] - obstacles[0][None, :]) ** 2
+                                        + (pos[:, 1:2] - obstacles[1][None, :]) ** 2),
+    ]
+    worst = max(float(part.max()) for part in parts)
+    if tube.planar_disc_mps is not None:
+        worst = max(worst, math.sqrt(float(np.max(np.einsum("ij,ij->i", inputs[:, :2], inputs[:, :2]))))
+                    - tube.planar_disc_mps)
     if tube.theta_bound_rad is not None:
         worst = max(worst, float(np.max(np.abs(states[1:, 2]))) - tube.theta_bound_rad)
-    for cx, cy, rad in obstacles.T:
-        worst = max(worst, float(rad - np.min(np.hypot(pos[:, 0] - cx, pos[:, 1] - cy))))
-    return max(worst, 0.0) if worst > 1e-12 else 0.0
+    return worst if worst > 1e-12 else 0.0
 
 
 @dataclass
@@ -262,7 +277,8 @@ class NominalMPC:
         n = prob.steps
         start = time.perf_counter()
         try:
-            out = solver(x0=w0, p=p, lbx=prob.lbx, ubx=prob.ubx, lbg=prob.lbg, ubg=prob.ubg)
+            lbx, ubx, lbg, ubg = prob.bounds_dm
+            out = solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         except RuntimeError as err:  # CasADi reports numerical breakdowns as RuntimeError
             elapsed = time.perf_counter() - start
             return f"exception: {err}".splitlines()[0][:200], False, 0, elapsed, np.zeros((n, 3)), np.zeros((n + 1, 3))

@@ -47,18 +47,19 @@ class GuidePath:
 
     def project(self, p: np.ndarray, s_from_m: float, window_m: float) -> float:
         """Arc length of the point of the path nearest to ``p`` within ``[s_from, s_from + window]``."""
-        best_s, best_d = s_from_m, math.inf
-        for i in range(len(self.points) - 1):
-            s0, s1 = float(self.cum_length_m[i]), float(self.cum_length_m[i + 1])
-            if s1 < s_from_m or s0 > s_from_m + window_m or s1 <= s0:
-                continue
-            a, b = self.points[i], self.points[i + 1]
-            t = float(np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0))
-            s = min(max(s0 + t * (s1 - s0), s_from_m), s_from_m + window_m)
-            d = float(np.linalg.norm(self.point_at(s) - p))
-            if d < best_d:
-                best_s, best_d = s, d
-        return best_s
+        if len(self.points) < 2:
+            return s_from_m
+        a, b = self.points[:-1], self.points[1:]
+        s0, s1 = self.cum_length_m[:-1], self.cum_length_m[1:]
+        ab = b - a
+        seg2 = np.einsum("ij,ij->i", ab, ab)
+        t = np.divide(np.einsum("ij,ij->i", p[:2] - a, ab), seg2, out=np.zeros(len(ab)), where=seg2 > 0)
+        s = np.clip(s0 + np.clip(t, 0.0, 1.0) * (s1 - s0), s_from_m, s_from_m + window_m)
+        s = np.clip(s, 0.0, self.length_m)
+        near = np.column_stack([np.interp(s, self.cum_length_m, self.points[:, 0]),
+                                np.interp(s, self.cum_length_m, self.points[:, 1])])
+        d = np.hypot(near[:, 0] - p[0], near[:, 1] - p[1])
+        return max(float(s[int(np.argmin(d))]), s_from_m) if len(d) else s_from_m
 
 
 def _visible(a: np.ndarray, ends: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
