@@ -114,3 +114,9 @@ def test_world_model_body_command_rotates() -> None:
     cmd = model.body_command(np.array([0.0, 0.0, math.pi / 2]), np.array([0.1, 0.0, 0.05]))
     # world +x seen from a robot facing +y is its -y axis
     assert cmd == pytest.approx([0.0, -0.1, 0.05], abs=1e-15)
+
+
+def test_gain_too_high_for_the_mocap_rate_is_refused() -> None:
+    sc = _variant(mocap={"rate_hz": 1.5})  # sigma * dt = 2 / 1.5 > 1
+    with pytest.raises(DesignError, match="MoCap period"):
+        design_tube(sc, model_for(sc))

@@ -114,12 +114,12 @@ class FhocpProblem:
         return STATE_DIM * (self.steps + 1)
 
 
-_CACHE: dict[tuple[str, str, int], FhocpProblem] = {}
+_CACHE: dict[tuple[str, str, TubeDesign, int], FhocpProblem] = {}
 
 
 def build_fhocp(scenario: Scenario, model: DynamicsModel, tube: TubeDesign, obstacle_slots: int) -> FhocpProblem:
     """Build (or fetch from the in-process cache) the FHOCP for a scenario, model and obstacle slot count."""
-    key = (scenario.sha256(), model.cache_key, obstacle_slots)
+    key = (scenario.sha256(), model.cache_key, tube, obstacle_slots)
     cached = _CACHE.get(key)
     if cached is not None:
         return cached

@@ -57,6 +57,11 @@ def design_tube(scenario: Scenario, model: DynamicsModel) -> TubeDesign:
             raise DesignError(f"tube.radius={stated!r} m is below the invariant radius {radius:.6g} m of the corrected "
                               f"lemma (delta_bar / (sigma_low * g_min))")
         radius = stated
+    dt = 1.0 / scenario.mocap.rate_hz
+    if gain.sigma * dt >= 1.0:
+        raise DesignError(f"ancillary gain sigma = {gain.sigma:.6g} times the MoCap period {dt:.6g} s is >= 1: the "
+                          f"sampled law u = u_hat - sigma q does not keep |q| <= r_q (raise mocap.rate_hz or lower "
+                          f"tube.sigma_low)")
     shrink = gain.sigma * radius
     if model.input_frame == "world":
         disc = min(u_max[0], u_max[1]) - shrink
