@@ -96,7 +96,8 @@ def main(argv: list[str] | None = None) -> NoReturn:
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
-        cli.main(args=args, prog_name="tubempc", standalone_mode=False)
+        # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
+        code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
     except click.exceptions.Exit as err:
         sys.exit(err.exit_code)
     except click.Abort:
@@ -119,4 +120,4 @@ def main(argv: list[str] | None = None) -> NoReturn:
         click.echo(f"tubempc: internal error: {err.__class__.__name__}: {err} (rerun with --debug for the "
                    f"traceback)", err=True)
         sys.exit(EXIT_INTERNAL)
-    sys.exit(EXIT_OK)
+    sys.exit(code if isinstance(code, int) else EXIT_OK)
