@@ -127,5 +127,5 @@ def test_wait_and_no_wait_differ() -> None:
 
 def test_export_dot() -> None:
     found = plan("F[0,10] r")
-    text = export_dot(found.explored)
+    text = export_dot(found.explored())
     assert text.startswith("digraph product {") and "->" in text

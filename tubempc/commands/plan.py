@@ -56,4 +56,4 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, json_out: 
         Path(json_out).write_text(json.dumps(result.to_json(), indent=2) + "\n")
     if dot_out is not None:
         found = find_run(wts, formula, wait=not no_wait, initial=scenario.initial_region)
-        Path(dot_out).write_text(export_dot(found.explored))
+        Path(dot_out).write_text(export_dot(found.explored()))

@@ -142,6 +142,11 @@ class TimedAutomaton:
         self._step_memo: dict[tuple[State, int, int], Dnf] = {}
         self._accept_memo: dict[State, tuple[bool, ...]] = {}
         self.buchi = tuple(i for i, n in enumerate(nodes) if n.kind in _EXISTENTIAL and n.hi is None)
+        # per node: 0 = not subsumable, 1 = existential (keep the older), 2 = universal (keep the younger)
+        self._mode = [1 if n.kind in _EXISTENTIAL else 2 if n.kind in _UNIVERSAL else 0 for n in nodes]
+        self._reach = [n.lo if n.lo_closed else n.lo + 1 for n in nodes]  # first age at or past the lower end
+        self._caps = [n.cap for n in nodes]
+        self._trigger_memo: dict[tuple[int, int], bool] = {}
         self.atoms = frozenset(n.atom for n in nodes if n.kind in (ATOM, NATOM))
 
     # ---- labels -------------------------------------------------------------------------------------------
@@ -163,17 +168,30 @@ class TimedAutomaton:
     def step(self, state: State, delta: int, label_class: int) -> Dnf:
         """Successor states after ``delta >= 1`` ticks at a new position with the given label class."""
         key = (state, delta, label_class)
-        out = self._step_memo.get(key)
-        if out is not None:
-            return out
-        acc: Dnf = ((),)
+        hit = self._step_memo.get(key)
+        if hit is not None:
+            return hit
+        caps = self._caps
+        single: list[Obligation] = []  # obligations of the conjuncts that have exactly one disjunct
+        multi: list[Dnf] = []
         for node_id, age in state:
-            node = self.nodes[node_id]
-            new_age = min(age + delta, node.cap)
-            acc = self._and(acc, self._expand(node_id, new_age, label_class))
-            if not acc:
-                break
-        out = self._minimize(self._canon(d) for d in acc)
+            new_age = age + delta
+            cap = caps[node_id]
+            part = self._expand(node_id, new_age if new_age < cap else cap, label_class)
+            if not part:
+                self._step_memo[key] = ()
+                return ()
+            if len(part) == 1:
+                single.extend(part[0])
+            else:
+                multi.append(part)
+        if not multi:
+            out: Dnf = (self._canon(single),)
+        else:
+            acc: Dnf = (tuple(single),)
+            for part in multi:
+                acc = self._and(acc, part)
+            out = self._minimize(self._canon(d) for d in acc)
         self._step_memo[key] = out
         return out
 
@@ -181,7 +199,8 @@ class TimedAutomaton:
         key = (node_id, age, cls)
         out = self._expand_memo.get(key)
         if out is None:
-            out = self._expand_uncached(node_id, age, cls)
+            raw = self._expand_uncached(node_id, age, cls)
+            out = raw if len(raw) <= 1 else self._minimize(self._canon(d) for d in raw)
             self._expand_memo[key] = out
         return out
 
@@ -253,17 +272,17 @@ class TimedAutomaton:
         """Subsumption inside one conjunction: keep the strongest in-window copy of each F/U/G/R node."""
         best: dict[int, int] = {}
         rest: set[Obligation] = set()
-        nodes = self.nodes
+        mode, reach = self._mode, self._reach
         for node_id, age in disjunct:
-            n = nodes[node_id]
-            if (n.kind in _EXISTENTIAL or n.kind in _UNIVERSAL) and n.reached(age):
+            m = mode[node_id]
+            if m and age >= reach[node_id]:
                 old = best.get(node_id)
                 if old is None:
                     best[node_id] = age
-                elif n.kind in _EXISTENTIAL:
-                    best[node_id] = max(old, age)
+                elif m == 1:
+                    best[node_id] = old if old > age else age
                 else:
-                    best[node_id] = min(old, age)
+                    best[node_id] = old if old < age else age
             else:
                 rest.add((node_id, age))
         rest.update(best.items())
@@ -316,11 +335,14 @@ class TimedAutomaton:
             self._accept_memo[state] = out
         return out
 
-    def event_delays(self, state: State) -> set[int]:
-        """Dwell durations (ticks) after which some pending obligation changes status at the dwell position."""
+    def event_delays(self, state: State, label_class: int) -> set[int]:
+        """Dwell durations (ticks) after which a pending obligation whose child can change value in the dwell
+        region (``label_class``), or a pending next, changes status at the dwell position; and one tick."""
         out = {1}
         for nid, age in state:
             n = self.nodes[nid]
+            if n.kind not in (NXT, WNXT) and not self._triggers(nid, label_class):
+                continue
             ends: tuple[int, ...] = (n.lo,) if n.hi is None else (n.lo, n.hi)
             base = 0 if n.kind in (NXT, WNXT) else age
             for c in ends:
@@ -352,6 +374,14 @@ class TimedAutomaton:
         return out
 
     def _triggers(self, node_id: int, cls: int) -> bool:
+        key = (node_id, cls)
+        out = self._trigger_memo.get(key)
+        if out is None:
+            out = self._triggers_uncached(node_id, cls)
+            self._trigger_memo[key] = out
+        return out
+
+    def _triggers_uncached(self, node_id: int, cls: int) -> bool:
         n = self.nodes[node_id]
         child = n.children[-1]
         val = self._expand(child, 0, cls)

@@ -43,29 +43,11 @@ __all__ = ["DEFAULT_MAX_STATES", "SearchLimitError", "SearchResult", "export_dot
 
 DEFAULT_MAX_STATES = 2_000_000
 MOVE, DWELL = "move", "dwell"
-_DOMINANCE_WINDOW = 16  # how many earlier states of the same region and obligation skeleton are compared
+_DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
 
 class SearchLimitError(TubeMPCError, RuntimeError):
     """The product grew past ``max_states`` before the search could decide."""
-
-
-@dataclass(frozen=True, slots=True)
-class SearchResult:
-    """A lasso run in exact seconds; ``kinds[i]`` is ``start``, ``move`` or ``dwell``."""
-
-    run: LassoRun
-    kinds: tuple[str, ...]
-    tick_s: Fraction
-    states: int
-    expanded: int
-    seconds: float
-    explored: nx.DiGraph = field(compare=False, repr=False)
-    automaton: TimedAutomaton = field(compare=False, repr=False)
-
-
-def _intervals(formula: Formula) -> list[Interval]:
-    return [f.interval for f in subformulas(formula) if isinstance(f, Next | Eventually | Always | Until)]
 
 
 class _Product:
@@ -99,6 +81,29 @@ class _Product:
         return sid, True
 
 
+@dataclass(frozen=True, slots=True)
+class SearchResult:
+    """A lasso run in exact seconds; ``kinds[i]`` is ``start``, ``move`` or ``dwell``."""
+
+    run: LassoRun
+    kinds: tuple[str, ...]
+    tick_s: Fraction
+    states: int
+    expanded: int
+    seconds: float
+    automaton: TimedAutomaton = field(compare=False, repr=False)
+    product: _Product = field(compare=False, repr=False)
+    region_names: tuple[str, ...] = field(compare=False, repr=False, default=())
+
+    def explored(self) -> nx.DiGraph:
+        """The explored product: nodes with region, time, pending obligations; edges with kind and duration."""
+        return _explored_graph(self.product, self.automaton, list(self.region_names), self.tick_s)
+
+
+def _intervals(formula: Formula) -> list[Interval]:
+    return [f.interval for f in subformulas(formula) if isinstance(f, Next | Eventually | Always | Until)]
+
+
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
              max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True) -> SearchResult:
     """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring)."""
@@ -123,8 +128,8 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
         raise NoAcceptingRunError(f"no timed run of the WTS satisfies {formula}", obligation=str(formula))
     run, kinds, prod, expanded = result
     return SearchResult(run=run, kinds=kinds, tick_s=tick, states=len(prod.region), expanded=expanded,
-                        seconds=time.perf_counter() - start, explored=_explored_graph(prod, aut, wts, tick),
-                        automaton=aut)
+                        seconds=time.perf_counter() - start, automaton=aut, product=prod,
+                        region_names=tuple(sorted(wts.nodes)))
 
 
 def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prune: bool,
@@ -168,7 +173,7 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prun
             for o2 in aut.step(obl, w, cls[j]):
                 succs.append((j, o2, w, w, MOVE))
         if wait:
-            delays = aut.event_delays(obl) | aut.targeted_delays(obl, arrivals[r])
+            delays = aut.event_delays(obl, cls[r]) | aut.targeted_delays(obl, arrivals[r])
             for d in sorted(delays):
                 for o2 in aut.step(obl, d, cls[r]):
                     succs.append((r, o2, d, 0, DWELL))
@@ -302,8 +307,7 @@ def _path_steps(sub: nx.DiGraph, path: list[int]) -> list[tuple[int, int, str]]:
     return [(b, sub.edges[a, b]["d"], sub.edges[a, b]["kind"]) for a, b in itertools.pairwise(path)]
 
 
-def _explored_graph(prod: _Product, aut: TimedAutomaton, wts: nx.DiGraph, tick: Fraction) -> nx.DiGraph:
-    names = sorted(wts.nodes)
+def _explored_graph(prod: _Product, aut: TimedAutomaton, names: list[str], tick: Fraction) -> nx.DiGraph:
     g = nx.DiGraph()
     for s in range(len(prod.region)):
         if not prod.settled[s]:

@@ -1,0 +1,139 @@
+"""Planner benchmark: product search on the built-in 9-region WTS and on random workspaces of 25/50/100 regions.
+
+Run: ``python3 benchmarks/bench_planner.py [--abstraction] [--repeat N]``. Prints wall times (median of N runs,
+search only: the WTS is built before timing) and the ratio to a baseline measured in the same run: one
+networkx single-source Dijkstra over the same WTS. ``--abstraction`` also times the built-in scenario's
+abstraction with the real controller (Algorithm 1) on all cores, cold (fresh cache) and warm (from cache).
+
+Targets (issue 5): paper case <= 50 ms; 100 regions x 10 timed operators (incl. ``G(g0 -> F[0,60] g1)``) <= 2 s.
+Random workspaces use the synthetic straight-line oracle (``tubempc.planning.synthetic``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import networkx as nx
+import numpy as np
+
+from tubempc.mitl import parse
+from tubempc.planning.search import find_run
+from tubempc.planning.semantics import holds
+from tubempc.planning.synthetic import random_scenario, straight_line_oracle
+from tubempc.planning.wts import FAILED, LABELS, ORACLE, WEIGHT, build_wts
+from tubempc.scenario import builtin_scenario
+
+TARGET_PAPER_S = 0.050
+TARGET_LARGE_S = 2.0
+
+
+def timed(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
+    times = []
+    out: object = None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def baseline(wts: nx.DiGraph, source: str, repeat: int) -> float:
+    def run() -> object:
+        return nx.single_source_dijkstra_path_length(wts, source, weight=lambda a, b, d: float(d[WEIGHT]))
+
+    return timed(run, repeat)[0]
+
+
+def random_case(n_regions: int, n_windows: int, seed: int) -> tuple[str, nx.DiGraph]:
+    """Labels ``m1..mk`` on distinct safe regions, ``g0``/``g1`` on two more; windows every 80 s, 120 s wide."""
+    rng = np.random.default_rng(seed)
+    picks = rng.choice(np.arange(1, n_regions), size=n_windows + 2, replace=False)
+    labels = {int(picks[k]): [f"m{k + 1}"] for k in range(n_windows)}
+    labels[int(picks[-2])] = ["g0"]
+    labels[int(picks[-1])] = ["g1"]
+    windows = [f"F[{80 * k + 10},{80 * k + 130}] m{k + 1}" for k in range(n_windows)]
+    spec = " & ".join(["G !obs", *windows, "G(g0 -> F[0,60] g1)"])
+    scenario = random_scenario(rng, n_regions, spec=spec, labels=labels)
+    with tempfile.TemporaryDirectory() as tmp:
+        wts = build_wts(scenario, oracle=straight_line_oracle, workers=1, cache_path=Path(tmp), progress=False)
+    return spec, wts
+
+
+def count_timed(spec: str) -> int:
+    return sum(spec.count(op) for op in ("F[", "G[", "G ", "G(", "U[", "X["))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--abstraction", action="store_true", help="also time the real abstraction (runs the MPC)")
+    args = ap.parse_args(argv)
+    ok = True
+
+    scenario = builtin_scenario()
+    if args.abstraction:
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            wts = build_wts(scenario, cache_path=Path(tmp), progress=False)
+            cold = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            build_wts(scenario, cache_path=Path(tmp), progress=False)
+            warm = time.perf_counter() - t0
+        print(f"abstraction of {scenario.name} (Algorithm 1, all cores): cold {cold:.2f} s, from cache "
+              f"{warm * 1000:.1f} ms; {wts.number_of_edges()} transitions, {len(wts.graph[FAILED])} failed pairs")
+    else:
+        try:
+            from tubempc.planning.wts import cache_dir
+
+            wts = build_wts(scenario, progress=False, cache_path=cache_dir())
+        except Exception as err:  # the benchmark falls back to synthetic weights, and says so
+            print(f"(real controller unavailable: {err}; using synthetic weights)")
+            wts = build_wts(scenario, oracle=straight_line_oracle, workers=1, use_cache=False, progress=False)
+    labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
+    base = baseline(wts, scenario.initial_region, args.repeat)
+    for wait in (True, False):
+        secs, res = timed(lambda w=wait: _try(wts, scenario.formula, w), args.repeat)  # type: ignore[misc]
+        status = "no run" if res is None else ("ok" if holds(scenario.formula, res.run, labels) else "WRONG")
+        good = secs <= TARGET_PAPER_S and status != "WRONG"
+        ok &= good
+        print(f"paper formula, 9 regions (weights: {wts.graph[ORACLE]}), wait={wait}: {secs * 1000:.1f} ms "
+              f"({secs / base:.0f}x one WTS Dijkstra) [{status}] target {TARGET_PAPER_S * 1000:.0f} ms "
+              f"{'met' if good else 'MISSED'}")
+
+    for n_regions in (25, 50, 100):
+        for n_windows in (3, 7):
+            spec, wts = random_case(n_regions, n_windows, seed=n_regions)
+            formula = parse(spec)
+            labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
+            base = baseline(wts, "R0", args.repeat)
+            secs, res = timed(lambda f=formula, g=wts: _try(g, f, True), args.repeat)  # type: ignore[misc]
+            status = "no run" if res is None else ("ok" if holds(formula, res.run, labels) else "WRONG")
+            states = 0 if res is None else res.states
+            line = (f"{n_regions:>3} regions ({wts.number_of_edges()} transitions), {count_timed(spec):>2} timed "
+                    f"operators: {secs * 1000:8.1f} ms ({secs / base:.0f}x one WTS Dijkstra), {states} product "
+                    f"states [{status}]")
+            if n_regions == 100 and n_windows == 7:
+                good = secs <= TARGET_LARGE_S and status == "ok"
+                ok &= good
+                line += f" target {TARGET_LARGE_S:.0f} s {'met' if good else 'MISSED'}"
+            print(line)
+    return 0 if ok else 1
+
+
+def _try(wts: nx.DiGraph, formula: object, wait: bool):  # type: ignore[no-untyped-def]
+    from tubempc.errors import NoAcceptingRunError
+
+    try:
+        return find_run(wts, formula, wait=wait, diagnose=False)  # type: ignore[arg-type]
+    except NoAcceptingRunError:
+        return None
+
+
+if __name__ == "__main__":
+    sys.exit(main())
