@@ -41,7 +41,7 @@ from tubempc.mitl import (
 )
 from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, make_wts, plan_from_wts
 from tubempc.strategies import TimedRun
-from verify.timedrun import check_timed_run
+from verify import check_timed_run
 
 ATOMS = ("p", "q", "r")
 T, U, F = 1.0, 0.5, 0.0  # Kleene truth values: and = min, or = max, not = 1 - x
