@@ -47,7 +47,7 @@ ATOMS = ("p", "q", "r")
 T, U, F = 1.0, 0.5, 0.0  # Kleene truth values: and = min, or = max, not = 1 - x
 VERDICT = {T: "pass", F: "fail", U: "inconclusive"}
 # cheap tests get five times the profile's budget (200 under ci, 5000 under nightly)
-CHEAP = 5 * settings.default.max_examples
+CHEAP = 5 * settings().max_examples
 MAX_STATES = 20_000  # product states before a search is abandoned (the case is then skipped, not failed)
 
 
