@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -35,7 +36,7 @@ from tqdm import tqdm
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
 from verify.errors import UnusableInputError, VerifyError
-from verify.report import CertifyResultLike, junit_xml, write_junit, write_reports
+from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
 
 __all__ = [
     "EXIT_INTERNAL",
@@ -215,13 +216,26 @@ def _show_progress(progress: bool | None) -> bool:
     return sys.stderr.isatty() if progress is None else progress
 
 
+def _process_context(preload: Sequence[str]) -> multiprocessing.context.BaseContext:
+    """forkserver where available: the server imports ``preload`` once, workers fork from it in milliseconds
+    (spawn would re-import pandas, rosbags, casadi in every worker; fork is unsafe with threads)."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(list(preload))
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
 def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: str | None = None,
-                 progress: bool | None = None, desc: str = "") -> list[R]:
+                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",)
+                 ) -> list[R]:
     """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
 
     ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"`` or a scheduler address.
-    ``progress``: a tqdm bar on stderr (default: only when stderr is a terminal). Exceptions raised by ``fn``
-    propagate; callers that must not stop (``certify_many``) catch inside ``fn``.
+    ``progress``: a tqdm bar on stderr (default: only when stderr is a terminal). ``preload``: modules the
+    process server imports once for all workers. Exceptions raised by ``fn`` propagate; callers that must not stop
+    (``certify_many``) catch inside ``fn``. Worker processes re-import the caller's ``__main__`` module: scripts
+    must guard their top level with ``if __name__ == "__main__":``.
     """
     if workers is not None and workers < 1:
         raise ValueError(f"workers={workers!r} must be at least 1")
@@ -238,11 +252,15 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
                 bar.update()
             return out
         results: dict[int, R] = {}
-        with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(max_workers=n, mp_context=_process_context(preload)) as pool:
             futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
-            for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                bar.update()
+            try:
+                for fut in as_completed(futures):
+                    results[futures[fut]] = fut.result()
+                    bar.update()
+            except BrokenProcessPool as err:
+                raise RuntimeError("a worker process died; a script that starts workers must guard its top level "
+                                   "with `if __name__ == \"__main__\":`") from err
         return [results[i] for i in range(len(items))]
     finally:
         bar.close()
@@ -335,32 +353,55 @@ def _md_cell(value: Any) -> str:
     return re.sub(r"([\\`*_|\[\]])", r"\\\1", html.escape(text, quote=False)).replace("\n", " ")
 
 
-def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True) -> dict[str, Path]:
+@dataclass(frozen=True, slots=True)
+class _WriteJob:
+    item: BatchItem
+    scenario: Scenario
+    folder: str
+    reports: bool
+
+
+def _write_item(job: _WriteJob) -> bytes:
+    """Write one log's folder; return its JUnit ``<testsuite>`` as XML bytes (picklable)."""
+    import xml.etree.ElementTree as ET
+
+    from verify.report import junit_xml, write_reports
+
+    item, sub = job.item, Path(job.folder)
+    sub.mkdir(parents=True, exist_ok=True)
+    if item.result is not None:
+        _write_certificate(item.result, sub)
+        if job.reports:
+            write_reports(item.result, job.scenario, sub, suite_name=item.name)
+        return ET.tostring(junit_xml(item.result, suite_name=item.name))
+    (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
+    suite = ET.Element("testsuite", {"name": item.name, "tests": "1", "failures": "0", "errors": "1",
+                                     "skipped": "0", "time": f"{item.elapsed_s:.3f}"})
+    case = ET.SubElement(suite, "testcase", {"classname": item.name, "name": "read log", "time": "0"})
+    ET.SubElement(case, "error", {"message": item.error or "", "type": item.verdict})
+    return ET.tostring(suite)
+
+
+def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True, workers: int | None = None,
+                dask: str | None = None, progress: bool | None = None) -> dict[str, Path]:
     """Write ``<out_dir>/<log>/`` (certificate.json + reports, or error.txt) and the summaries.
 
+    The per-log folders are written in parallel like ``certify_many`` (figures take about 2 s per log).
     Returns the top-level files: ``summary.md``, ``summary.csv``, ``junit.xml`` (one suite per log; an unusable
     log is a suite with one errored test case).
     """
     import xml.etree.ElementTree as ET
 
+    from verify.report import write_junit
+
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    suites: list[ET.Element] = []
-    for item in batch.items:
-        sub = out / item.name
-        sub.mkdir(parents=True, exist_ok=True)
-        if item.result is not None:
-            _write_certificate(item.result, sub)
-            if reports:
-                write_reports(item.result, batch.scenario, sub, suite_name=item.name)
-            suites.append(junit_xml(item.result, suite_name=item.name))
-        else:
-            (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
-            suite = ET.Element("testsuite", {"name": item.name, "tests": "1", "failures": "0", "errors": "1",
-                                             "skipped": "0", "time": f"{item.elapsed_s:.3f}"})
-            case = ET.SubElement(suite, "testcase", {"classname": item.name, "name": "read log", "time": "0"})
-            ET.SubElement(case, "error", {"message": item.error or "", "type": item.verdict})
-            suites.append(suite)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UnusableInputError(f"cannot create the output folder ({err})", path=str(out)) from err
+    jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports) for item in batch.items]
+    suites = [ET.fromstring(x) for x in parallel_map(_write_item, jobs, workers=workers, dask=dask,
+                                                     progress=progress, desc="reports")]
     rows = batch.rows()
     columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
     with (out / "summary.csv").open("w", newline="", encoding="utf-8") as fh:
@@ -373,8 +414,8 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
              + ", ".join(f"{n} {k}" for k, n in counts.items() if n) + ".", "",
              "| log | verdict | exit | failed checks | inconclusive checks | worst margin | first violation [s] "
              "| error |", "|---|---|---|---|---|---|---|---|"]
+    target = "report.md" if reports else "certificate.json"
     for row in rows:
-        target = "report.md" if reports else "certificate.json"
         link = (f"[{_md_cell(row['log'])}]({row['folder']}/{target})" if row["exit_code"] in (0, 1, 2)
                 else _md_cell(row["log"]))
         lines.append(f"| {link} | {row['verdict']} | {row['exit_code']} | {_md_cell(row['failed_checks'])} | "

@@ -37,6 +37,7 @@ __all__ = [
 ]
 
 MAX_PLOT_POINTS = 20_000  # lines are decimated to this many points; markers (violations, run) stay exact
+MAX_BAND_POINTS = 2_000  # the tube band outline (a polygon: costly to draw) per side
 _DPI = 110
 _KIND_COLOURS = {"unsafe": "#d62728", "labelled": "#2ca02c", "free": "#7f7f7f"}
 _FAIL_COLOUR = "#d62728"
@@ -53,7 +54,7 @@ class FigureSpec:
 
 def _png(fig: Figure) -> bytes:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=_DPI)
     return buf.getvalue()
 
 
@@ -99,6 +100,8 @@ def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
     """Outline of the band of half-width ``radius_m`` around the nominal path (left side, then right reversed)."""
     xy = nominal[["x_m", "y_m"]].to_numpy(dtype=float)
     xy = xy[np.all(np.isfinite(xy), axis=1)]
+    if len(xy) > MAX_BAND_POINTS:
+        xy = xy[np.unique(np.r_[np.arange(0, len(xy), math.ceil(len(xy) / MAX_BAND_POINTS)), len(xy) - 1])]
     if len(xy) < 2 or radius_m <= 0:
         return None
     keep = np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0, axis=1)])
@@ -117,7 +120,7 @@ def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
 def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
                      nominal: pd.DataFrame | None) -> bytes:
     """The map: workspace box, regions by kind, trajectory, tube band, timed run, violations."""
-    fig = Figure(figsize=(7.0, 7.0))
+    fig = Figure(figsize=(8.5, 6.2), layout="constrained")
     ax = fig.add_subplot()
     ws = scenario.workspace
     ax.add_patch(Rectangle((ws.x[0], ws.y[0]), ws.x[1] - ws.x[0], ws.y[1] - ws.y[0], fill=False, lw=1.5,
@@ -189,7 +192,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
         return None
     tr = _decimate(trajectory)
     nom = _decimate(nominal) if nominal is not None and _usable(nominal, ("t_s", "x_m", "y_m")) else None
-    fig = Figure(figsize=(8.0, 7.5))
+    fig = Figure(figsize=(8.0, 7.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     eta = scenario.robot.radius
     r_q = scenario.tube_radius_m
@@ -219,7 +222,7 @@ def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd
     if inputs is None or not _usable(inputs, ("t_s", "u1", "u2", "u3")):
         return None
     data = _decimate(inputs)
-    fig = Figure(figsize=(8.0, 7.5))
+    fig = Figure(figsize=(8.0, 7.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     units = ("m/s", "m/s", "rad/s")
     for i, ax in enumerate(axes):
@@ -255,7 +258,7 @@ def tube_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: 
     err_m = np.hypot(dx, dy)
     step = max(1, math.ceil(len(t) / MAX_PLOT_POINTS))
     r_q = scenario.tube_radius_m
-    fig = Figure(figsize=(8.0, 3.2))
+    fig = Figure(figsize=(8.0, 3.2), layout="constrained")
     ax = fig.add_subplot()
     ax.plot(t[::step], err_m[::step], color="black", lw=1.0, label="|p - p_hat|")
     ax.axhline(r_q, color="#1f77b4", ls="--", lw=1.0, label=f"r_q = {r_q:.3g} m")
@@ -278,7 +281,7 @@ def robustness_figure(certificate: Mapping[str, Any], robustness: pd.DataFrame |
     data = _decimate(robustness)
     t = data["t_s"].to_numpy(dtype=float)
     rho = data["rho_m"].to_numpy(dtype=float)
-    fig = Figure(figsize=(8.0, 3.2))
+    fig = Figure(figsize=(8.0, 3.2), layout="constrained")
     ax = fig.add_subplot()
     ax.plot(t, rho, color="black", lw=1.0, label="robustness")
     ax.fill_between(t, rho, 0.0, where=rho < 0, color=_FAIL_COLOUR, alpha=0.3, lw=0, label="violated")
@@ -299,7 +302,7 @@ def sampling_figure(scenario: Scenario, trajectory: pd.DataFrame | None) -> byte
     t = trajectory["t_s"].to_numpy(dtype=float)
     dt_s = np.diff(t)
     period_s = 1.0 / scenario.mocap.rate_hz
-    fig = Figure(figsize=(8.0, 3.2))
+    fig = Figure(figsize=(8.0, 3.2), layout="constrained")
     ax = fig.add_subplot()
     step = max(1, math.ceil(len(dt_s) / MAX_PLOT_POINTS))
     idx = np.arange(0, len(dt_s), step)

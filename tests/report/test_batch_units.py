@@ -80,7 +80,7 @@ def test_mixed_batch_inline(tmp_path: Path, scenario: Scenario, make_result: Cal
     assert "RuntimeError: boom" in (result.items[1].error or "")
 
     out = tmp_path / "out"
-    files = write_batch(result, out)
+    files = write_batch(result, out, workers=1)  # in this process: the monkeypatched writer applies
     assert set(files) == {"summary.md", "summary.csv", "junit.xml"}
     assert (out / "pass_1.mcap" / "certificate.json").is_file()
     assert (out / "pass_1.mcap" / "report.html").is_file()
