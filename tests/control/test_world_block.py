@@ -42,3 +42,32 @@ def test_block_matches_per_sample_recursion(kind: str) -> None:
         xhr = xhr + dt * u_hat
     assert x_end == pytest.approx(xr, abs=1e-14)
     assert xh_end == pytest.approx(xhr, abs=1e-14)
+
+
+@pytest.mark.parametrize("kind", ["random", "worst", "sine"])
+def test_casadi_block_matches_the_closed_form_on_the_world_model(kind: str) -> None:
+    from tubempc.control import world_model
+    from tubempc.control.closed_loop import _block_function, _casadi_block
+
+    m, dt, sigma, bound = 10, 0.01, 2.0, 0.02
+    a = 1.0 - sigma * dt
+    powers = a ** np.arange(m + 1)
+    lower = np.array([[a ** (k - 1 - j) if j < k else 0.0 for j in range(m)] for k in range(m + 1)])
+    x = np.array([0.1, -0.2, 0.01])
+    x_hat = np.array([0.105, -0.2, 0.0])
+    u_hat = np.array([0.1, -0.12, 0.02])
+    noise_m = 0.0 if kind == "worst" else 0.001
+    t_arr = 2.0 + dt * np.arange(m)
+    closed = {name: np.zeros((m, 3)) for name in ("xs", "xms", "xhs", "uw")}
+    end_a = _world_block(0, m, x, x_hat, u_hat, t_arr=t_arr, dist=make_disturbance(kind, bound,
+                         np.random.default_rng(1)), rng=np.random.default_rng(2), sigma=sigma, dt=dt,
+                         noise_m=noise_m, powers=powers, lower=lower, **closed)
+    rk4 = {name: np.zeros((m, 3)) for name in ("xs", "xms", "xhs", "uw")}
+    end_b = _casadi_block(0, m, x, x_hat, u_hat, t0_s=2.0, dist=make_disturbance(kind, bound,
+                          np.random.default_rng(1)), rng=np.random.default_rng(2), sigma=sigma, dt=dt,
+                          noise_m=noise_m, fn=_block_function(world_model(), dt, m), samples=m, **rk4)
+    # RK4 is exact for the world model's constant-rate motion over a sample: equal up to rounding
+    for name, values in closed.items():
+        assert np.allclose(values, rk4[name], rtol=0, atol=1e-13), name
+    assert np.allclose(end_a[0], end_b[0], rtol=0, atol=1e-13)
+    assert np.allclose(end_a[1], end_b[1], rtol=0, atol=1e-13)

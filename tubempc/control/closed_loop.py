@@ -25,7 +25,7 @@ import numpy as np
 
 from tubempc.control.disturbance import Disturbance, InvalidArgumentError, make_disturbance
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel, model_for
-from tubempc.control.fhocp import FAR_AWAY_M, NominalMPC, build_fhocp, discrete_step
+from tubempc.control.fhocp import FAR_AWAY_M, NominalMPC, build_fhocp
 from tubempc.control.guide import GuidePath, guide_path, references
 from tubempc.control.tube import TubeDesign, design_tube
 from tubempc.errors import DesignError
@@ -107,24 +107,74 @@ def leg_obstacles(scenario: Scenario, source: str, target: str) -> list[tuple[fl
     return [(r.center[0], r.center[1], r.radius) for r in scenario.regions if r.name not in (source, target)]
 
 
-def _plant_step(model: DynamicsModel, dt_s: float) -> ca.Function | None:
-    if model.linear_world:
-        return None
-    x = ca.SX.sym("x", STATE_DIM)
-    u = ca.SX.sym("u", STATE_DIM)
-    d = ca.SX.sym("d", STATE_DIM)
+_BLOCK_CACHE: dict[tuple[str, float, int], ca.Function] = {}
+
+
+def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Function:
+    """One MPC step of the sampled loop as a CasADi function (any model, any disturbance, with noise).
+
+    inputs: x0, x_hat0, u_hat (3), noise (3 x m), delta (3 x m), worst (1: delta = bound q/|q|), bound, direction
+    (3, used while q = 0), sigma; outputs: X, X_hat, U (3 x m: states at the sample starts and the applied u),
+    x_end, x_hat_end. RK4 with 4 substeps per sample for the plant and the nominal.
+    """
+    key = (model.cache_key, dt_s, samples)
+    cached = _BLOCK_CACHE.get(key)
+    if cached is not None:
+        return cached
+    x0, xh0, uh = (ca.SX.sym(n, STATE_DIM) for n in ("x0", "xh0", "uh"))
+    noise, delta = ca.SX.sym("noise", STATE_DIM, samples), ca.SX.sym("delta", STATE_DIM, samples)
+    worst, bound, sigma = ca.SX.sym("worst"), ca.SX.sym("bound"), ca.SX.sym("sigma")
+    direction = ca.SX.sym("direction", STATE_DIM)
     sub = 4
     dt = dt_s / sub
-    xk = x
-    for _ in range(sub):
-        def rhs(z: ca.SX) -> ca.SX:
-            return model.f(z) + model.g(z) @ u + d
-        k1 = rhs(xk)
-        k2 = rhs(xk + dt / 2 * k1)
-        k3 = rhs(xk + dt / 2 * k2)
-        k4 = rhs(xk + dt * k3)
-        xk = xk + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("plant", [x, u, d], [xk])
+
+    def rk4(z: ca.SX, u: ca.SX, d: ca.SX) -> ca.SX:
+        for _ in range(sub):
+            k1 = model.f(z) + model.g(z) @ u + d
+            k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
+            k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
+            k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
+            z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return z
+
+    x, xh = x0, xh0
+    xs, xhs, us = [], [], []
+    zero = ca.SX.zeros(STATE_DIM)
+    for k in range(samples):
+        q = x - xh
+        u = uh - sigma * (q + noise[:, k])
+        norm = ca.norm_2(q)
+        d_worst = bound * ca.if_else(norm > 1e-15, q / ca.fmax(norm, 1e-300), direction)
+        d = ca.if_else(worst > 0.5, d_worst, delta[:, k])
+        xs.append(x)
+        xhs.append(xh)
+        us.append(u)
+        x = rk4(x, u, d)
+        xh = rk4(xh, uh, zero)
+    fn = ca.Function("sample_block", [x0, xh0, uh, noise, delta, worst, bound, direction, sigma],
+                     [ca.horzcat(*xs), ca.horzcat(*xhs), ca.horzcat(*us), x, xh])
+    _BLOCK_CACHE[key] = fn
+    return fn
+
+
+def _casadi_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np.ndarray, *, xs: np.ndarray,
+                  xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t0_s: float, dist: Disturbance,
+                  rng: np.random.Generator, sigma: float, dt: float, noise_m: float,
+                  fn: ca.Function, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """``m_blk`` (<= samples) samples through ``_block_function``; the arrays get the sample-start values."""
+    noise = np.zeros((samples, STATE_DIM))
+    if noise_m > 0:
+        noise[:, :2] = rng.normal(scale=noise_m, size=(samples, 2))
+    worst = dist.kind == "worst"
+    deltas = np.zeros((samples, STATE_DIM)) if worst else dist.batch(t0_s + dt * np.arange(samples))
+    states, nominal, inputs, x_end, xh_end = fn(x, x_hat, u_hat, noise.T, deltas.T, float(worst), dist.bound,
+                                                dist.direction, sigma)
+    states = np.asarray(states, dtype=float).T
+    xs[i:i + m_blk] = states[:m_blk]
+    xms[i:i + m_blk] = states[:m_blk] + noise[:m_blk]
+    xhs[i:i + m_blk] = np.asarray(nominal, dtype=float).T[:m_blk]
+    uw[i:i + m_blk] = np.asarray(inputs, dtype=float).T[:m_blk]
+    return np.asarray(x_end, dtype=float).ravel(), np.asarray(xh_end, dtype=float).ravel()
 
 
 @dataclass
@@ -236,8 +286,8 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     problem = build_fhocp(scenario, model, tube, MIN_OBSTACLE_SLOTS)
     chord = problem.chord_margin_m
     mpc_by_slots: dict[int, NominalMPC] = {}
-    nominal_step = discrete_step(model, dt, substeps=4)
-    plant = _plant_step(model, dt)
+    fast = model.linear_world and not (disturbance == "worst" and mocap_noise_m > 0)
+    block_fn = None if fast else _block_function(model, dt, per_step)
 
     start = scenario.region(source)
     x = np.array([start.center[0], start.center[1], scenario.initial_heading], dtype=float)
@@ -269,7 +319,6 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     sigma = tube.sigma
     cx, cy, rho = _disc(scenario, targets[0].region)
     a_step = 1.0 - sigma * dt  # q+ = a q + dt (delta - sigma noise) for the linear world model
-    fast = plant is None and not (disturbance == "worst" and mocap_noise_m > 0)
     powers = a_step ** np.arange(per_step + 1)  # a^k, k = 0..m
     lower = np.array([[a_step ** (k - 1 - j) if j < k else 0.0 for j in range(per_step)]
                       for k in range(per_step + 1)])  # (m+1) x m: q_k = a^k q_0 + sum_j a^(k-1-j) w_j
@@ -307,47 +356,36 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             records.append(SolverRecord(t_s=t, status=out.status, success=out.success, iterations=out.iterations,
                                         solve_time_s=out.solve_time_s, backup=out.backup, target=leg.target.region))
             u_hat = out.inputs[0].copy()
-        if fast and done_at is None and i % per_step == 0:
-            m_blk = min(per_step, n_max - i)
-            x, x_hat = _world_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t_arr=t_arr,
-                                    dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,
-                                    powers=powers, lower=lower)
-            if leg.inside_s is None:
-                gap = np.hypot(xs[i:i + m_blk, 0] - cx, xs[i:i + m_blk, 1] - cy) + eta <= rho
-                if gap.any():
-                    leg.inside_s = float(t_arr[i + int(np.argmax(gap))])
-            i += m_blk
-            continue
-        if mocap_noise_m > 0:
-            x_meas = x.copy()
-            x_meas[:2] += rng.normal(scale=mocap_noise_m, size=2)
+        m_blk = 1 if done_at is not None else min(per_step, n_max - i)
+        if block_fn is None:
+            x_next, xh_next = _world_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t_arr=t_arr,
+                                           dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,
+                                           powers=powers, lower=lower)
         else:
-            x_meas = x
-        u = u_hat - sigma * (x_meas - x_hat)
-        xs[i], xms[i], xhs[i], uw[i] = x, x_meas, x_hat, u
-        if leg.inside_s is None and math.hypot(float(x[0]) - cx, float(x[1]) - cy) + eta <= rho:
-            leg.inside_s = t
+            x_next, xh_next = _casadi_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t0_s=t,
+                                            dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,
+                                            fn=block_fn, samples=per_step)
+        if leg.inside_s is None:
+            inside = np.hypot(xs[i:i + m_blk, 0] - cx, xs[i:i + m_blk, 1] - cy) + eta <= rho
+            if inside.any():
+                leg.inside_s = float(t_arr[i + int(np.argmax(inside))])
+        i += m_blk
         if done_at is not None:
             break
-        delta = dist.sample(t, x - x_hat)
-        if plant is None:
-            x = x + dt * (u + delta)
-            x_hat = x_hat + dt * u_hat
-        else:
-            x = np.asarray(plant(x, u, delta), dtype=float).ravel()
-            x_hat = np.asarray(nominal_step(x_hat, u_hat), dtype=float).ravel()
-        i += 1
+        x, x_hat = x_next, xh_next
     n = (done_at + 1) if done_at is not None else n_max
     # uw holds the applied input u; as a world-frame velocity (g(x) u) and as the body-frame command (cmd_vel)
-    if model.input_frame == "world" and model.linear_world:
+    applied = uw[:n].copy()
+    if model.input_frame == "world":
         cos, sin = np.cos(xs[:n, 2]), np.sin(xs[:n, 2])
-        ub[:n, 0] = cos * uw[:n, 0] + sin * uw[:n, 1]
-        ub[:n, 1] = -sin * uw[:n, 0] + cos * uw[:n, 1]
-        ub[:n, 2] = uw[:n, 2]
+        ub[:n, 0] = cos * applied[:, 0] + sin * applied[:, 1]
+        ub[:n, 1] = -sin * applied[:, 0] + cos * applied[:, 1]
+        ub[:n, 2] = applied[:, 2]
     else:
-        for k in range(n):
-            ub[k] = model.body_command(xs[k], uw[k])
-            uw[k] = np.asarray(model.g(xs[k]), dtype=float) @ uw[k]
+        ub[:n] = applied
+    if not model.linear_world and n:
+        g_all = np.asarray(model.g.map(n)(xs[:n].T), dtype=float).reshape(STATE_DIM, n, STATE_DIM)
+        uw[:n] = np.einsum("ikj,kj->ki", g_all, applied)
     arrivals = tuple(Arrival(region=lg.target.region, departed_s=lg.departed_s,
                              t_ij_s=None if lg.entered_s is None else round(lg.entered_s - lg.departed_s, 9),
                              entered_terminal_s=lg.entered_s, inside_s=lg.inside_s, departure_s=lg.departure_s)
