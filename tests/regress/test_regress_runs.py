@@ -1,0 +1,103 @@
+"""`tubempc regress` end to end with the real controller and certifier: a baseline from the default controller,
+then a deliberately degraded controller (a smaller sigma_low; a scaled-down ancillary gain) must be caught."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tubempc.control import closed_loop
+from tubempc.regress import (
+    compare,
+    default_baseline_path,
+    expand_suite,
+    format_diff,
+    load_suite,
+    read_baseline,
+    run_cases,
+)
+from tubempc.scenario import builtin_scenario_text
+
+SUITE = """\
+name: small
+scenarios:
+  - name: nexus
+    scenario: lab.yaml
+    runs:
+      - {name: R1-R3, start: R1, targets: [R3]}
+seeds: [0]
+disturbances: [worst]
+"""
+
+
+def _regress(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "tubempc", "regress", "--no-progress", *args], capture_output=True,
+                          text=True, timeout=600, check=False)
+
+
+@pytest.fixture
+def small_suite(tmp_path: Path) -> Path:
+    (tmp_path / "lab.yaml").write_text(builtin_scenario_text())
+    (tmp_path / "suite.yaml").write_text(SUITE)
+    return tmp_path / "suite.yaml"
+
+
+def test_smaller_sigma_low_is_caught(small_suite: Path, tmp_path: Path) -> None:
+    base = tmp_path / "base.json"
+    made = _regress("--suite", str(small_suite), "--baseline", str(base), "--update-baseline", "--workers", "1")
+    assert made.returncode == 0, made.stderr
+    assert read_baseline(base)["runs"]["nexus.R1-R3.worst.s0"]["metrics"]["arrived"] is True
+
+    same = _regress("--suite", str(small_suite), "--baseline", str(base), "--workers", "1", "--out",
+                    str(tmp_path / "same"))
+    assert same.returncode == 0, same.stdout + same.stderr
+    assert same.stdout.strip().splitlines()[-1].startswith("OK: 1 runs")
+    assert (tmp_path / "same" / "nexus.R1-R3.worst.s0" / "certificate.json").is_file()
+
+    lab = tmp_path / "lab.yaml"
+    lab.write_text(lab.read_text().replace("sigma_low: 2.0", "sigma_low: 0.5"))
+    worse = _regress("--suite", str(small_suite), "--baseline", str(base), "--workers", "1", "--out",
+                     str(tmp_path / "worse"))
+    assert worse.returncode == 1, worse.stdout + worse.stderr
+    assert worse.stdout.startswith("REGRESSED")
+    # the tube is four times wider: under the worst-case push the robot settles near the new r_q = 0.04 m
+    assert "nexus.R1-R3.worst.s0  max_tube_error_m: 0.01 -> 0.0399" in worse.stdout
+    junit = ET.parse(tmp_path / "worse" / "junit.xml").getroot()
+    assert [c.find("failure") is not None for c in junit.iter("testcase")] == [True]
+
+
+def test_scaled_down_gain_is_caught(small_suite: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    loaded = load_suite(small_suite)
+    cases = expand_suite(loaded)
+    (good,) = run_cases(cases, workers=1, progress=False)
+    assert good.error is None, good.error
+    baseline = {"runs": {good.run_id: {"metrics": good.metrics}}}
+
+    design = closed_loop.design_tube
+
+    def weak_design(*args: Any, **kwargs: Any) -> Any:
+        tube = design(*args, **kwargs)
+        return dataclasses.replace(tube, sigma=tube.sigma / 4)  # the bug: a quarter of the designed gain
+
+    monkeypatch.setattr(closed_loop, "design_tube", weak_design)
+    (bad,) = run_cases(cases, workers=1, progress=False)  # in this process, so the patch applies
+    comparison = compare(baseline, [bad], loaded.suite.tolerances)
+    regressed = {r.metric for r in comparison.by_status("regressed")}
+    assert {"tube_ratio", "max_tube_error_m", "verdict"} <= regressed, format_diff(comparison)
+    assert bad.metrics["tube_ratio"] > 3.5  # worst case: |q| -> delta_bar / (sigma / 4) = 4 r_q
+    assert any(m.startswith("check.") and m.endswith(".verdict") for m in regressed)  # the certificate's tube check
+
+
+@pytest.mark.slow
+def test_default_suite_matches_the_shipped_baseline(tmp_path: Path) -> None:
+    out = _regress("--workers", "2", "--out", str(tmp_path / "out"))
+    assert out.returncode == 0, out.stdout + out.stderr
+    runs = read_baseline(default_baseline_path())["runs"]
+    assert len(runs) == len(expand_suite(load_suite())) == 10
+    assert all(r["metrics"]["verdict"] == "pass" for r in runs.values())
