@@ -94,10 +94,22 @@ def test_scaled_down_gain_is_caught(small_suite: Path, monkeypatch: pytest.Monke
     assert any(m.startswith("check.") and m.endswith(".verdict") for m in regressed)  # the certificate's tube check
 
 
-@pytest.mark.slow
 def test_default_suite_matches_the_shipped_baseline(tmp_path: Path) -> None:
     out = _regress("--workers", "2", "--out", str(tmp_path / "out"))
     assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.strip().splitlines()[-1].startswith("OK: 10 runs")
+    junit = ET.parse(tmp_path / "out" / "junit.xml").getroot()
+    assert len(list(junit.iter("testcase"))) == 10 and junit.get("failures") == "0"
     runs = read_baseline(default_baseline_path())["runs"]
     assert len(runs) == len(expand_suite(load_suite())) == 10
     assert all(r["metrics"]["verdict"] == "pass" for r in runs.values())
+
+
+def test_runs_on_dask_like_inline(small_suite: Path) -> None:
+    cases = expand_suite(load_suite(small_suite))
+    (inline,) = run_cases(cases, workers=1, progress=False)
+    (remote,) = run_cases(cases, workers=1, dask="local", progress=False)
+    assert remote.error is None, remote.error
+    timing = {"solve_time_p50_ms", "solve_time_p95_ms"}  # wall-clock: differs between processes
+    assert {k: v for k, v in remote.metrics.items() if k not in timing} == \
+        {k: v for k, v in inline.metrics.items() if k not in timing}
