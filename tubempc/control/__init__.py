@@ -11,6 +11,7 @@ from tubempc.control.closed_loop import (
 )
 from tubempc.control.disturbance import DISTURBANCE_MODELS, InvalidArgumentError
 from tubempc.control.dynamics import DynamicsModel, body_model, model_for, user_model, world_model
+from tubempc.control.guide import NoGuidePathError
 from tubempc.control.tube import TubeDesign, design_tube
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "ClosedLoopResult",
     "DynamicsModel",
     "InvalidArgumentError",
+    "NoGuidePathError",
     "SolverRecord",
     "Target",
     "TransitionResult",
