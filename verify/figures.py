@@ -134,7 +134,8 @@ def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, traject
                             label=None if kind in seen else label))
         seen.add(kind)
         text = region.name + (f"\n{', '.join(region.labels)}" if region.labels else "")
-        ax.annotate(text, region.center, ha="center", va="center", fontsize=8)
+        ax.annotate(text, (region.center[0], region.center[1] + 0.45 * region.radius), ha="center", va="center",
+                    fontsize=8)
     r_q = scenario.tube_radius_m
     if _usable(nominal, ("x_m", "y_m")) and nominal is not None:
         poly = _tube_polygon(nominal, r_q)
@@ -149,6 +150,7 @@ def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, traject
         first = trajectory.iloc[0]
         ax.add_patch(Circle((float(first["x_m"]), float(first["y_m"])), scenario.robot.radius, fill=False,
                             ec="black", ls=":", label="robot disc at t = 0"))
+        listing: list[str] = []
         for i, entry in enumerate(certificate.get("timed_run", []) or []):
             if not isinstance(entry, Mapping):
                 continue
@@ -159,15 +161,23 @@ def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, traject
             if pos is None:
                 continue
             ax.plot(*pos, "o", color="#ff7f0e", ms=6, label="timed run" if i == 0 else None)
-            ax.annotate(f"{entry.get('region', '?')} @ {float(t):.1f} s", pos, xytext=(6, -10),
-                        textcoords="offset points", fontsize=8, color="#ff7f0e")
-        for j, (name, t_fail) in enumerate(failed_checks(certificate)):
+            ax.annotate(str(i), pos, xytext=(5, -11), textcoords="offset points", fontsize=8, color="#ff7f0e",
+                        weight="bold")
+            listing.append(f"{i}: {entry.get('region', '?')} @ {float(t):.2f} s")
+        if listing:
+            shown = listing if len(listing) <= 20 else [*listing[:19], f"... ({len(listing) - 19} more)"]
+            ax.text(1.02, 0.0, "timed run\n" + "\n".join(shown), transform=ax.transAxes, va="bottom", ha="left",
+                    fontsize=8, color="#ff7f0e")
+        by_time: dict[float, list[str]] = {}
+        for name, t_fail in failed_checks(certificate):
+            by_time.setdefault(round(t_fail, 6), []).append(name)
+        for j, (t_fail, names) in enumerate(sorted(by_time.items())):
             pos = _position_at(trajectory, t_fail)
             if pos is None:
                 continue
             ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=10, label="first violation" if j == 0 else None)
-            ax.annotate(f"{name} @ {t_fail:.2f} s", pos, xytext=(6, 6), textcoords="offset points", fontsize=8,
-                        color=_FAIL_COLOUR)
+            ax.annotate(f"{', '.join(names)} @ {t_fail:.2f} s", pos, xytext=(6, 6 + 10 * j),
+                        textcoords="offset points", fontsize=8, color=_FAIL_COLOUR)
     pad = 0.1
     ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
     ax.set_ylim(ws.y[0] - pad, ws.y[1] + pad)

@@ -39,7 +39,7 @@ __all__ = [
 _MAIN_KEYS = ("checks", "timed_run", "data_quality")
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
 _XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
-_MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+!|~])")
+_MD_SPECIAL = re.compile(r"([\\`*\[\]|~]|(?<!\w)_|_(?!\w))")  # links, emphasis, code, tables; not intraword _
 
 
 class CertifyResultLike(Protocol):
@@ -106,7 +106,7 @@ def _check_details(check: Mapping[str, Any]) -> str:
 
 
 def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
-    rows = [("scenario", scenario.name)]
+    rows = [] if "scenario" in certificate else [("scenario", scenario.name)]
     for key in sorted(certificate, key=str):
         if key in _MAIN_KEYS or key == "verdict":
             continue
