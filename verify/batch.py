@@ -47,6 +47,7 @@ __all__ = [
     "certify_many",
     "discover_logs",
     "parallel_map",
+    "summary_lines",
     "worst_exit_code",
     "write_batch",
 ]
@@ -336,6 +337,24 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)
+
+
+def summary_lines(batch: BatchResult) -> list[str]:
+    """One line per log for a terminal: ``path: verdict (failed checks with first violation times)``."""
+    lines = []
+    for item in batch.items:
+        if item.result is None:
+            lines.append(f"{item.path}: {item.verdict} ({item.error})")
+            continue
+        bad = [c for c in item.result.certificate.get("checks", []) or []
+               if isinstance(c, dict) and c.get("verdict") != "pass"]
+        detail = "; ".join(f"{c.get('name')}: {c.get('verdict')}" + (
+            f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
+            for c in bad)
+        lines.append(f"{item.path}: {item.verdict}" + (f" ({detail})" if detail else ""))
+    counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
+    lines.append(f"{len(batch.items)} log(s): {counts}; exit code {batch.exit_code}")
+    return lines
 
 
 # ---- writing ------------------------------------------------------------------------------------------------------

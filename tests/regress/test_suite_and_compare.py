@@ -124,3 +124,14 @@ def test_baseline_round_trip(tmp_path: Path) -> None:
         read_baseline(tmp_path / "bad.json")
     with pytest.raises(BaselineError, match="--update-baseline"):
         read_baseline(tmp_path / "none.json")
+
+
+def test_cli_missing_baseline_is_one_line_exit_3(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "tubempc", "regress", "--baseline", str(tmp_path / "none.json")],
+                         capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 3
+    assert out.stderr.strip().splitlines()[-1].startswith("tubempc: error: ")
+    assert "none.json: baseline not found" in out.stderr and "Traceback" not in out.stderr

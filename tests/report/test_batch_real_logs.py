@@ -13,7 +13,7 @@ import pytest
 from tubempc.control.closed_loop import Target, run_closed_loop
 from tubempc.rosio import write_log
 from tubempc.scenario import Scenario, builtin_scenario
-from verify.batch import certify_many, write_batch
+from verify.batch import certify_many, summary_lines, write_batch
 
 # R1 -> R3 reaches mission_2 at about 17 s: pass. R1 -> R2 never does: the log of about 20 s ends inside the
 # [0, 60] window (inconclusive); held in R2 until 70 s the window closes unmet (fail).
@@ -50,6 +50,9 @@ def test_mixed_batch_in_processes(logs: dict[str, Path], tmp_path: Path) -> None
     assert _codes(batch) == {"fail.mcap": 1, "inconclusive.bag": 2, "junk.bag": 3, "pass.mcap": 0,
                              "truncated.mcap": 3}
     assert batch.exit_code == 3
+    lines = summary_lines(batch)
+    assert lines[-1] == "5 log(s): 1 pass, 1 fail, 1 inconclusive, 2 unusable; exit code 3"
+    assert any(ln.startswith(f"{logs['fail.mcap']}: fail (") for ln in lines)
     junk = next(i for i in batch.items if i.path.endswith("junk.bag"))
     assert junk.result is None and "junk.bag" in (junk.error or "")
 

@@ -125,3 +125,15 @@ def test_violation_is_drawn_on_the_map(scenario: Scenario, make_result: Callable
     with_mark = workspace_figure(failing.certificate, scenario, failing.trajectory, failing.nominal)
     without = workspace_figure(passing_cert, scenario, failing.trajectory, failing.nominal)
     assert with_mark != without
+
+
+def test_reports_and_batch_import_only_the_shared_parts_of_tubempc() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, verify.report, verify.figures, verify.batch; "
+            "print(' '.join(m for m in sys.modules if m.startswith('tubempc')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    allowed = ("tubempc.mitl", "tubempc.scenario")
+    loaded = out.stdout.split()
+    assert loaded and all(m in ("tubempc", "tubempc.errors") or m.startswith(allowed) for m in loaded), loaded
