@@ -139,4 +139,6 @@ def run_cases(cases: list[RunCase], *, out_dir: str | Path | None = None, report
     from verify.batch import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports) for case in cases]
-    return parallel_map(run_case, jobs, workers=workers, dask=dask, progress=progress, desc="regress")
+    preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio")
+    return parallel_map(run_case, jobs, workers=workers, dask=dask, progress=progress, desc="regress",
+                        preload=preload)

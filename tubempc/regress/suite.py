@@ -86,9 +86,10 @@ class Tolerances(_Frozen):
     check_margin: Tolerance = Tolerance(abs=0.01)  # every certificate check's margin; smaller is worse
     solver_failures: Tolerance = Tolerance(abs=0)
     solver_backups: Tolerance = Tolerance(abs=0)
-    # solve times depend on the machine and its load: generous by default, tighten on a dedicated runner
-    solve_time_p50_ms: Tolerance = Tolerance(abs=2.0, rel=1.0)
-    solve_time_p95_ms: Tolerance = Tolerance(abs=5.0, rel=2.0)
+    # solve times depend on the machine and its load (a loaded 2-core runner showed 3-5x): by default only a gross
+    # slow-down (> 5x + a few ms) fails; tighten on a dedicated runner
+    solve_time_p50_ms: Tolerance = Tolerance(abs=5.0, rel=4.0)
+    solve_time_p95_ms: Tolerance = Tolerance(abs=10.0, rel=4.0)
 
 
 class TargetSpec(_Frozen):
