@@ -38,6 +38,7 @@ __all__ = [
     "Explanation",
     "Positions",
     "Truth",
+    "bounds_ns",
     "evaluate",
     "evaluate_at_points",
     "explain",
@@ -117,7 +118,7 @@ def verdict_of(lo: float, hi: float) -> str:
 _NS = 10**9
 
 
-def _bounds_ns(interval: Interval) -> tuple[int, int | None]:
+def bounds_ns(interval: Interval) -> tuple[int, int | None]:
     """Integer-ns offsets ``[lo, hi]`` (closed) such that ``t + d`` (ns) is in ``t + interval``; hi None: unbounded."""
     lo = Fraction(interval.lo) * _NS
     lo_ns = math.ceil(lo) if interval.lo_closed else math.floor(lo) + 1
@@ -144,7 +145,7 @@ class _Windows:
 def _windows(pos: Positions, interval: Interval, at: IntArray | None = None) -> _Windows:
     """Windows of the positions ``at`` (default: all). Index ranges are clipped to ``j >= i`` (pointwise semantics:
     positions with equal timestamps are distinct and only later ones count)."""
-    lo_ns, hi_ns = _bounds_ns(interval)
+    lo_ns, hi_ns = bounds_ns(interval)
     s_all, e_all = pos.start_ns, pos.stop_ns
     idx = np.arange(pos.size, dtype=np.int64) if at is None else at
     s, e = s_all[idx], e_all[idx]
@@ -232,7 +233,7 @@ def _first_at_or_after(cond: BoolArray) -> IntArray:
 def evaluate(formula: Formula, pos: Positions, atoms: Mapping[str, Truth]) -> dict[Formula, Truth]:
     """Truth of ``formula`` and of each of its sub-formulas at every position (memoized per distinct sub-formula)."""
     memo: dict[Formula, Truth] = {}
-    _eval(formula, pos, atoms, memo, None)
+    _eval(formula, pos, atoms, memo, part={}, at=None)
     return memo
 
 
@@ -240,15 +241,20 @@ def evaluate_at_points(formula: Formula, pos: Positions, atoms: Mapping[str, Tru
     """Like ``evaluate`` but the formula itself (and boolean nodes above its temporal operators) is only needed at
     the point positions: its values at gaps are NaN. Temporal operators below it are evaluated everywhere."""
     memo: dict[Formula, Truth] = {}
-    _eval(formula, pos, atoms, memo, np.flatnonzero(pos.is_point))
-    return memo
+    part: dict[Formula, Truth] = {}
+    _eval(formula, pos, atoms, memo, part=part, at=np.flatnonzero(pos.is_point))
+    return {**part, **memo}  # values computed at every position override the points-only ones
 
 
-def _eval(f: Formula, pos: Positions, atoms: Mapping[str, Truth], memo: dict[Formula, Truth],
-          at: IntArray | None) -> Truth:
-    """``at``: the positions where this node's value is needed (None: all); elsewhere the result may be NaN."""
+def _eval(f: Formula, pos: Positions, atoms: Mapping[str, Truth], memo: dict[Formula, Truth], *,
+          part: dict[Formula, Truth], at: IntArray | None) -> Truth:
+    """``at``: the positions where this node's value is needed (None: all); elsewhere the result may be NaN.
+    ``memo`` holds values valid at every position, ``part`` values valid only at the ``at`` positions (a
+    sub-formula needed at the top level and again under a temporal operator is computed in full for the latter)."""
     if f in memo:
         return memo[f]
+    if at is not None and f in part:
+        return part[f]
     n = pos.size
     out: Truth
     if isinstance(f, Atom):
@@ -259,31 +265,31 @@ def _eval(f: Formula, pos: Positions, atoms: Mapping[str, Truth], memo: dict[For
         v = INF if f.value else -INF
         out = Truth(np.full(n, v), np.full(n, v))
     elif isinstance(f, Not):
-        a = _eval(f.arg, pos, atoms, memo, at)
+        a = _eval(f.arg, pos, atoms, memo, part=part, at=at)
         out = Truth(-a.hi, -a.lo)
     elif isinstance(f, And | Or):
         op = np.minimum if isinstance(f, And) else np.maximum
-        parts = [_eval(g, pos, atoms, memo, at) for g in f.args]
+        parts = [_eval(g, pos, atoms, memo, part=part, at=at) for g in f.args]
         lo, hi = parts[0].lo, parts[0].hi
         for p in parts[1:]:
             lo, hi = op(lo, p.lo), op(hi, p.hi)
         out = Truth(lo, hi)
     elif isinstance(f, Implies):
-        a = _eval(f.left, pos, atoms, memo, at)
-        b = _eval(f.right, pos, atoms, memo, at)
+        a = _eval(f.left, pos, atoms, memo, part=part, at=at)
+        b = _eval(f.right, pos, atoms, memo, part=part, at=at)
         out = Truth(np.maximum(-a.hi, b.lo), np.maximum(-a.lo, b.hi))
     elif isinstance(f, Eventually):
-        out = _eventually(_eval(f.arg, pos, atoms, memo, None), _windows(pos, f.interval, at), at, n)
+        out = _eventually(_eval(f.arg, pos, atoms, memo, part=part, at=None), _windows(pos, f.interval, at), at, n)
     elif isinstance(f, Always):
-        a = _eval(f.arg, pos, atoms, memo, None)
+        a = _eval(f.arg, pos, atoms, memo, part=part, at=None)
         neg = _eventually(Truth(-a.hi, -a.lo), _windows(pos, f.interval, at), at, n)
         out = Truth(-neg.hi, -neg.lo)
     elif isinstance(f, Next):
-        out = _next(_eval(f.arg, pos, atoms, memo, None), pos, f.interval)
+        out = _next(_eval(f.arg, pos, atoms, memo, part=part, at=None), pos, f.interval)
     else:
-        out = _until(_eval(f.left, pos, atoms, memo, None), _eval(f.right, pos, atoms, memo, None), pos,
-                     f.interval)
-    memo[f] = out
+        left = _eval(f.left, pos, atoms, memo, part=part, at=None)
+        out = _until(left, _eval(f.right, pos, atoms, memo, part=part, at=None), pos, f.interval)
+    (memo if at is None else part)[f] = out
     return out
 
 
@@ -306,7 +312,7 @@ def _next(a: Truth, pos: Positions, interval: Interval) -> Truth:
     hi = np.full(n, -INF)
     if n == 0:
         return Truth(lo, hi)
-    lo_ns, hi_ns = _bounds_ns(interval)
+    lo_ns, hi_ns = bounds_ns(interval)
     point_idx = np.flatnonzero(pos.is_point)
     # next point strictly after each position
     nxt = np.searchsorted(point_idx, np.arange(n), side="right")

@@ -20,8 +20,13 @@ from tubempc.mitl import Formula, atoms
 from tubempc.scenario import Scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m
 from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
+from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, regular_grid
 
-__all__ = ["TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
+__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
+
+#: the fast path computes distances with sqrt(dx*dx + dy*dy) (a few ulps from hypot); a root margin closer to 0
+#: than this is recomputed with hypot, so the verdict is the one of the exact margins
+NEAR_ZERO_MARGIN_M = 1e-6
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -97,6 +102,11 @@ def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Flo
         empty_i = np.zeros(0, dtype=np.int64)
         return TrajectoryVerdict("inconclusive", -np.inf, np.inf, str(formula), None, "no pose samples",
                                  empty_i, np.zeros(0))
+    grid = regular_grid(t_ns)
+    if grid is not None and bool(np.isfinite(x_m).all()) and bool(np.isfinite(y_m).all()):
+        fast = _check_on_grid(formula, grid, t_ns, x_m, y_m, scenario=scenario, max_speed_mps=max_speed_mps)
+        if fast is not None:
+            return fast
     pos, point_at, gap_at = trajectory_positions(t_ns)
     step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
     values: dict[str, Truth] = {}
@@ -113,3 +123,40 @@ def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Flo
         return TrajectoryVerdict(verdict, lo0, hi0, None, None, None, t_ns, signal)
     why = explain(formula, 0, pos, result)
     return TrajectoryVerdict(verdict, lo0, hi0, why.subformula, why.time_ns, why.reason, t_ns, signal)
+
+
+def _check_on_grid(formula: Formula, grid: Grid, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, *,
+                   scenario: Scenario, max_speed_mps: float) -> TrajectoryVerdict | None:
+    """Regularly sampled, NaN-free trajectory: ``verify.regular`` (same values as the interleaved engine). A pass
+    far from a zero margin keeps the fast distances; otherwise the margins are recomputed with ``hypot`` and the
+    witness is found on the interleaved positions. None: the formula needs the general engine (``Until``)."""
+    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
+    if not bool(np.isfinite(step).all()):
+        return None
+    names = atoms(formula)
+    try:
+        res = evaluate_grid(formula, grid, label_margins(x_m, y_m, scenario, names, exact=False), step)
+    except UnsupportedFormulaError:
+        return None
+    lo0, hi0 = float(res.root.p_lo[0]), float(res.root.p_hi[0])
+    if verdict_of(lo0, hi0) == "pass" and lo0 > NEAR_ZERO_MARGIN_M:
+        return TrajectoryVerdict("pass", lo0, hi0, None, None, None, t_ns, res.root.p_lo)
+    res = evaluate_grid(formula, grid, label_margins(x_m, y_m, scenario, names, exact=True), step)
+    lo0, hi0 = float(res.root.p_lo[0]), float(res.root.p_hi[0])
+    verdict = verdict_of(lo0, hi0)
+    if verdict == "pass":
+        return TrajectoryVerdict("pass", lo0, hi0, None, None, None, t_ns, res.root.p_lo)
+    pos, point_at, gap_at = trajectory_positions(t_ns)
+    why = explain(formula, 0, pos, _interleaved(res, point_at, gap_at, pos.size))
+    return TrajectoryVerdict(verdict, lo0, hi0, why.subformula, why.time_ns, why.reason, t_ns, res.root.p_lo)
+
+
+def _interleaved(res: GridResult, point_at: IntArray, gap_at: IntArray, size: int) -> dict[Formula, Truth]:
+    """Split values -> values on the interleaved positions (NaN at the gaps of samples-only sub-formulas)."""
+    out: dict[Formula, Truth] = {}
+    for f, v in res.values().items():
+        nan_gaps = np.full(gap_at.shape[0], np.nan)
+        g_lo = nan_gaps if v.g_lo is None else v.g_lo
+        g_hi = nan_gaps if v.g_hi is None else v.g_hi
+        out[f] = interleave(v.p_lo, v.p_hi, g_lo, g_hi, point_at=point_at, gap_at=gap_at, size=size)
+    return out

@@ -1,0 +1,349 @@
+"""Trajectory monitor on a regular sample grid: formula + per-atom sample margins -> robustness at samples and gaps.
+
+input: an MITL formula, a ``Grid`` (first time, period ``dt_ns`` >= 2, sample count), every atom's margin at the
+samples (finite or -inf, no NaN) and the path-length bound of every gap -> output: for the formula and each
+sub-formula a ``SplitTruth`` (robustness bounds at the n samples and, where needed, at the n - 1 gaps).
+
+This is the same semantics as ``verify.monitor`` on the interleaved positions of ``verify.trajectory`` (sample points
+and the open gaps ``[t_i + 1, t_{i+1} - 1]`` ns) and gives bit-identical values (min/max are exact; the only
+arithmetic is the gap bound ``(m_i + m_{i+1}) / 2 -+ D / 2``, done in the same order). It is faster because
+
+* samples and gaps are kept in separate arrays (no interleaving of 2n positions, no searchsorted): on a regular grid
+  every window ``t + I`` covers samples ``i + a .. i + b`` and gaps ``i + a' .. i + b'`` with constant offsets;
+* propositional sub-formulas are evaluated once on the gap mid-points: every atom's gap bound is
+  ``mid -+ half`` with the same ``half`` for all atoms, and rounding is monotone, so ``min``/``max``/negation commute
+  with ``-+ half`` exactly;
+* a sub-formula needed only at the samples (the formula itself and boolean nodes above its temporal operators)
+  skips the gaps.
+
+``Until`` is not handled here (``UnsupportedFormulaError``; the caller uses the general engine).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until
+from verify.monitor import bounds_ns
+
+__all__ = [
+    "Grid",
+    "GridResult",
+    "SplitTruth",
+    "UnsupportedFormulaError",
+    "evaluate_grid",
+    "regular_grid",
+    "sliding_clipped",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+INF = np.inf
+
+
+class UnsupportedFormulaError(Exception):
+    """The formula has an operator this evaluator does not handle (``Until``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Grid:
+    """Sample times ``t0_ns + i * dt_ns`` for ``i < n``; ``dt_ns >= 2`` so every pair of samples leaves a gap."""
+
+    t0_ns: int
+    dt_ns: int
+    n: int
+
+    def __post_init__(self) -> None:
+        if self.dt_ns < 2 or self.n < 2:
+            raise ValueError(f"a grid needs dt_ns >= 2 and n >= 2, got dt_ns={self.dt_ns}, n={self.n}")
+
+    @property
+    def end_ns(self) -> int:
+        return self.t0_ns + (self.n - 1) * self.dt_ns
+
+
+def regular_grid(t_ns: IntArray) -> Grid | None:
+    """The grid of ``t_ns`` if its samples are exactly evenly spaced by >= 2 ns, else None."""
+    n = int(t_ns.shape[0])
+    if n < 2:
+        return None
+    dt = int(t_ns[1]) - int(t_ns[0])
+    if dt < 2 or int(t_ns[-1]) - int(t_ns[0]) != (n - 1) * dt:
+        return None
+    if not np.all(np.diff(t_ns) == dt):
+        return None
+    return Grid(int(t_ns[0]), dt, n)
+
+
+@dataclass(frozen=True, slots=True)
+class SplitTruth:
+    """Robustness bounds at the samples (``p_*``, length n) and at the gaps (``g_*``, length n - 1, or None when
+    the sub-formula was only needed at the samples). ``p_lo`` and ``p_hi`` may be the same array."""
+
+    p_lo: FloatArray
+    p_hi: FloatArray
+    g_lo: FloatArray | None
+    g_hi: FloatArray | None
+
+
+@dataclass(slots=True)
+class _Val:
+    """Internal value: gaps either explicit (``g_lo``/``g_hi``) or centred (``g_mid -+ half``)."""
+
+    p_lo: FloatArray
+    p_hi: FloatArray
+    g_lo: FloatArray | None = None
+    g_hi: FloatArray | None = None
+    g_mid: FloatArray | None = None
+
+    def gaps(self, half: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self.g_lo is None or self.g_hi is None:
+            if self.g_mid is None:
+                raise ValueError("gap values were not computed")
+            self.g_lo = self.g_mid - half
+            self.g_hi = self.g_mid + half
+        return self.g_lo, self.g_hi
+
+
+# ---- windows on the grid --------------------------------------------------------------------------------------------
+def _ceil_div(a: int, b: int) -> int:
+    return -((-a) // b)
+
+
+@dataclass(frozen=True, slots=True)
+class _Range:
+    """Offsets ``[a, b]`` (inclusive, relative to the query index) of the samples and of the gaps in a window;
+    ``b`` None: to the end; empty when ``b < a``."""
+
+    pa: int
+    pb: int | None
+    ga: int
+    gb: int | None
+
+
+def _range(a_rel: int, b_rel: int | None, dt: int, gap_query: bool, empty: bool) -> _Range:
+    """Positions overlapping ``[t_i + a_rel, t_i + b_rel]`` and not before the query position (``t_i`` its sample
+    time). A sample k is in it iff ``a_rel <= (k - i) dt <= b_rel``; a gap k (``[t_k + 1, t_k + dt - 1]``) iff
+    ``t_k + dt - 1 >= t_i + a_rel`` and ``t_k + 1 <= t_i + b_rel``."""
+    if empty:
+        return _Range(1, 0, 1, 0)
+    pa = max(_ceil_div(a_rel, dt), 1 if gap_query else 0)
+    ga = max(_ceil_div(a_rel - dt + 1, dt), 0)
+    if b_rel is None:
+        return _Range(pa, None, ga, None)
+    return _Range(pa, b_rel // dt, ga, (b_rel - 1) // dt)
+
+
+def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float) -> FloatArray:
+    """``out[k] = op(x[k : k + width])`` for every k < len(x) (windows clipped at the end), van Herk/Gil-Werman."""
+    n = x.shape[0]
+    if width <= 1 or n == 0:
+        return x
+    m = -(-(n + width - 1) // width)
+    xp = np.full(m * width, identity)
+    xp[:n] = x
+    prefix = op.accumulate(xp.reshape(m, width), axis=1).ravel()
+    suffix = op.accumulate(xp[::-1].reshape(m, width), axis=1).ravel()[::-1]
+    return op(suffix[:n], prefix[width - 1 : width - 1 + n])  # type: ignore[no-any-return]
+
+
+def _window_reduce(x: FloatArray, a: int, b: int | None, *, nq: int, op: np.ufunc, identity: float) -> FloatArray:
+    """``out[i] = op(x[i + a : i + b + 1])`` clipped to ``x`` (``identity`` when empty), for ``i < nq``."""
+    size = x.shape[0]
+    out = np.full(nq, identity)
+    if b is not None and b < a:
+        return out
+    valid = max(0, min(nq, size - a))
+    if valid == 0:
+        return out
+    reduced = op.accumulate(x[::-1])[::-1] if b is None else sliding_clipped(x, b - a + 1, op, identity)
+    out[:valid] = reduced[a : a + valid]
+    return out
+
+
+def _reduce(p: FloatArray, g: FloatArray, r: _Range, *, nq: int, op: np.ufunc, identity: float) -> FloatArray:
+    return op(_window_reduce(p, r.pa, r.pb, nq=nq, op=op, identity=identity),  # type: ignore[no-any-return]
+              _window_reduce(g, r.ga, r.gb, nq=nq, op=op, identity=identity))
+
+
+# ---- evaluation -----------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _Ctx:
+    grid: Grid
+    margins: Mapping[str, FloatArray]
+    half: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class GridResult:
+    """The formula's values at the samples (``root``) and, on demand, every sub-formula's (``values``)."""
+
+    root: SplitTruth
+    _ctx: _Ctx
+    _full: dict[Formula, _Val]
+    _part: dict[Formula, _Val]
+
+    def values(self) -> dict[Formula, SplitTruth]:
+        """Every evaluated sub-formula; values computed at samples and gaps override samples-only ones."""
+        out: dict[Formula, SplitTruth] = {}
+        for memo in (self._part, self._full):
+            for f, v in memo.items():
+                has_gaps = v.g_lo is not None or v.g_mid is not None
+                g_lo, g_hi = v.gaps(self._ctx.half) if has_gaps else (None, None)
+                out[f] = SplitTruth(v.p_lo, v.p_hi, g_lo, g_hi)
+        return out
+
+
+def evaluate_grid(formula: Formula, grid: Grid, margins: Mapping[str, FloatArray], step_m: FloatArray
+                  ) -> GridResult:
+    """Values of ``formula`` (at the samples only) and of its sub-formulas (samples and, below a temporal operator,
+    gaps). ``margins``: every atom's margin at the samples (finite or -inf); ``step_m``: path-length bound of every
+    gap (finite). Same values as ``monitor.evaluate_at_points`` on the interleaved positions."""
+    if step_m.shape != (grid.n - 1,):
+        raise ValueError(f"step_m has shape {step_m.shape}, expected ({grid.n - 1},)")
+    ctx = _Ctx(grid, margins, 0.5 * step_m)
+    full: dict[Formula, _Val] = {}
+    part: dict[Formula, _Val] = {}
+    root = _eval(formula, ctx, full, part, need_gaps=False)
+    return GridResult(SplitTruth(root.p_lo, root.p_hi, None, None), ctx, full, part)
+
+
+def _eval(f: Formula, ctx: _Ctx, full: dict[Formula, _Val], part: dict[Formula, _Val], *, need_gaps: bool) -> _Val:
+    if f in full:
+        return full[f]
+    if not need_gaps and f in part:
+        return part[f]
+    n = ctx.grid.n
+    out: _Val
+    if isinstance(f, Atom):
+        if f.name not in ctx.margins:
+            raise KeyError(f"atom={f.name!r} has no valuation")
+        m = ctx.margins[f.name]
+        out = _Val(m, m, g_mid=0.5 * (m[:-1] + m[1:]) if need_gaps else None)
+    elif isinstance(f, Const):
+        v = INF if f.value else -INF
+        p = np.full(n, v)
+        out = _Val(p, p, g_mid=np.full(n - 1, v) if need_gaps else None)
+    elif isinstance(f, Not):
+        a = _eval(f.arg, ctx, full, part, need_gaps=need_gaps)
+        out = _negate(a)
+    elif isinstance(f, And | Or | Implies):
+        if isinstance(f, Implies):
+            parts = [_negate(_eval(f.left, ctx, full, part, need_gaps=need_gaps)),
+                     _eval(f.right, ctx, full, part, need_gaps=need_gaps)]
+            op: np.ufunc = np.maximum
+        else:
+            parts = [_eval(g, ctx, full, part, need_gaps=need_gaps) for g in f.args]
+            op = np.minimum if isinstance(f, And) else np.maximum
+        out = _combine(parts, op, ctx.half, need_gaps)
+    elif isinstance(f, Eventually | Always):
+        a = _eval(f.arg, ctx, full, part, need_gaps=True)
+        out = _temporal(a, f, ctx, need_gaps)
+    elif isinstance(f, Next):
+        out = _next(_eval(f.arg, ctx, full, part, need_gaps=True), f, ctx)
+    elif isinstance(f, Until):
+        raise UnsupportedFormulaError(f"{f} (until) is evaluated by the general engine")
+    else:
+        raise TypeError(f"unknown formula node {f!r}")
+    (full if need_gaps else part)[f] = out
+    return out
+
+
+def _negate(a: _Val) -> _Val:
+    if a.p_lo is a.p_hi:
+        neg = -a.p_lo
+        p_lo = p_hi = neg
+    else:
+        p_lo, p_hi = -a.p_hi, -a.p_lo
+    if a.g_lo is not None and a.g_hi is not None:
+        return _Val(p_lo, p_hi, g_lo=-a.g_hi, g_hi=-a.g_lo)
+    return _Val(p_lo, p_hi, g_mid=None if a.g_mid is None else -a.g_mid)
+
+
+def _combine(parts: list[_Val], op: np.ufunc, half: FloatArray, need_gaps: bool) -> _Val:
+    shared = all(p.p_lo is p.p_hi for p in parts)
+    lo = parts[0].p_lo
+    hi = parts[0].p_hi
+    for p in parts[1:]:
+        lo = op(lo, p.p_lo)
+        hi = lo if shared else op(hi, p.p_hi)
+    if not need_gaps:
+        return _Val(lo, hi)
+    if all(p.g_lo is None and p.g_mid is not None for p in parts):
+        mid = parts[0].g_mid
+        for p in parts[1:]:
+            mid = op(mid, p.g_mid)
+        return _Val(lo, hi, g_mid=mid)
+    g_lo, g_hi = parts[0].gaps(half)
+    for p in parts[1:]:
+        pl, ph = p.gaps(half)
+        g_lo, g_hi = op(g_lo, pl), op(g_hi, ph)
+    return _Val(lo, hi, g_lo=g_lo, g_hi=g_hi)
+
+
+def _temporal(a: _Val, f: Eventually | Always, ctx: _Ctx, need_gaps: bool) -> _Val:
+    """``F_I a``: lo = max of a.lo over the inner window, hi = max of a.hi over the outer one (+inf if the window
+    reaches past the end). ``G_I a``: lo = min of a.lo over the outer window (-inf if incomplete), hi = min of
+    a.hi over the inner one."""
+    grid = ctx.grid
+    dt, n = grid.dt_ns, grid.n
+    lo_ns, hi_ns = bounds_ns(f.interval)
+    g_lo, g_hi = a.gaps(ctx.half)
+    always = isinstance(f, Always)
+    op: np.ufunc = np.minimum if always else np.maximum
+    ident = INF if always else -INF
+    span_ns = (n - 1) * dt
+
+    def side(gap_query: bool) -> tuple[FloatArray, FloatArray]:
+        s, e = (1, dt - 1) if gap_query else (0, 0)
+        nq = n - 1 if gap_query else n
+        outer = _range(s + lo_ns, None if hi_ns is None else e + hi_ns, dt, gap_query, False)
+        # inner window [e + lo, s + hi]; on samples queried alone it is the outer one (as in monitor._windows)
+        if not gap_query and not need_gaps:
+            inner = outer
+        else:
+            empty = hi_ns is not None and e + lo_ns > s + hi_ns
+            inner = _range(e + lo_ns, None if hi_ns is None else s + hi_ns, dt, gap_query, empty)
+        # F: lo over inner, hi over outer; G: lo over outer, hi over inner
+        lo_rng, hi_rng = (outer, inner) if always else (inner, outer)
+        if lo_rng == hi_rng and a.p_lo is a.p_hi:
+            p_part = _window_reduce(a.p_lo, lo_rng.pa, lo_rng.pb, nq=nq, op=op, identity=ident)
+            lo = op(p_part, _window_reduce(g_lo, lo_rng.ga, lo_rng.gb, nq=nq, op=op, identity=ident))
+            hi = op(p_part, _window_reduce(g_hi, hi_rng.ga, hi_rng.gb, nq=nq, op=op, identity=ident))
+        else:
+            lo = _reduce(a.p_lo, g_lo, lo_rng, nq=nq, op=op, identity=ident)
+            hi = _reduce(a.p_hi, g_hi, hi_rng, nq=nq, op=op, identity=ident)
+        if hi_ns is not None:
+            # complete iff t_i + e + hi <= end, i.e. i * dt <= span - e - hi
+            first_incomplete = max(0, (span_ns - e - hi_ns) // dt + 1)
+            if first_incomplete < nq:
+                if always:
+                    lo[first_incomplete:] = -INF
+                else:
+                    hi[first_incomplete:] = INF
+        return lo, hi
+
+    p_lo, p_hi = side(False)
+    if not need_gaps:
+        return _Val(p_lo, p_hi)
+    q_lo, q_hi = side(True)
+    return _Val(p_lo, p_hi, g_lo=q_lo, g_hi=q_hi)
+
+
+def _next(a: _Val, f: Next, ctx: _Ctx) -> _Val:
+    """``X_I a`` at sample i: a at sample i + 1 if ``dt`` is in I; at the last sample undecided while ``t + hi``
+    lies after the end; at gaps ``[-inf, inf]``."""
+    n, dt = ctx.grid.n, ctx.grid.dt_ns
+    lo_ns, hi_ns = bounds_ns(f.interval)
+    p_lo = np.full(n, -INF)
+    p_hi = np.full(n, -INF)
+    if lo_ns <= dt and (hi_ns is None or dt <= hi_ns):
+        p_lo[:-1] = a.p_lo[1:]
+        p_hi[:-1] = a.p_hi[1:]
+    if hi_ns is not None and hi_ns > 0:
+        p_hi[-1] = INF
+    return _Val(p_lo, p_hi, g_lo=np.full(n - 1, -INF), g_hi=np.full(n - 1, INF))
