@@ -1,16 +1,36 @@
-"""The `tubempc demo` subcommand (placeholder until its feature lands: exits 4 with one clear line)."""
+"""The ``tubempc demo`` subcommand: the paper's experiment end to end on the built-in scenario."""
 
 from __future__ import annotations
 
-import click
+import sys
+import time
+from pathlib import Path
 
-from tubempc.errors import NotAvailableError
+import click
 
 __all__ = ["demo"]
 
 
-@click.command(context_settings={"ignore_unknown_options": True})
-@click.argument("args", nargs=-1, type=click.UNPROCESSED)
-def demo(args: tuple[str, ...]) -> None:
-    """Not available yet."""
-    raise NotAvailableError("'tubempc demo' is not available yet in this version")
+@click.command()
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Output folder (default: reports/demo-<timestamp>).")
+@click.option("--seed", type=int, default=7, show_default=True, help="Seed of the disturbance generator.")
+@click.option("--disturbance", type=click.Choice(["none", "random", "worst", "bias", "sine"]), default="random",
+              show_default=True, help="Disturbance model of the simulated run.")
+@click.option("--no-cache", is_flag=True, help="Rebuild the abstraction instead of reusing the on-disk cache.")
+def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool) -> None:
+    """Plan the paper's formula on the built-in scenario, run it with the tube MPC, log, certify and report.
+
+    Exit code: the certificate's (0 pass, 1 fail, 2 inconclusive).
+    """
+    from tubempc.demo import run_demo
+
+    folder = out_dir if out_dir is not None else Path("reports") / time.strftime("demo-%Y%m%d-%H%M%S")
+    started = time.perf_counter()
+    result = run_demo(folder, seed=seed, disturbance=disturbance, use_cache=not no_cache,
+                      log=click.echo)
+    click.echo(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
+    for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml", "comparison"):
+        if key in result.files:
+            click.echo(f"  {key:12s} {result.files[key]}")
+    sys.exit(result.exit_code)
