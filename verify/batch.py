@@ -290,7 +290,9 @@ def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, 
         raise UnusableInputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
                                  path=address) from err
     try:
-        futures = client.map(fn, list(items), pure=False)
+        # ship the inputs as data (certification results carry frames), not embedded in the task graph
+        scattered = client.scatter(list(items)) if items else []
+        futures = client.map(fn, scattered, pure=False)
         for _ in dask_completed(futures):
             bar.update()
         gathered: list[R] = client.gather(futures)
