@@ -14,6 +14,7 @@ the spec too; runs are drawn at the MoCap rate with the scenario's speed bound, 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 from pathlib import Path
@@ -21,7 +22,8 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-from hypothesis import HealthCheck, event, example, given, settings
+import pytest
+from hypothesis import HealthCheck, assume, event, example, given, settings
 from hypothesis import strategies as st
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
@@ -178,13 +180,18 @@ def _write_damaged(root: Path, traj: Trajectory, cmd_u: npt.NDArray[np.float64],
 UNVERIFIABLE = {"truncate"}
 
 
-@given(faulty_runs())
-@example((Trajectory(t_s=(0.0, 0.01), xy_m=((0.0, 0.0), (0.0, 0.0)), yaw_rad=(0.0, 0.0)),
-          np.zeros((2, 3)), "mcap", LogFault(kind="missing_topic", topic="nominal")))
-@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-def test_damaged_logs_never_crash_and_never_pass_wrongly(case: tuple[Trajectory, npt.NDArray[np.float64], Format,
-                                                                      LogFault]) -> None:
+Case = tuple[Trajectory, npt.NDArray[np.float64], Format, LogFault]
+
+
+# Known certifier bug (found by the nightly profile, pinned below): set to False once verify/ingest wraps the
+# apsw.CorruptError rosbags raises while iterating a truncated .db3; the strict xfail below then reports XPASS.
+SQLITE3_TRUNCATION_CRASHES = True
+
+
+def check_damaged(case: Case) -> None:
     traj, cmd_u, fmt, fault = case
+    if SQLITE3_TRUNCATION_CRASHES:
+        assume(not (fmt == "sqlite3" and fault.kind == "truncate"))  # pinned separately, see below
     bad = violates(traj, cmd_u, SCENARIO)
     with tempfile.TemporaryDirectory() as tmp:
         path = _write_damaged(Path(tmp), traj, cmd_u, fmt, fault)
@@ -201,6 +208,37 @@ def test_damaged_logs_never_crash_and_never_pass_wrongly(case: tuple[Trajectory,
                 assert verdict != "pass", (fault, fmt, "a violating run passed")
             if fault.kind in UNVERIFIABLE or (fault.kind == "missing_topic" and fault.topic != "pose"):
                 assert verdict != "pass", (fault, fmt, "an unverifiable log passed")
+
+
+@given(faulty_runs())
+@example((Trajectory(t_s=(0.0, 0.01), xy_m=((0.0, 0.0), (0.0, 0.0)), yaw_rad=(0.0, 0.0)),
+          np.zeros((2, 3)), "mcap", LogFault(kind="missing_topic", topic="nominal")))
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+def test_damaged_logs_never_crash_and_never_pass_wrongly(case: Case) -> None:
+    check_damaged(case)
+
+
+# Found by the nightly profile (seed 79787955990689291046924142033752259217), shrunk: a ROS2 sqlite3 bag whose
+# .db3 is cut to 90 % (or 99 %) of its bytes opens, then rosbags raises apsw.CorruptError ("database disk image is
+# malformed") while iterating messages; verify/ingest/raw.py does not wrap it, so the certifier crashes (exit 70)
+# instead of exit 3 / a partial verdict. Pinned here; remove the xfail marker when the certifier wraps the error.
+TRUNCATED_SQLITE3: Case = (Trajectory(t_s=(0.0, 0.01), xy_m=((-1.99, -1.78), (-1.99, -1.78)), yaw_rad=(0.0, 0.0)),
+                           np.zeros((2, 3)), "sqlite3", LogFault(kind="truncate", start=0, count=1, fraction=0.9))
+
+
+@pytest.mark.xfail(SQLITE3_TRUNCATION_CRASHES, strict=True,
+                   reason="certifier bug: apsw.CorruptError from a truncated .db3 is not wrapped")
+def test_truncated_sqlite3_bag_is_unusable_input_not_a_crash() -> None:
+    traj, cmd_u, _, fault = TRUNCATED_SQLITE3
+    for fraction in (0.9, 0.99):
+        with tempfile.TemporaryDirectory() as tmp:
+            path = _write_damaged(Path(tmp), traj, cmd_u, "sqlite3", dataclasses.replace(fault, fraction=fraction))
+            for salvage in (False, True):
+                try:
+                    verdict = certify_log(path, SCENARIO, spec=SPEC, salvage=salvage).verdict
+                except UnusableInputError:
+                    continue
+                assert verdict != "pass"
 
 
 @given(strategies.trajectories(rate_hz=100.0, max_samples=120, max_speed_mps=0.2, box_m=2.2),
