@@ -94,6 +94,7 @@ def test_scaled_down_gain_is_caught(small_suite: Path, monkeypatch: pytest.Monke
     assert any(m.startswith("check.") and m.endswith(".verdict") for m in regressed)  # the certificate's tube check
 
 
+@pytest.mark.slow  # 10 closed-loop runs (about 15 s idle, 30 s on a loaded runner)
 def test_default_suite_matches_the_shipped_baseline(tmp_path: Path) -> None:
     out = _regress("--workers", "2", "--out", str(tmp_path / "out"))
     assert out.returncode == 0, out.stdout + out.stderr

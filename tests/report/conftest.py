@@ -74,7 +74,7 @@ def scenario() -> Scenario:
     return builtin_scenario()
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def make_result() -> Callable[..., FakeResult]:
     def build(*, verdict: str = "fail", evil: bool = False, with_optional: bool = True) -> FakeResult:
         traj, nom, u, rho = _frames()

@@ -9,6 +9,8 @@ from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from tubempc.scenario import Scenario
 from verify.figures import workspace_figure
 from verify.report import write_reports
@@ -36,8 +38,19 @@ def _parse(path: Path) -> _Collector:
     return parser
 
 
-def test_files_and_figures(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any]) -> None:
-    written = write_reports(make_result(), scenario, tmp_path)
+@pytest.fixture(scope="module")
+def failing_report(tmp_path_factory: pytest.TempPathFactory,
+                   make_result: Callable[..., Any]) -> tuple[Path, dict[str, Path], Any]:
+    """One rendering of the failing double's reports, shared by the read-only tests below."""
+    from tubempc.scenario import builtin_scenario
+
+    folder = tmp_path_factory.mktemp("report")
+    result = make_result(verdict="fail")
+    return folder, write_reports(result, builtin_scenario(), folder, suite_name="run.mcap"), result
+
+
+def test_files_and_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
+    tmp_path, written, _ = failing_report
     expected = {"report.md", "report.html", "junit.xml", "figures/workspace.png", "figures/states.png",
                 "figures/tube.png", "figures/inputs.png", "figures/robustness.png", "figures/sampling.png"}
     assert set(written) == expected
@@ -52,9 +65,8 @@ def test_files_and_figures(tmp_path: Path, scenario: Scenario, make_result: Call
     assert "| tube | fail |" in md and "12.5" in md
 
 
-def test_html_is_self_contained_with_embedded_figures(tmp_path: Path, scenario: Scenario,
-                                                      make_result: Callable[..., Any]) -> None:
-    write_reports(make_result(), scenario, tmp_path)
+def test_html_is_self_contained_with_embedded_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
+    tmp_path = failing_report[0]
     page = _parse(tmp_path / "report.html")
     imgs = [attrs for tag, attrs in page.tags if tag == "img"]
     assert len(imgs) == 6
@@ -88,9 +100,8 @@ def test_strings_from_log_and_scenario_are_escaped(tmp_path: Path, scenario: Sce
     assert '<script>alert("x")</script><img src="http://evil.example/x.png">&' in names
 
 
-def test_junit_one_case_per_check(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any]) -> None:
-    result = make_result()
-    write_reports(result, scenario, tmp_path, suite_name="run.mcap")
+def test_junit_one_case_per_check(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
+    tmp_path, _, result = failing_report
     root = ET.parse(tmp_path / "junit.xml").getroot()
     assert root.tag == "testsuites"
     (suite,) = root.findall("testsuite")
