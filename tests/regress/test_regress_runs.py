@@ -54,6 +54,8 @@ def test_smaller_sigma_low_is_caught(small_suite: Path, tmp_path: Path) -> None:
     assert made.returncode == 0, made.stderr
     assert read_baseline(base)["runs"]["nexus.R1-R3.worst.s0"]["metrics"]["arrived"] is True
 
+    (tmp_path / "same" / "nexus.R1-R3.worst.s0").mkdir(parents=True)
+    (tmp_path / "same" / "nexus.R1-R3.worst.s0" / "run.mcap").write_bytes(b"stale")  # an earlier run's output
     same = _regress("--suite", str(small_suite), "--baseline", str(base), "--workers", "1", "--out",
                     str(tmp_path / "same"))
     assert same.returncode == 0, same.stdout + same.stderr

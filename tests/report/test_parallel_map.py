@@ -31,3 +31,11 @@ def test_exceptions_propagate() -> None:
 def test_bad_dask_address_is_unusable_input() -> None:
     with pytest.raises(UnusableInputError, match="expected 'local'"):
         parallel_map(abs, ITEMS, dask="my-laptop", progress=False)
+
+
+def test_progress_bar_on_request(capsys: pytest.CaptureFixture[str]) -> None:
+    parallel_map(abs, ITEMS, workers=1, progress=True, desc="certify")
+    err = capsys.readouterr().err
+    assert "certify" in err and f"{len(ITEMS)}/{len(ITEMS)}" in err
+    parallel_map(abs, ITEMS, workers=1, progress=False, desc="certify")
+    assert capsys.readouterr().err == ""

@@ -99,6 +99,7 @@ def _run_in(case: RunCase, folder: Path, reports: bool) -> tuple[dict[str, Any],
     result = run_closed_loop(case.scenario, targets, start_region=case.start, disturbance=case.disturbance,
                              seed=case.seed, t_end_s=case.t_end_s, mocap_noise_m=case.mocap_noise_m)
     folder.mkdir(parents=True, exist_ok=True)
+    (folder / "run.mcap").unlink(missing_ok=True)  # a previous regress run into the same --out folder
     log = write_log(result, case.scenario, folder / "run.mcap",
                     metadata={"regress_run": case.run_id, "spec": case.spec})
     certified = certify_log(log, case.scenario, spec=case.spec)
