@@ -241,7 +241,7 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
     if workers is not None and workers < 1:
         raise ValueError(f"workers={workers!r} must be at least 1")
     bar = tqdm(total=len(items), desc=desc or None, unit="job", disable=not _show_progress(progress),
-               file=sys.stderr, leave=False)
+               file=sys.stderr, leave=True)
     try:
         if dask is not None:
             return _dask_map(fn, items, workers=workers, address=dask, bar=bar)
