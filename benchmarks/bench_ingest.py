@@ -12,6 +12,7 @@ Prints deserialize/ours (target >= 3x) and raw/ours (target >= 0.7, i.e. ours re
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -100,6 +101,7 @@ def bench(path: Path) -> None:
         cols = decode_pose(rl.topics[TOPIC], rl.ros1)
         return int(cols.x_m.size)
 
+    print(f"load average (2 cores here): {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     t_raw, n_raw = timed(raw)
     t_des, n_des = timed(deser)
     t_ours, n_ours = timed(ours)

@@ -154,14 +154,15 @@ def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float) ->
 def _window_reduce(x: FloatArray, a: int, b: int | None, *, nq: int, op: np.ufunc, identity: float) -> FloatArray:
     """``out[i] = op(x[i + a : i + b + 1])`` clipped to ``x`` (``identity`` when empty), for ``i < nq``."""
     size = x.shape[0]
-    out = np.full(nq, identity)
-    if b is not None and b < a:
-        return out
     valid = max(0, min(nq, size - a))
-    if valid == 0:
-        return out
+    if (b is not None and b < a) or valid == 0:
+        return np.full(nq, identity)
     reduced = op.accumulate(x[::-1])[::-1] if b is None else sliding_clipped(x, b - a + 1, op, identity)
+    if a == 0 and valid == nq:
+        return reduced[:nq]
+    out = np.empty(nq)
     out[:valid] = reduced[a : a + valid]
+    out[valid:] = identity
     return out
 
 

@@ -24,6 +24,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from verify.errors import LogReadError
 from verify.ingest.raw import RawTopic
+from verify.ingest.ros1 import PayloadBuffer
 
 __all__ = [
     "FAST_TYPES",
@@ -78,6 +79,9 @@ def typestore(ros1: bool) -> Any:
 
 
 def _joined(payloads: Sequence[bytes]) -> tuple[npt.NDArray[np.uint8], IntArray, IntArray]:
+    """Payloads -> one byte buffer, offsets, lengths (a ``PayloadBuffer`` already is one: no copy)."""
+    if isinstance(payloads, PayloadBuffer):
+        return payloads.data, payloads.offsets, payloads.lengths
     lens = np.fromiter(map(len, payloads), dtype=np.int64, count=len(payloads))
     offs = np.zeros(len(payloads), dtype=np.int64)
     if len(payloads) > 1:
@@ -85,7 +89,13 @@ def _joined(payloads: Sequence[bytes]) -> tuple[npt.NDArray[np.uint8], IntArray,
     return np.frombuffer(b"".join(payloads), dtype=np.uint8), offs, lens
 
 
-def _u32(u8: npt.NDArray[np.uint8], at: IntArray) -> IntArray:
+def _u32(u8: npt.NDArray[np.uint8], at: IntArray, size: int | None = None) -> IntArray:
+    """uint32 at byte offsets ``at``; ``size``: all payloads have this length and are packed (column read)."""
+    if size is not None and at.shape[0] and np.all(at - np.arange(at.shape[0]) * size == at[0]):
+        rel = int(at[0])
+        if rel + 4 <= size:
+            cols = u8.reshape(-1, size)[:, rel : rel + 4]
+            return np.ascontiguousarray(cols).view("<u4").ravel().astype(np.int64)
     cols = u8[at[:, None] + np.arange(4)]
     return np.ascontiguousarray(cols).view("<u4").ravel().astype(np.int64)
 
@@ -112,21 +122,22 @@ def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
     base = 0 if ros1 else 4
     if np.any(lens < base + 16):
         return None
+    packed = int(lens[0]) if np.all(lens == lens[0]) and u8.shape[0] == n * int(lens[0]) else None
     if not ros1:
         # CDR little-endian encapsulation header: 0x00 0x01
-        enc = u8[offs[:, None] + np.arange(2)]
+        enc = u8.reshape(n, packed)[:, :2] if packed is not None else u8[offs[:, None] + np.arange(2)]
         if not (np.all(enc[:, 0] == 0) and np.all(enc[:, 1] == 1)):
             return None
     sec_at = offs + 4  # ROS1: after seq; CDR: after the encapsulation header
     len_at = offs + 12
-    str_len = _u32(u8, len_at)
+    str_len = _u32(u8, len_at, packed)
     pos = len_at + 4 + str_len  # after header.frame_id
     if raw.msgtype == ODOMETRY:
         if not ros1:
             pos = offs + _align(pos - offs, base, 4)
         if np.any(pos + 4 > offs + lens):
             return None
-        child_len = _u32(u8, pos)
+        child_len = _u32(u8, pos, packed)
         pos = pos + 4 + child_len
     if not ros1:
         pos = offs + _align(pos - offs, base, 8)

@@ -3,7 +3,9 @@
 input: a log path (ROS1 ``.bag``, bare ``.mcap`` / ``.db3``, or a ROS2 bag directory) and topic names -> output: a
 ``RawLog`` (per topic: message type, whether the bag carries its definition, log times in ns, raw payloads).
 
-Opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; the latter reads bare
+An indexed ROS1 bag is read by our own chunk reader (``verify.ingest.ros1``: index records, chunk decompression,
+numpy slicing of the message records) when it is well-formed; anything unusual goes to ``rosbags``. Otherwise
+opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; the latter reads bare
 ``.mcap`` and ``.db3`` files directly, sqlite3 with ``immutable=1`` so a ``-wal`` file is neither read nor
 checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with ``salvage=True`` the complete records
 are read by a stream walk (``verify.ingest.salvage``) and the result is marked partial.
@@ -17,6 +19,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+import numpy.typing as npt
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import ReaderError as ReaderError1
@@ -24,6 +28,7 @@ from rosbags.rosbag2 import Reader as Reader2
 from rosbags.rosbag2 import ReaderError as ReaderError2
 
 from verify.errors import LogReadError, TruncatedLogError
+from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 
 __all__ = ["RawLog", "RawTopic", "detect_format", "read_raw"]
@@ -34,13 +39,16 @@ _MCAP_TRUNCATION_HINTS = ("end magic", "Truncated record", "footer", "summary of
 
 @dataclass(slots=True)
 class RawTopic:
-    """Raw payloads of one topic in log-time order of reading (not necessarily sorted)."""
+    """Raw payloads of one topic in the order of reading (rosbags' order: by log time for indexed logs).
+
+    ``log_ns`` is a list or an int64 array, ``payloads`` a list of bytes or a ``PayloadBuffer`` (the fast ROS1
+    reader's packed buffer, which indexes like a list)."""
 
     topic: str
     msgtype: str
     has_definition: bool
-    log_ns: list[int] = field(default_factory=list)
-    payloads: list[bytes] = field(default_factory=list)
+    log_ns: list[int] | npt.NDArray[np.int64] = field(default_factory=list)
+    payloads: list[bytes] | PayloadBuffer = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +104,10 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                 notes.append(f"un-checkpointed write-ahead log {wal.name} ({wal.stat().st_size} bytes) beside "
                              f"{db.name}: the database is opened read-only and immutable, so messages still in the "
                              f"-wal file are not read")
+    if fmt == "ros1" and (fast := read_ros1_fast(p, wanted)) is not None:
+        topics_out = {topic: RawTopic(topic, msgtype, has_def, log_ns, payloads)
+                      for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items()}
+        return RawLog(str(p), fmt, True, topics_out, fast.available, False, tuple(notes))
     try:
         return _read_indexed(p, fmt, wanted, notes)
     except TruncatedLogError as err:
@@ -129,17 +141,20 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         available = {c.topic: c.msgtype for c in conns}
         selected = [c for c in conns if c.topic in wanted]
         out = _topics_from(selected)
+        logs: dict[str, list[int]] = {t: [] for t in out}
+        payloads: dict[str, list[bytes]] = {t: [] for t in out}
         if selected:
             try:
                 for conn, log_ns, raw in reader.messages(connections=selected):
-                    t = out[conn.topic]
-                    t.log_ns.append(log_ns)
-                    t.payloads.append(bytes(raw) if not isinstance(raw, bytes) else raw)
+                    logs[conn.topic].append(log_ns)
+                    payloads[conn.topic].append(bytes(raw) if not isinstance(raw, bytes) else raw)
             except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
                     KeyError, IndexError) as err:
                 raise _wrap_error(path, fmt, err) from err
     finally:
         reader.close()
+    for topic, t in out.items():
+        t.log_ns, t.payloads = logs[topic], payloads[topic]
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
 
 
@@ -157,6 +172,8 @@ def _topics_from(conns: Iterable[Connection]) -> dict[str, RawTopic]:
 def _salvage(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     messages: Iterator[SalvagedMessage]
     out: dict[str, RawTopic] = {}
+    logs: dict[str, list[int]] = {}
+    payloads: dict[str, list[bytes]] = {}
     available: dict[str, str] = {}
     stops: list[str] = []
     files = _storage_files(path, fmt)
@@ -169,7 +186,10 @@ def _salvage(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog
                 continue
             if m.topic not in out:
                 out[m.topic] = RawTopic(m.topic, m.msgtype, m.has_definition)
-            out[m.topic].log_ns.append(m.log_ns)
-            out[m.topic].payloads.append(m.payload)
+                logs[m.topic], payloads[m.topic] = [], []
+            logs[m.topic].append(m.log_ns)
+            payloads[m.topic].append(m.payload)
         stops.append(f"{file.name}: {walk.stop_reason()}")
+    for topic, t in out.items():
+        t.log_ns, t.payloads = logs[topic], payloads[topic]
     return RawLog(str(path), fmt, fmt == "ros1", out, available, True, tuple(notes + stops))

@@ -1,0 +1,132 @@
+"""Our ROS1 chunk reader returns exactly what rosbags' reader returns (order, times, payloads, types, definitions),
+on uncompressed, bz2 and lz4 bags, and declines (falls back to rosbags) on anything unusual."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_typestore
+
+from tubempc.scenario import Scenario
+from verify.errors import TruncatedLogError
+from verify.ingest.decode import decode_pose
+from verify.ingest.raw import _read_indexed, read_raw
+from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
+
+STORE = get_typestore(Stores.ROS1_NOETIC)
+T = STORE.types
+POSE = "geometry_msgs/msg/PoseStamped"
+STRING = "std_msgs/msg/String"
+
+
+def _pose(t_ns: int, x: float, frame: str) -> bytes:
+    hdr = T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9,
+                                                                                  nanosec=t_ns % 10**9),
+                                   frame_id=frame)
+    msg = T[POSE](header=hdr, pose=T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=-x, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+    return bytes(STORE.serialize_ros1(msg, POSE))
+
+
+def _write(path: Path, compression: str | None, *, chunk_bytes: int = 4096, shuffle: bool = False,
+           frames: tuple[str, ...] = ("world",), no_definition: bool = False) -> Path:
+    """Pose on /pose (two connections: two callers), strings on /status, a Twist-free /other; many chunks."""
+    rng = np.random.default_rng(5)
+    times = 1_700_000_000 * 10**9 + np.arange(600, dtype=np.int64) * 10_000_000
+    if shuffle:  # log times out of order within and across chunks, with ties
+        times = times[rng.permutation(times.size)]
+        times[10] = times[11]
+    writer = Writer(path)
+    if compression == "bz2":
+        writer.set_compression(Writer.CompressionFormat.BZ2)
+    elif compression == "lz4":
+        writer.set_compression(Writer.CompressionFormat.LZ4)
+    writer.chunk_threshold = chunk_bytes
+    with writer as w:
+        kw: dict[str, Any] = {"msgdef": "", "md5sum": "0" * 32} if no_definition else {"typestore": STORE}
+        pose_a = w.add_connection("/pose", POSE, callerid="/a", **kw)
+        pose_b = w.add_connection("/pose", POSE, callerid="/b", typestore=STORE)
+        status = w.add_connection("/status", STRING, typestore=STORE)
+        other = w.add_connection("/other", STRING, typestore=STORE)
+        for k, t in enumerate(times.tolist()):
+            frame = frames[k % len(frames)]
+            w.write(pose_a if k % 3 else pose_b, t, _pose(t, 0.001 * k, frame))
+            if k % 7 == 0:
+                text = T[STRING](data="x" * (k % 13))
+                w.write(status, t + 1, bytes(STORE.serialize_ros1(text, STRING)))
+            if k % 50 == 0:
+                w.write(other, t, bytes(STORE.serialize_ros1(T[STRING](data="o"), STRING)))
+    return path
+
+
+def _same_as_rosbags(path: Path, wanted: set[str]) -> None:
+    fast = read_ros1_fast(path, wanted)
+    assert fast is not None
+    ref = _read_indexed(path, "ros1", wanted, [])
+    assert fast.available == ref.available
+    assert set(fast.topics) == set(ref.topics)
+    for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items():
+        want = ref.topics[topic]
+        assert isinstance(payloads, PayloadBuffer)
+        assert (msgtype, has_def) == (want.msgtype, want.has_definition)
+        assert log_ns.tolist() == list(want.log_ns)
+        assert list(payloads) == list(want.payloads)
+
+
+@pytest.mark.parametrize("compression", [None, "bz2", "lz4"])
+def test_reader_equals_rosbags(tmp_path: Path, compression: str | None) -> None:
+    path = _write(tmp_path / "run.bag", compression)
+    _same_as_rosbags(path, {"/pose", "/status", "/absent"})
+
+
+def test_reader_equals_rosbags_out_of_order_and_variable_sizes(tmp_path: Path) -> None:
+    path = _write(tmp_path / "run.bag", "lz4", shuffle=True, frames=("world", "map", "mocap_frame"))
+    _same_as_rosbags(path, {"/pose", "/status"})
+    path2 = _write(tmp_path / "run2.bag", None, chunk_bytes=1 << 20, no_definition=True)  # one chunk
+    _same_as_rosbags(path2, {"/pose"})
+
+
+def test_read_raw_uses_fast_reader_and_decodes(tmp_path: Path) -> None:
+    path = _write(tmp_path / "run.bag", "bz2")
+    raw = read_raw(path, ["/pose"])
+    pose = raw.topics["/pose"]
+    assert isinstance(pose.payloads, PayloadBuffer)
+    cols = decode_pose(pose, True)
+    assert cols.fast
+    slow = decode_pose(pose, True, fast=False)  # per-message deserialize over the same buffer
+    np.testing.assert_array_equal(cols.x_m, slow.x_m)
+    np.testing.assert_array_equal(cols.stamp_ns, slow.stamp_ns)
+
+
+def test_damaged_bags_fall_back_to_rosbags(tmp_path: Path, scenario: Scenario) -> None:
+    path = _write(tmp_path / "run.bag", None)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    assert read_ros1_fast(cut, {"/pose"}) is None
+    with pytest.raises(TruncatedLogError):
+        read_raw(cut, ["/pose"])
+    salvaged = read_raw(cut, ["/pose"], salvage=True)
+    assert salvaged.partial
+    assert 0 < len(salvaged.topics["/pose"].payloads) < 600
+    # a corrupted message record inside an uncompressed chunk: declined, rosbags decides
+    broken = bytearray(data)
+    first = data.index(b"op=\x02")
+    broken[first + 3] = 0x09
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(broken))
+    assert read_ros1_fast(bad, {"/pose", "/status", "/other"}) is None
+    assert read_ros1_fast(tmp_path / "run.bag", {"/pose"}) is not None
+    unindexed = bytearray(data)
+    pos = data.index(b"index_pos=") + len(b"index_pos=")
+    unindexed[pos : pos + 8] = bytes(8)
+    un = tmp_path / "unindexed.bag"
+    un.write_bytes(bytes(unindexed))
+    assert read_ros1_fast(un, {"/pose"}) is None
+    with pytest.raises(TruncatedLogError):
+        read_raw(un, ["/pose"])

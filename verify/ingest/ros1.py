@@ -1,0 +1,388 @@
+"""Fast ROS1 bag reader: an indexed ``.bag`` + wanted topics -> their payloads packed into one numpy buffer per topic.
+
+input: a ROS1 bag (format 2.0) and topic names -> output: ``RawTopic`` values whose ``payloads`` is a
+``PayloadBuffer`` (packed payload bytes + offsets + lengths), ``available`` topics, or ``None`` when the bag is in any
+way unusual (then the caller reads it with ``rosbags``, which also decides truncation and salvage).
+
+Reading follows the format (wiki.ros.org/Bags/Format/2.0): the bag header record gives ``index_pos``; there the
+connection records (topic, type, definition) and chunk info records (chunk position, message count per connection)
+are read; each chunk record (compression none / bz2 / lz4, uncompressed size) is followed by one index data record
+per connection listing ``(time, offset)`` of its messages inside the uncompressed chunk. For the wanted connections
+the message data records are located at those offsets and checked with numpy (same header layout, ``op`` = 2, the
+right connection id, time equal to the index), and the payloads are copied out with strided views (no per-message
+Python object). Messages are ordered as ``rosbags`` yields them: by (time, chunk position, offset). The file is
+opened read-only and read with positioned reads; chunks without a wanted connection are not read.
+"""
+
+from __future__ import annotations
+
+import bz2
+import os
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import overload
+
+import numpy as np
+import numpy.typing as npt
+from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
+from rosbags.typesys.msg import normalize_msgtype
+
+__all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
+
+U8Array = npt.NDArray[np.uint8]
+IntArray = npt.NDArray[np.int64]
+
+_MAGIC = b"#ROSBAG V2.0\n"
+_OP_MSG, _OP_BAG, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
+_INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
+
+
+class PayloadBuffer(Sequence[bytes]):
+    """Payloads of one topic packed in one byte buffer: payload i is ``data[offsets[i] : offsets[i] + lengths[i]]``
+    (offsets are the running sum of the lengths). Indexing yields ``bytes`` like a list of payloads."""
+
+    __slots__ = ("data", "lengths", "offsets")
+
+    def __init__(self, data: U8Array, offsets: IntArray, lengths: IntArray) -> None:
+        if offsets.shape != lengths.shape:
+            raise ValueError("offsets and lengths must have the same shape")
+        self.data = data
+        self.offsets = offsets
+        self.lengths = lengths
+
+    def __len__(self) -> int:
+        return int(self.offsets.shape[0])
+
+    @overload
+    def __getitem__(self, i: int) -> bytes: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[bytes]: ...
+
+    def __getitem__(self, i: int | slice) -> bytes | list[bytes]:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        o = int(self.offsets[i])
+        return self.data[o : o + int(self.lengths[i])].tobytes()
+
+
+@dataclass(frozen=True, slots=True)
+class _Conn:
+    cid: int
+    topic: str
+    msgtype: str
+    has_definition: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Ros1Index:
+    """What the fast reader found: per wanted topic its type, definition flag, log times and payloads."""
+
+    topics: dict[str, tuple[str, bool, IntArray, PayloadBuffer]]
+    available: dict[str, str]
+
+
+class _UnusualError(Exception):
+    """Anything the fast path does not handle; the caller falls back to rosbags."""
+
+
+def _fields(raw: bytes | memoryview) -> dict[str, bytes]:
+    out: dict[str, bytes] = {}
+    pos = 0
+    size = len(raw)
+    while pos < size:
+        if pos + 4 > size:
+            raise _UnusualError("cut header field")
+        (flen,) = struct.unpack_from("<I", raw, pos)
+        if pos + 4 + flen > size:
+            raise _UnusualError("cut header field")
+        item = bytes(raw[pos + 4 : pos + 4 + flen])
+        name, eq, value = item.partition(b"=")
+        if not eq:
+            raise _UnusualError("header field without '='")
+        out[name.decode("ascii", "replace")] = value
+        pos += 4 + flen
+    return out
+
+
+class _File:
+    """Positioned reads (``os.pread``) of a file opened read-only; a short read means the file is cut."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.size = os.fstat(fd).st_size
+
+    def read(self, pos: int, n: int) -> bytes:
+        if pos < 0 or n < 0 or pos + n > self.size:
+            raise _UnusualError("read past the end of the file")
+        data = os.pread(self.fd, n, pos)
+        if len(data) != n:
+            raise _UnusualError("short read")
+        return data
+
+    def record(self, pos: int) -> tuple[dict[str, bytes], int, int, int]:
+        """Record at ``pos`` -> (header fields, data start, data length, next position); data not read."""
+        (hlen,) = struct.unpack("<I", self.read(pos, 4))
+        head = self.read(pos + 4, hlen + 4)
+        (dlen,) = struct.unpack_from("<I", head, hlen)
+        start = pos + 8 + hlen
+        if start + dlen > self.size:
+            raise _UnusualError("cut record")
+        return _fields(head[:hlen]), start, dlen, start + dlen
+
+
+def _u32(value: bytes, name: str) -> int:
+    if len(value) != 4:
+        raise _UnusualError(f"field {name} is not uint32")
+    return int(struct.unpack("<I", value)[0])
+
+
+def _u64(value: bytes, name: str) -> int:
+    if len(value) != 8:
+        raise _UnusualError(f"field {name} is not uint64")
+    return int(struct.unpack("<Q", value)[0])
+
+
+def _op(header: dict[str, bytes], want: int) -> None:
+    op = header.get("op", b"")
+    if len(op) != 1 or op[0] != want:
+        raise _UnusualError(f"expected op {want:#x}")
+
+
+def _topic(name: str) -> str:
+    """Topic normalisation as rosbags does it (single slashes, keep a leading one)."""
+    return f"{'/' * (name[:1] == '/')}{'/'.join(x for x in name.split('/') if x)}"
+
+
+def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
+    conns: list[_Conn] = []
+    for _ in range(count):
+        header, start, dlen, pos = f.record(pos)
+        _op(header, _OP_CONN)
+        info = _fields(f.read(start, dlen))
+        typ = info.get("type", b"").decode()
+        if not typ or "md5sum" not in info or "message_definition" not in info:
+            raise _UnusualError("connection without type, md5sum or definition")
+        conns.append(_Conn(_u32(header["conn"], "conn"), _topic(header["topic"].decode()),
+                           normalize_msgtype(typ), bool(info["message_definition"].decode().strip())))
+    return conns, pos
+
+
+def _chunk_infos(f: _File, pos: int, count: int) -> list[tuple[int, int, frozenset[int]]]:
+    """(chunk position, number of connections in it, their ids) per chunk, by position."""
+    out: list[tuple[int, int, frozenset[int]]] = []
+    for _ in range(count):
+        header, start, dlen, pos = f.record(pos)
+        _op(header, _OP_CHUNK_INFO)
+        if _u32(header.get("ver", b""), "ver") != 1:
+            raise _UnusualError("chunk info version")
+        n = _u32(header["count"], "count")
+        if dlen != 8 * n:
+            raise _UnusualError("chunk info length")
+        ids = frozenset(np.frombuffer(f.read(start, dlen), dtype="<u4")[0::2].tolist())
+        out.append((_u64(header["chunk_pos"], "chunk_pos"), n, ids))
+    out.sort()
+    return out
+
+
+def _chunk_data(f: _File, pos: int, *, read: bool) -> tuple[U8Array | None, int]:
+    """Uncompressed content of the chunk record at ``pos`` (None unless ``read``) and the position after it."""
+    header, start, dlen, nxt = f.record(pos)
+    _op(header, _OP_CHUNK)
+    compression = header.get("compression", b"").decode()
+    size = _u32(header.get("size", b""), "size")
+    if compression not in ("none", "bz2", "lz4"):
+        raise _UnusualError(f"compression {compression!r}")
+    if not read:
+        return None, nxt
+    raw = f.read(start, dlen)
+    if compression == "none":
+        inner = raw
+    else:
+        try:
+            inner = bz2.decompress(raw) if compression == "bz2" else lz4_decompress(raw)
+        except (OSError, ValueError, RuntimeError) as err:
+            raise _UnusualError(f"chunk does not decompress ({err})") from err
+    if len(inner) != size:
+        raise _UnusualError("chunk size differs from its header")
+    return np.frombuffer(inner, dtype=np.uint8), nxt
+
+
+@dataclass(slots=True)
+class _Parts:
+    """Per topic, the pieces gathered chunk by chunk."""
+
+    times: list[IntArray]
+    blocks: list[U8Array]  # packed payloads of a chunk
+    lengths: list[IntArray]
+
+
+def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) -> tuple[IntArray, U8Array, IntArray]:
+    """Log times, packed payloads and payload lengths of connection ``cid``'s messages listed in ``index`` (sorted
+    by offset). Records are viewed as rows of a byte matrix (strided view when evenly spaced, else gathered)."""
+    offs = index["offset"].astype(np.int64)
+    times = index["sec"].astype(np.int64) * 1_000_000_000 + index["nsec"].astype(np.int64)
+    k = offs.shape[0]
+    size = chunk.shape[0]
+    if k == 0:
+        return times, np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.int64)
+    o0 = int(offs[0])
+    if o0 + 8 > size:
+        raise _UnusualError("index offset outside its chunk")
+    (h,) = struct.unpack("<I", chunk[o0 : o0 + 4].tobytes())
+    if o0 + 8 + h > size:
+        raise _UnusualError("index offset outside its chunk")
+    raw0 = chunk[o0 + 4 : o0 + 4 + h].tobytes()
+    first = _fields(raw0)
+    if first.get("op") != bytes([_OP_MSG]) or set(first) != {"op", "conn", "time"}:
+        raise _UnusualError("indexed record is not plain message data")
+    (d,) = struct.unpack("<I", chunk[o0 + 4 + h : o0 + 8 + h].tobytes())
+    width = 8 + h + d
+    if int(offs[-1]) + width > size:
+        raise _UnusualError("message data outside its chunk")
+    step = int(offs[1] - offs[0]) if k > 1 else width
+    if step >= width and np.all(np.diff(offs) == step):
+        rec = np.lib.stride_tricks.as_strided(chunk[o0:], shape=(k, width), strides=(step, 1), writeable=False)
+    else:
+        rec = chunk[offs[:, None] + np.arange(width)]
+    # every record: same header length, same header bytes except the conn and time values, same data length
+    conn_at = 4 + raw0.index(b"conn=") + 5
+    time_at = 4 + raw0.index(b"time=") + 5
+    fixed = np.ones(8 + h, dtype=bool)
+    fixed[conn_at : conn_at + 4] = False
+    fixed[time_at : time_at + 8] = False
+    same = rec[:, : 8 + h] == rec[0, : 8 + h]
+    if not bool(same[:, fixed].all()):
+        return _messages_varied(chunk, cid, offs, times)
+    conn = np.ascontiguousarray(rec[:, conn_at : conn_at + 4]).view("<u4").ravel()
+    stamp = np.ascontiguousarray(rec[:, time_at : time_at + 8]).view("<u4").reshape(k, 2).astype(np.int64)
+    if np.any(conn != cid) or not np.array_equal(stamp[:, 0] * 1_000_000_000 + stamp[:, 1], times):
+        raise _UnusualError("index and message records disagree")
+    return times, np.ascontiguousarray(rec[:, 8 + h :]).ravel(), np.full(k, d, dtype=np.int64)
+
+
+def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) -> tuple[IntArray, U8Array,
+                                                                                             IntArray]:
+    """Records of different lengths (e.g. frame ids of different lengths): parsed one by one."""
+    buf = chunk.tobytes()
+    pieces: list[bytes] = []
+    lengths = np.empty(offs.shape[0], dtype=np.int64)
+    for i, o in enumerate(offs.tolist()):
+        (hlen,) = struct.unpack_from("<I", buf, o)
+        header = _fields(buf[o + 4 : o + 4 + hlen])
+        (dlen,) = struct.unpack_from("<I", buf, o + 4 + hlen)
+        start = o + 8 + hlen
+        if start + dlen > len(buf):
+            raise _UnusualError("message data outside its chunk")
+        _op(header, _OP_MSG)
+        sec, nsec = struct.unpack("<II", header["time"])
+        if _u32(header["conn"], "conn") != cid or sec * 1_000_000_000 + nsec != int(times[i]):
+            raise _UnusualError("index and message records disagree")
+        pieces.append(buf[start : start + dlen])
+        lengths[i] = dlen
+    return times, np.frombuffer(b"".join(pieces), dtype=np.uint8), lengths
+
+
+def _index_records(f: _File, pos: int, count: int) -> tuple[dict[int, npt.NDArray[np.void]], int]:
+    out: dict[int, npt.NDArray[np.void]] = {}
+    for _ in range(count):
+        header, start, dlen, pos = f.record(pos)
+        _op(header, _OP_INDEX)
+        if _u32(header.get("ver", b""), "ver") != 1:
+            raise _UnusualError("index data version")
+        n = _u32(header["count"], "count")
+        if dlen != 12 * n:
+            raise _UnusualError("index data length")
+        cid = _u32(header["conn"], "conn")
+        if cid in out:
+            raise _UnusualError("two index records for one connection in a chunk")
+        out[cid] = np.frombuffer(f.read(start, dlen), dtype=_INDEX_DTYPE)
+    return out, pos
+
+
+def read_ros1_fast(path: Path, topics: Iterable[str]) -> Ros1Index | None:
+    """Read the wanted topics of an indexed, unencrypted ROS1 bag; None when anything is unusual."""
+    try:
+        return _read(path, set(topics))
+    except (_UnusualError, KeyError, UnicodeDecodeError, struct.error, ValueError, OSError):
+        return None
+
+
+def _read(path: Path, wanted: set[str]) -> Ros1Index | None:
+    with path.open("rb") as fh:
+        return _read_file(_File(fh.fileno()), wanted)
+
+
+def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
+    if f.size < len(_MAGIC) + 8 or f.read(0, len(_MAGIC)) != _MAGIC:
+        return None
+    header, _start, _dlen, _nxt = f.record(len(_MAGIC))
+    _op(header, _OP_BAG)
+    if header.get("encryptor"):
+        return None
+    index_pos = _u64(header["index_pos"], "index_pos")
+    conn_count = _u32(header["conn_count"], "conn_count")
+    chunk_count = _u32(header["chunk_count"], "chunk_count")
+    if index_pos == 0 or chunk_count == 0 or index_pos >= f.size:
+        return None
+    conns, pos = _connections(f, index_pos, conn_count)
+    chunks = _chunk_infos(f, pos, chunk_count)
+    if len({c.cid for c in conns}) != len(conns):
+        return None
+    available = {c.topic: c.msgtype for c in conns}
+    selected = {c.cid: c for c in conns if c.topic in wanted}
+    parts: dict[str, _Parts] = {}
+    for c in selected.values():
+        parts.setdefault(c.topic, _Parts([], [], []))
+    for chunk_pos, n_conns, ids in chunks:
+        # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
+        chunk, after = _chunk_data(f, chunk_pos, read=not ids.isdisjoint(selected))
+        indexes, _ = _index_records(f, after, n_conns)
+        if set(indexes) != ids:
+            raise _UnusualError("chunk info and index records disagree")
+        for cid, index in indexes.items():
+            if cid not in selected or chunk is None:
+                continue
+            offsets = index["offset"].astype(np.int64)
+            idx = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
+            times, packed, lens = _messages_in_chunk(chunk, cid, idx)
+            p = parts[selected[cid].topic]
+            p.times.append(times)
+            p.blocks.append(packed)
+            p.lengths.append(lens)
+    out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
+    for topic, p in parts.items():
+        tconns = [c for c in selected.values() if c.topic == topic]
+        out[topic] = (tconns[0].msgtype, all(c.has_definition for c in tconns), *_ordered(p))
+    return Ros1Index(out, available)
+
+
+def _ordered(p: _Parts) -> tuple[IntArray, PayloadBuffer]:
+    """Concatenate the chunks' pieces (already in chunk position, offset order) and sort them stably by time: the
+    order in which rosbags yields them (by time, then chunk position, then offset)."""
+    if not p.times:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, PayloadBuffer(np.zeros(0, dtype=np.uint8), empty, empty)
+    times = np.concatenate(p.times)
+    lengths = np.concatenate(p.lengths)
+    data = np.concatenate(p.blocks) if len(p.blocks) > 1 else p.blocks[0]
+    offsets = np.zeros(lengths.shape[0], dtype=np.int64)
+    if lengths.shape[0] > 1:
+        np.cumsum(lengths[:-1], out=offsets[1:])
+    if not np.any(np.diff(times) < 0):
+        return times, PayloadBuffer(data, offsets, lengths)
+    perm = np.argsort(times, kind="stable")
+    times = times[perm]
+    lengths_p = lengths[perm]
+    d = int(lengths[0])
+    if np.all(lengths == d):
+        packed = data.reshape(-1, d)[perm].ravel()
+    else:
+        packed = np.frombuffer(b"".join(data[int(offsets[i]) : int(offsets[i] + lengths[i])].tobytes()
+                                        for i in perm), dtype=np.uint8)
+    new_offsets = np.zeros(lengths_p.shape[0], dtype=np.int64)
+    if lengths_p.shape[0] > 1:
+        np.cumsum(lengths_p[:-1], out=new_offsets[1:])
+    return times, PayloadBuffer(packed, new_offsets, lengths_p)
