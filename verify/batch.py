@@ -403,13 +403,43 @@ def _write_item(job: _WriteJob) -> bytes:
     return ET.tostring(suite)
 
 
+def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool) -> str:
+    """The summary as a self-contained page linking to each log's report (every log/scenario string escaped)."""
+    import html
+
+    def e(value: Any) -> str:
+        text = "" if value is None else (f"{value:.6g}" if isinstance(value, float) else str(value))
+        return html.escape(text, quote=True)
+
+    colours = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
+    target = "report.html" if reports else "certificate.json"
+    body = []
+    for row in rows:
+        name = e(row["log"])
+        link = (f'<a href="{e(row["folder"])}/{target}">{name}</a>' if row["exit_code"] in (0, 1, 2) else name)
+        colour = colours.get(row["verdict"], "#555")
+        body.append(f'<tr><td>{link}</td><td style="color:{colour}">{e(row["verdict"])}</td>'
+                    f"<td>{e(row['exit_code'])}</td><td>{e(row['failed_checks'])}</td>"
+                    f"<td>{e(row['inconclusive_checks'])}</td><td>{e(row['worst_margin'])}</td>"
+                    f"<td>{e(row['first_violation_s'])}</td><td>{e(row['error'])}</td></tr>")
+    counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Batch certification</title>"
+            "<style>body{font-family:system-ui,sans-serif;margin:2em}table{border-collapse:collapse}"
+            "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}</style></head><body>"
+            f"<h1>Batch certification: exit code {batch.exit_code}</h1>"
+            f"<p>Scenario {e(batch.scenario.name)}; {len(batch.items)} log(s): {e(counts)}.</p>"
+            "<table><tr><th>log</th><th>verdict</th><th>exit</th><th>failed checks</th><th>inconclusive checks</th>"
+            "<th>worst margin</th><th>first violation [s]</th><th>error</th></tr>"
+            + "".join(body) + "</table></body></html>\n")
+
+
 def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True, workers: int | None = None,
                 dask: str | None = None, progress: bool | None = None) -> dict[str, Path]:
     """Write ``<out_dir>/<log>/`` (certificate.json + reports, or error.txt) and the summaries.
 
     The per-log folders are written in parallel like ``certify_many`` (figures take about 2 s per log).
-    Returns the top-level files: ``summary.md``, ``summary.csv``, ``junit.xml`` (one suite per log; an unusable
-    log is a suite with one errored test case).
+    Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
+    ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
     import xml.etree.ElementTree as ET
 
@@ -443,5 +473,6 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
                      f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin'])} | "
                      f"{_md_cell(row['first_violation_s'])} | {_md_cell(row['error'])} |")
     (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return {"summary.md": out / "summary.md", "summary.csv": out / "summary.csv",
+    (out / "summary.html").write_text(_summary_html(batch, rows, reports), encoding="utf-8")
+    return {"summary.md": out / "summary.md", "summary.html": out / "summary.html", "summary.csv": out / "summary.csv",
             "junit.xml": write_junit(suites, out / "junit.xml")}

@@ -81,7 +81,9 @@ def test_mixed_batch_inline(tmp_path: Path, scenario: Scenario, make_result: Cal
 
     out = tmp_path / "out"
     files = write_batch(result, out, workers=1)  # in this process: the monkeypatched writer applies
-    assert set(files) == {"summary.md", "summary.csv", "junit.xml"}
+    assert set(files) == {"summary.md", "summary.html", "summary.csv", "junit.xml"}
+    page = files["summary.html"].read_text()
+    assert '<a href="pass_1.mcap/report.html">' in page and "nope.bag" in page and "<script" not in page
     assert (out / "pass_1.mcap" / "certificate.json").is_file()
     assert (out / "pass_1.mcap" / "report.html").is_file()
     assert "boom" in (out / "crash.mcap" / "error.txt").read_text()
@@ -110,3 +112,19 @@ def test_same_file_names_get_distinct_folders(tmp_path: Path, scenario: Scenario
 def test_malformed_spec_stops_the_whole_batch(tmp_path: Path, scenario: Scenario) -> None:
     with pytest.raises(ValueError, match="column"):
         certify_many([tmp_path], scenario, spec="F[1,2 a")
+
+
+def test_log_names_are_escaped_in_summaries(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any],
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(batch_mod, "_certify_function", lambda: _fake_certifier(make_result))
+    monkeypatch.setattr(batch_mod, "_write_certificate",
+                        lambda result, out: (out / "certificate.json").write_text(json.dumps(result.certificate)))
+    evil = tmp_path / 'pass_<script>alert("x")<|>.mcap'
+    evil.write_bytes(b"")
+    batch = certify_many([evil], scenario, workers=1, progress=False)
+    assert batch.items[0].name == "pass__script_alert_x_.mcap"  # a safe folder name
+    files = write_batch(batch, tmp_path / "out", reports=False, workers=1)
+    assert "<script>" not in files["summary.html"].read_text()
+    assert "&lt;script&gt;" in files["summary.html"].read_text()
+    md = files["summary.md"].read_text()
+    assert "<script>" not in md and "\\|" in md  # the pipe cannot break the table
