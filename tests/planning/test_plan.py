@@ -1,16 +1,23 @@
-"""Plans for the built-in scenario, checked by the certifier's independent ``check_timed_run``."""
+"""Plans for the built-in scenario, checked by the certifier's independent ``check_timed_run``.
+
+Silent mode (the default) must give a run of arrivals only, inside both windows of the paper's formula with a
+margin; observed mode keeps each dwell as a position.
+"""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
+import networkx as nx
 import pytest
 
-from tubempc.planning import plan_from_wts
+from tubempc.planning import Plan, plan_from_wts
 from tubempc.planning.synthetic import straight_line_oracle
-from tubempc.planning.wts import build_wts
+from tubempc.planning.wts import WEIGHT, build_wts
 from tubempc.scenario import builtin_scenario
+
+# the paper's formula: F[30,50] mission_2 & F[80,110] mission_1 (plus G !obstacle)
+WINDOW_2, WINDOW_1 = (30.0, 50.0), (80.0, 110.0)
 
 
 def certify(spec: str, run: list[tuple[str, float]], labels: dict[str, tuple[str, ...]]) -> str:
@@ -18,35 +25,90 @@ def certify(spec: str, run: list[tuple[str, float]], labels: dict[str, tuple[str
     return str(check_timed_run(spec, run, {k: list(v) for k, v in labels.items()}).verdict)
 
 
-def test_builtin_plan_satisfies_the_paper_formula(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def synthetic_wts(tmp_path_factory: pytest.TempPathFactory) -> nx.DiGraph:
     s = builtin_scenario()
-    wts = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
-    p = plan_from_wts(wts, s.formula, initial=s.initial_region)
+    return build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path_factory.mktemp("wts"), workers=1)
+
+
+def check_silent_builtin(p: Plan, wts: nx.DiGraph) -> None:
+    """The silent plan of the paper's formula: arrivals only, each window met by an arrival with >= 10 s margin."""
+    s = builtin_scenario()
+    assert p.dwell == "silent"
     assert p.run[0] == (s.initial_region, 0.0)
+    assert set(p.kinds) <= {"start", "move"}  # no dwell position: what Definition 3 reconstructs from a log
     assert certify(s.spec, list(p.run), s.labels()) == "pass"
-    # re-timing centres the witnesses: F[30,50] at 40 and F[80,110] at 90 leave 10 s on every side
-    assert p.margin_s == pytest.approx(10.0, abs=1e-6)  # LP optimum, rounded to the millisecond
-    assert p.targets and p.targets[-1].region == "R1"
+    # F[30,50] mission_2 must be met by an arrival at R3 (mission_2), F[80,110] mission_1 by one at R1; 10 s is the
+    # LP optimum of the narrower window (half its width), rounded to the millisecond
+    assert p.margin_s == pytest.approx(10.0, abs=1e-3)
+    in_2 = [t for r, t in p.run if "mission_2" in p.labels[r] and WINDOW_2[0] <= t <= WINDOW_2[1]]
+    in_1 = [t for r, t in p.run if "mission_1" in p.labels[r] and WINDOW_1[0] <= t <= WINDOW_1[1]]
+    assert in_2 and in_1
+    assert min(abs(t - 40.0) for t in in_2) <= 1e-3  # centred: 10 s from both ends
+    assert min(abs(t - 95.0) for t in in_1) <= 1e-3  # centred by the second LP stage: 15 s from both ends
+    # targets: one per arrival; every departure is the planned arrival minus the WTS weight of the move
+    arrivals = list(p.run[1:])
+    assert [(t.region, t.arrival_s) for t in p.targets if t.arrival_s > 0] == arrivals
+    prev_region, prev_depart = s.initial_region, 0.0
+    for t in p.targets:
+        if t.arrival_s == 0.0:  # a silent wait in the initial region before the first departure
+            assert t.region == s.initial_region and t.depart_after_s is not None
+            prev_depart = t.depart_after_s
+            continue
+        weight = float(wts.edges[prev_region, t.region][WEIGHT])
+        assert t.arrival_s == pytest.approx(prev_depart + weight, abs=1e-6)  # float sums of exact ms values
+        prev_region, prev_depart = t.region, (t.depart_after_s if t.depart_after_s is not None else t.arrival_s)
+
+
+def test_builtin_silent_plan_satisfies_the_paper_formula(synthetic_wts: nx.DiGraph) -> None:
+    s = builtin_scenario()
+    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region)
+    check_silent_builtin(p, synthetic_wts)
+    assert p.targets[0].region == s.initial_region  # R3 at 40 needs a wait in R1 before the first departure
+    assert p.targets[-1].depart_after_s is None  # the run ends: stay in the last region
     data = p.to_json()
     assert data["run"][0] == {"region": "R1", "time": 0.0, "kind": "start", "labels": ["mission_1"]}
+    assert data["dwell"] == "silent"
     json.dumps(data)
 
 
-def test_targets_follow_the_run(tmp_path: Path) -> None:
+def test_controller_targets_hold_until_departure(synthetic_wts: nx.DiGraph) -> None:
+    pytest.importorskip("tubempc.control.closed_loop")
     s = builtin_scenario()
-    wts = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
-    p = plan_from_wts(wts, s.formula, initial=s.initial_region)
+    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region)
+    targets = p.controller_targets()
+    assert [(t.region, t.depart_after_s) for t in targets] == [(t.region, t.depart_after_s) for t in p.targets]
+
+
+def test_builtin_observed_plan_keeps_dwell_positions(synthetic_wts: nx.DiGraph) -> None:
+    s = builtin_scenario()
+    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, dwell="observed")
+    assert p.dwell == "observed" and "dwell" in p.kinds
+    assert certify(s.spec, list(p.run), s.labels()) == "pass"
+    assert p.margin_s == pytest.approx(10.0, abs=1e-6)  # LP optimum, rounded to the millisecond
     arrivals = {(r, t) for (r, t), k in zip(p.run, p.kinds, strict=True) if k == "move"}
     assert {(t.region, t.arrival_s) for t in p.targets} <= arrivals
     for t in p.targets:
         assert t.depart_after_s is None or t.depart_after_s >= t.arrival_s
+    # Definition 3 sees only the arrivals: the observed plan's entries alone miss both windows, the reason why
+    # silent is the default
+    entries = [(r, t) for (r, t), k in zip(p.run, p.kinds, strict=True) if k != "dwell"]
+    assert certify(s.spec, entries, s.labels()) != "pass"
+
+
+def test_bad_dwell_mode_is_refused(synthetic_wts: nx.DiGraph) -> None:
+    s = builtin_scenario()
+    with pytest.raises(ValueError, match="dwell="):
+        plan_from_wts(synthetic_wts, s.formula, dwell="sometimes")
 
 
 @pytest.mark.slow
-def test_builtin_plan_with_the_real_controller(tmp_path: Path) -> None:
+def test_builtin_silent_plan_with_the_real_controller() -> None:
     pytest.importorskip("tubempc.control.algorithm1")
     s = builtin_scenario()
-    wts = build_wts(s, cache_path=tmp_path)
+    wts = build_wts(s, progress=False)  # cached under $TUBEMPC_CACHE or ~/.cache/tubempc (about 13 s cold)
     p = plan_from_wts(wts, s.formula, initial=s.initial_region)
-    assert certify(s.spec, list(p.run), s.labels()) == "pass"
-    assert p.margin_s > 0
+    check_silent_builtin(p, wts)
+    observed = plan_from_wts(wts, s.formula, initial=s.initial_region, dwell="observed")
+    assert certify(s.spec, list(observed.run), s.labels()) == "pass"
+    assert observed.margin_s > 0

@@ -45,3 +45,19 @@ def test_no_run_exits_1_naming_the_obligation(capsys: pytest.CaptureFixture[str]
 
 def test_bad_spec_exits_3(capsys: pytest.CaptureFixture[str]) -> None:
     assert run(["plan", "--spec", "F[3,1] p", "--workers", "1"]) == 3
+
+
+def test_dwell_modes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    silent, observed = tmp_path / "silent.json", tmp_path / "observed.json"
+    assert run(["plan", "--json", str(silent), "--workers", "1"]) == 0
+    assert run(["plan", "--dwell", "observed", "--json", str(observed), "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "waits: silent" in out and "waits: observed" in out
+    s, o = json.loads(silent.read_text()), json.loads(observed.read_text())
+    assert s["dwell"] == "silent" and o["dwell"] == "observed"
+    assert {e["kind"] for e in s["run"]} == {"start", "move"}  # arrivals only
+    assert "dwell" in {e["kind"] for e in o["run"]}
+    # the silent run's R3 arrival lies inside F[30,50]; its departure from R1 is a target for the initial region
+    assert any(e["region"] == "R3" and 30 <= e["time"] <= 50 for e in s["run"])
+    assert s["targets"][0]["region"] == "R1" and s["targets"][0]["depart_after_s"] > 0
+    assert run(["plan", "--dwell", "sometimes", "--workers", "1"]) != 0

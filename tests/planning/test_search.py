@@ -16,9 +16,9 @@ WEIGHTS = {("A", "B"): 2, ("B", "A"): 2, ("B", "C"): 3, ("C", "B"): 3, ("A", "C"
 WTS = make_wts(LABELS, WEIGHTS, initial="A")
 
 
-def plan(text: str, *, wait: bool = True):  # type: ignore[no-untyped-def]
+def plan(text: str, *, wait: bool = True, dwell: str = "silent"):  # type: ignore[no-untyped-def]
     f = parse(text)
-    found = find_run(WTS, f, wait=wait)
+    found = find_run(WTS, f, wait=wait, dwell=dwell)
     assert holds(f, found.run, LABELS), found.run  # the independent reference semantics agrees
     return found
 
@@ -32,8 +32,15 @@ def test_eventually_is_time_optimal() -> None:
     assert first_time(found, "C") == 4  # direct A->C (4 s) beats A->B->C (5 s)
 
 
-def test_eventually_lower_bound_uses_a_wait() -> None:
+def test_eventually_lower_bound_uses_a_silent_wait_before_the_first_departure() -> None:
     found = plan("F[7,8] r")
+    # wait 3 s in A (no position), then A->C (4 s) arrives at 7; the run ends there (stay in C)
+    assert found.run.regions == ("A", "C") and found.run.times == (0, 7) and found.run.loop_start is None
+    assert found.kinds == ("start", "move") and found.waits_s == (0, 3)
+
+
+def test_eventually_lower_bound_uses_an_observed_dwell() -> None:
+    found = plan("F[7,8] r", dwell="observed")
     assert any(k == "dwell" for k in found.kinds)
     times = [t for r, t in zip(found.run.regions, found.run.times, strict=True) if r == "C" and 7 <= t <= 8]
     assert times
@@ -58,9 +65,18 @@ def test_closed_and_open_endpoints_without_wait(text: str, ok: bool) -> None:
 
 
 def test_open_lower_endpoint_with_wait_lands_strictly_inside() -> None:
-    found = plan("F(4,5) r")
+    found = plan("F(4,5) r", dwell="observed")
     t = next(t for r, t in zip(found.run.regions, found.run.times, strict=True) if r == "C" and 4 < t < 5)
     assert 4 < t < 5
+    found = plan("F(4,5) r")  # silent: the arrival itself lands one tick past 4
+    assert found.run.regions[-1] == "C" and found.run.times[-1] == Fraction(9, 2)
+
+
+def test_silent_wait_lands_past_the_end_of_an_always_window() -> None:
+    found = plan("G[0,6] !q & F[0,10] q")
+    # B is entered only after 6: a silent wait of 4.5 s in A, then A->B (2 s) lands at 6.5 (one tick past 6)
+    assert found.run.regions == ("A", "B") and found.run.times == (0, Fraction(13, 2))
+    assert found.kinds == ("start", "move")
 
 
 def test_always_forbids_a_region_inside_its_window() -> None:
@@ -82,8 +98,12 @@ def test_next() -> None:
     assert found.run.regions[1] == "B" and found.run.times[1] == 2
     with pytest.raises(NoAcceptingRunError):
         find_run(WTS, parse("X[0,1] q"), wait=True)
-    found = plan("X[0,1] p")  # only a dwell in A can be the next position within 1 s
+    found = plan("X[0,1] p", dwell="observed")  # only a dwell in A can be the next position within 1 s
     assert found.kinds[1] == "dwell"
+    with pytest.raises(NoAcceptingRunError):  # a silent wait is no position: no move reaches p within 1 s
+        find_run(WTS, parse("X[0,1] p"), dwell="silent")
+    found = plan("X[6,7] r")  # silent: the next position is the arrival in C after a 2 s wait in A
+    assert found.run.regions[1] == "C" and found.run.times[1] == 6
 
 
 def test_nested_response_with_lasso() -> None:
@@ -121,8 +141,19 @@ def test_wait_and_no_wait_differ() -> None:
     # without waiting A is re-entered at 4, 8, 9, ... (A->B->A, twice that, A->B->C->A): never in [5,6]
     with pytest.raises(NoAcceptingRunError):
         find_run(WTS, f, wait=False)
-    found = plan("F[5,6] p")
+    found = plan("F[5,6] p", dwell="observed")
     assert any(r == "A" and 5 <= t <= 6 for r, t in zip(found.run.regions, found.run.times, strict=True))
+    # silent: A is only observed again by re-entering it (A->B->A with a 1 s wait)
+    found = plan("F[5,6] p")
+    assert found.run.regions == ("A", "B", "A") and found.run.times[-1] == 5
+    assert sum(found.waits_s) == 1
+
+
+def test_silent_stay_needs_only_universal_obligations() -> None:
+    found = plan("G !q")
+    assert found.run.regions == ("A",) and found.run.loop_start is None  # stay in A forever
+    found = plan("G F p & G F r")  # infinitely many arrivals: a lasso of moves
+    assert found.run.loop_start is not None and set(found.kinds) <= {"start", "move"}
 
 
 def test_export_dot() -> None:

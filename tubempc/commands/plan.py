@@ -1,5 +1,8 @@
 """The ``tubempc plan`` subcommand: scenario (+ formula) -> WTS by Algorithm 1 -> timed run table (and JSON).
 
+``--dwell silent`` (default): waits add no position, the run lists the arrivals a log will show and the targets carry
+the planned departure times; ``--dwell observed``: each dwell is a position; ``--no-wait``: no waiting at all.
+
 Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input;
 4 the controller (Algorithm 1) is not available.
 """
@@ -20,6 +23,9 @@ __all__ = ["plan"]
               help="A built-in scenario name or a scenario YAML file.")
 @click.option("--spec", "spec_text", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--no-wait", is_flag=True, help="Strict WTS of the paper: no dwelling in a region.")
+@click.option("--dwell", type=click.Choice(["silent", "observed"]), default="silent", show_default=True,
+              help="silent: a wait in a region adds no position (the move after it arrives later; what a log "
+                   "shows); observed: each dwell is a position of the planned run.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the plan as JSON to this file.")
 @click.option("--no-cache", is_flag=True, help="Rebuild the abstraction even when it is cached.")
@@ -27,8 +33,8 @@ __all__ = ["plan"]
 @click.option("--dask", "dask_address", default=None, help="Dask scheduler address for the abstraction.")
 @click.option("--dot", "dot_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the explored product graph as Graphviz DOT.")
-def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, json_out: str | None, no_cache: bool,
-         workers: int | None, dask_address: str | None, dot_out: str | None) -> None:
+def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str, json_out: str | None,
+         no_cache: bool, workers: int | None, dask_address: str | None, dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
     from tubempc.mitl import parse
     from tubempc.planning.plan import plan_from_wts
@@ -40,20 +46,27 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, json_out: 
         scenario_name)
     formula = parse(spec_text) if spec_text is not None else scenario.formula
     wts = build_wts(scenario, use_cache=not no_cache, workers=workers, dask=dask_address)
-    result = plan_from_wts(wts, formula, wait=not no_wait, initial=scenario.initial_region)
+    result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
     click.echo(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
                f"transitions, weights from {wts.graph.get('oracle')}); formula {formula}")
     click.echo(f"{'region':<8} {'time [s]':>10}  {'kind':<6} labels")
     for k, ((region, t), kind) in enumerate(zip(result.run, result.kinds, strict=True)):
-        mark = "  <- repeats from here" if k == result.loop_start and k < len(result.run) else ""
+        mark = "  <- repeats from here" if k == result.loop_start and result.period_s > 0 else ""
         labels = ",".join(result.labels.get(region, ())) or "-"
         click.echo(f"{region:<8} {t:>10.3f}  {kind:<6} {labels}{mark}")
-    click.echo(f"repeating part: from position {result.loop_start}, period {result.period_s:.3f} s")
+    if result.period_s > 0:
+        click.echo(f"repeating part: from position {result.loop_start}, period {result.period_s:.3f} s")
+    else:
+        click.echo(f"the run ends in {result.run[-1][0]}: the robot stays there (no further position)")
+    click.echo(f"waits: {result.dwell}; controller targets (region, planned arrival, depart after):")
+    for tg in result.targets:
+        depart = "-" if tg.depart_after_s is None else f"{tg.depart_after_s:.3f}"
+        click.echo(f"  {tg.region:<8} {tg.arrival_s:>10.3f} {depart:>10}")
     margin = "inf (no timing constraint)" if math.isinf(result.margin_s) else f"{result.margin_s:.3f} s"
     click.echo(f"margin to interval endpoints: {margin}; search {result.search_s * 1000:.1f} ms, "
                f"{result.product_states} product states")
     if json_out is not None:
         Path(json_out).write_text(json.dumps(result.to_json(), indent=2) + "\n")
     if dot_out is not None:
-        found = find_run(wts, formula, wait=not no_wait, initial=scenario.initial_region)
+        found = find_run(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
         Path(dot_out).write_text(export_dot(found.explored()))

@@ -63,6 +63,7 @@ KIND_NAMES = ("true", "false", "atom", "!atom", "and", "or", "F", "G", "U", "R",
 _TEMPORAL = frozenset({EV, ALW, UNT, REL, NXT, WNXT})
 _EXISTENTIAL = frozenset({EV, UNT})  # in-window copies: the older implies the younger
 _UNIVERSAL = frozenset({ALW, REL})  # in-window copies: the younger implies the older
+_FINAL_OK = frozenset({ALW, REL, WNXT})  # pending obligations that a run ending here meets
 
 Obligation = tuple[int, int]  # (node id, age in ticks)
 State = tuple[Obligation, ...]  # sorted, canonical; () = nothing pending (accepting, absorbing)
@@ -147,6 +148,8 @@ class TimedAutomaton:
         self._reach = [n.lo if n.lo_closed else n.lo + 1 for n in nodes]  # first age at or past the lower end
         self._caps = [n.cap for n in nodes]
         self._trigger_memo: dict[tuple[int, int], bool] = {}
+        self._age_memo: dict[tuple[State, int], State] = {}
+        self._silent_memo: dict[tuple[State, int, bool], tuple[int, ...]] = {}
         self.atoms = frozenset(n.atom for n in nodes if n.kind in (ATOM, NATOM))
 
     # ---- labels -------------------------------------------------------------------------------------------
@@ -372,6 +375,58 @@ class TimedAutomaton:
                     if d >= 1:
                         out.add(d)
         return out
+
+    # ---- silent waits ---------------------------------------------------------------------------------------
+    def final(self, state: State) -> bool:
+        """Whether ``state`` is met by a run that ends here (no further position): only ``G``, ``R`` and weak
+        ``X`` obligations are pending (a silent stay forever in the last region)."""
+        nodes = self.nodes
+        return all(nodes[nid].kind in _FINAL_OK for nid, _ in state)
+
+    def age(self, state: State, delta: int) -> State:
+        """``state`` after ``delta`` ticks without any position (a silent wait): every age grows, capped."""
+        key = (state, delta)
+        out = self._age_memo.get(key)
+        if out is None:
+            caps = self._caps
+            out = self._canon((nid, min(age + delta, caps[nid])) for nid, age in state)
+            self._age_memo[key] = out
+        return out
+
+    def silent_goals(self, state: State, label_class: int, *, direct: bool = True) -> tuple[int, ...]:
+        """Elapsed times (ticks from now, sorted) at which an arrival into ``label_class`` lands where a pending
+        obligation changes status there: on the lower end of an ``F``/``U`` window (or one tick past an open one)
+        whose child can hold in that class, one tick past the end of a ``G``/``R`` window whose child can fail
+        there, and (``direct``: the arrival is the next position) on either end of a pending next's interval.
+
+        A silent wait before a move of ``w`` ticks is event-driven when ``w + wait`` is one of these goals
+        (``silent_delays``); with ``direct=False`` the arrival is the last of several moves."""
+        key = (state, label_class, direct)
+        out = self._silent_memo.get(key)
+        if out is not None:
+            return out
+        found: set[int] = set()
+        for nid, age in state:
+            n = self.nodes[nid]
+            k = n.kind
+            if k in (NXT, WNXT):
+                if direct:
+                    found.add(self._reach[nid] - age)
+                    if n.hi is not None:
+                        found.add(n.hi + (1 if n.hi_closed else 0) - age)
+            elif k in _EXISTENTIAL:
+                if n.before(age) and self._triggers(nid, label_class):
+                    found.add(self._reach[nid] - age)
+            elif k in _UNIVERSAL and n.hi is not None and self._triggers(nid, label_class):
+                found.add(n.hi + (1 if n.hi_closed else 0) - age)
+        out = tuple(sorted(g for g in found if g > 0))
+        self._silent_memo[key] = out
+        return out
+
+    def silent_delays(self, state: State, weight: int, label_class: int, *, direct: bool = True) -> list[int]:
+        """Silent waits (ticks, >= 1, sorted) before a move (or, ``direct=False``, a path of moves) of ``weight``
+        ticks into ``label_class`` after which the arrival lands on a goal of ``silent_goals``."""
+        return [g - weight for g in self.silent_goals(state, label_class, direct=direct) if g > weight]
 
     def _triggers(self, node_id: int, cls: int) -> bool:
         key = (node_id, cls)

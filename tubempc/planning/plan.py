@@ -1,9 +1,13 @@
 """Plan: WTS + formula -> a re-timed accepting timed run and the controller targets that execute it.
 
 input: a WTS (``build_wts``) or a scenario to build it from, and a formula (the scenario's by default) -> output: a
-frozen ``Plan``: the timed run ``[(region, time_s)]`` (one entry per arrival or dwell position, starting with the
-initial region at 0; prefix plus one copy of the repeating suffix), the margin of its times, and the targets
-``(region, planned arrival, depart after)`` for the closed loop.
+frozen ``Plan``: the timed run ``[(region, time_s)]`` (starting with the initial region at 0; prefix plus one copy of
+the repeating suffix), the margin of its times, and the targets ``(region, planned arrival, depart after)`` for the
+closed loop.
+
+Dwell modes: ``silent`` (default) — a wait adds no position, the run lists only arrivals (what Definition 3
+reconstructs from a log) and each wait is a planned departure time of a target (a wait in the initial region before
+the first departure is a first target for the initial region); ``observed`` — each dwell is a position of the run.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import networkx as nx
 
 from tubempc.mitl import Formula
 from tubempc.planning.retime import retime
-from tubempc.planning.search import DEFAULT_MAX_STATES, SearchResult, find_run
+from tubempc.planning.search import DEFAULT_MAX_STATES, DWELL_MODES, SILENT, SearchResult, find_run
 from tubempc.planning.semantics import LassoRun
 from tubempc.planning.wts import LABELS, ORACLE, TransitionOracle, build_wts
 from tubempc.scenario import Scenario
@@ -41,7 +45,8 @@ class PlannedTarget:
 
 @dataclass(frozen=True, slots=True)
 class Plan:
-    """A planned mission. ``run[loop_start:]`` repeats forever, ``period_s`` after its first position."""
+    """A planned mission. ``run[loop_start:]`` repeats forever, ``period_s`` after its first position;
+    ``period_s == 0``: the run ends at its last position and the robot stays there (no further position)."""
 
     formula: str
     run: tuple[tuple[str, float], ...]
@@ -54,6 +59,7 @@ class Plan:
     exact_times: tuple[Fraction, ...]
     tick_s: Fraction
     wait: bool
+    dwell: str  # "silent", "observed" or "none" (no waiting)
     retimed: bool
     oracle: str
     search_s: float
@@ -82,6 +88,7 @@ class Plan:
             "targets": [{"region": t.region, "arrival_s": t.arrival_s, "depart_after_s": t.depart_after_s}
                         for t in self.targets],
             "wait": self.wait,
+            "dwell": self.dwell,
             "retimed": self.retimed,
             "tick_s": str(self.tick_s),
             "oracle": self.oracle,
@@ -109,12 +116,36 @@ def _targets(run: LassoRun, kinds: tuple[str, ...]) -> tuple[PlannedTarget, ...]
     return tuple(out)
 
 
+def _silent_targets(run: LassoRun, weights: list[Fraction]) -> tuple[PlannedTarget, ...]:
+    """One target per arrival; a silent wait before a departure is the previous target's ``depart_after_s`` (a
+    wait before the first departure: a first target for the initial region, held from time 0)."""
+    n = run.size
+    departs: list[float | None] = [None] * n  # planned departure from position k (None: leave on arrival)
+    for k in range(1, n):
+        if run.times[k] - run.times[k - 1] > weights[k]:
+            departs[k - 1] = float(run.times[k] - weights[k])
+    out: list[PlannedTarget] = []
+    if departs[0] is not None:
+        out.append(PlannedTarget(run.regions[0], 0.0, departs[0]))
+    out.extend(PlannedTarget(run.regions[k], float(run.times[k]), departs[k]) for k in range(1, n))
+    return tuple(out)
+
+
 def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
-                  max_states: int = DEFAULT_MAX_STATES) -> Plan:
-    """Search, re-time and map to targets (raises ``NoAcceptingRunError`` when no run exists)."""
-    found: SearchResult = find_run(wts, formula, wait=wait, initial=initial, max_states=max_states)
+                  max_states: int = DEFAULT_MAX_STATES, dwell: str = SILENT) -> Plan:
+    """Search, re-time and map to targets (raises ``NoAcceptingRunError`` when no run exists).
+
+    ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` or ``observed``."""
+    if dwell not in DWELL_MODES:
+        raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
+    found: SearchResult = find_run(wts, formula, wait=wait, initial=initial, max_states=max_states, dwell=dwell)
     labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
-    re = retime(found.run, found.kinds, formula, labels, min_dwell_s=found.tick_s)
+    silent = found.dwell == SILENT
+    # the WTS weight of the step into each position (silent mode: its duration without the wait)
+    weights = [Fraction(0)] + [found.run.times[k] - found.run.times[k - 1] - found.waits_s[k]
+                               for k in range(1, found.run.size)]
+    re = retime(found.run, found.kinds, formula, labels, min_dwell_s=found.tick_s,
+                waits_s=found.waits_s if silent else None)
     run = re.run
     loop = run.loop_start if run.loop_start is not None else run.size - 1
     period = run.period if run.period is not None else Fraction(0)
@@ -125,11 +156,12 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
         loop_start=loop,
         period_s=float(period),
         margin_s=re.margin_s,
-        targets=_targets(run, found.kinds),
+        targets=_silent_targets(run, weights) if silent else _targets(run, found.kinds),
         labels=labels,
         exact_times=run.times,
         tick_s=found.tick_s,
         wait=wait,
+        dwell=found.dwell,
         retimed=re.retimed,
         oracle=str(wts.graph.get(ORACLE, "?")),
         search_s=found.seconds,
@@ -137,11 +169,11 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
     )
 
 
-def plan_mission(scenario: Scenario, *, formula: Formula | None = None, wait: bool = True,
+def plan_mission(scenario: Scenario, *, formula: Formula | None = None, wait: bool = True, dwell: str = SILENT,
                  wts: nx.DiGraph | None = None, oracle: TransitionOracle | None = None, use_cache: bool = True,
                  workers: int | None = None, dask: Any = None, progress: bool | None = None) -> Plan:
     """Build (or reuse) the scenario's WTS and plan ``formula`` (default: the scenario's spec) on it."""
     graph = wts if wts is not None else build_wts(scenario, oracle=oracle, use_cache=use_cache, workers=workers,
                                                   dask=dask, progress=progress)
-    return plan_from_wts(graph, formula if formula is not None else scenario.formula, wait=wait,
+    return plan_from_wts(graph, formula if formula is not None else scenario.formula, wait=wait, dwell=dwell,
                          initial=scenario.initial_region)

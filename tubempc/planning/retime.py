@@ -1,17 +1,19 @@
-"""Re-timing: a found run skeleton -> the same regions with dwell durations that maximise the timing margin.
+"""Re-timing: a found run skeleton -> the same regions with wait durations that maximise the timing margin.
 
-input: the search's ``LassoRun`` with the kind of each position (``move`` durations are fixed WTS weights; prefix
-``dwell`` durations are free), the formula and the labels -> output: a ``Retimed`` run (times rounded to the
-millisecond, re-checked exactly) and its margin: the smallest distance, in seconds, between a time difference the
-verdict depends on and the interval endpoint it must stay on the right side of.
+input: the search's ``LassoRun`` with the kind of each position (``move`` durations are fixed WTS weights, plus a
+free silent wait before the departure in silent mode; observed ``dwell`` durations are free), the formula and the
+labels -> output: a ``Retimed`` run (times rounded to the millisecond, re-checked exactly) and its margin: the
+smallest distance, in seconds, between a time difference the verdict depends on and the interval endpoint it must
+stay on the right side of.
 
 Which differences matter is read off the exact truth table of the skeleton: for an existential operator
 (``F``, ``U``, ``!G``) that holds at an anchor, one witness (the one with the most slack) must stay inside its
 window; when it does not hold, every candidate must stay outside; ``X`` keeps the membership of its successor.
 The children are kept where these choices use them, recursively. Keeping those memberships keeps the truth of every
 sub-formula that the verdict uses, so the re-timed run satisfies the formula (and it is re-checked exactly).
-A linear program (cvxpy) maximises the smallest slack, then minimises the total dwell time at that margin.
-Dwells of the repeating part keep their durations (the suffix is periodic).
+Three linear programs (cvxpy): maximise the smallest slack (the margin); at that margin, maximise the sum of the
+slacks of the two-sided windows (each capped at its half width: witnesses move towards the window centres); at
+both optima, minimise the total duration. Durations of the repeating part stay fixed (the suffix is periodic).
 """
 
 from __future__ import annotations
@@ -135,8 +137,12 @@ def _keeps(formula: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]],
 
 
 def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mapping[str, Sequence[str]], *,
-           min_dwell_s: Fraction) -> Retimed:
-    """Maximise the margin over the prefix dwells of ``run`` (see the module docstring)."""
+           min_dwell_s: Fraction, waits_s: Sequence[Fraction] | None = None) -> Retimed:
+    """Maximise the margin over the free durations of the prefix of ``run`` (see the module docstring).
+
+    Observed dwells (``kinds[p] == "dwell"``) last at least ``min_dwell_s``. With ``waits_s`` (silent mode: the
+    wait before the move into each position), every prefix move is free: it lasts at least its WTS weight
+    (``times[p] - times[p - 1] - waits_s[p]``), the excess being the silent wait before its departure."""
     loop = run.loop_start if run.loop_start is not None else run.size - 1
     span = _max_constant(formula) + (run.period or 0) + 1
     horizon = 0
@@ -147,13 +153,19 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
         return Retimed(run, math.inf, False)
     originals = [run.time(k.j) - run.time(k.i) for k in keeps]
     margin0 = min(_slack(d, k, d) for d, k in zip(originals, keeps, strict=True))
-    dwells = [p for p in range(1, loop + 1) if kinds[p] == "dwell"]
-    if not dwells:
+    free: dict[int, Fraction] = {}  # position -> minimum duration of the step into it
+    for p in range(1, loop + 1):
+        if kinds[p] == "dwell":
+            free[p] = min_dwell_s
+        elif waits_s is not None and kinds[p] == "move":
+            free[p] = run.times[p] - run.times[p - 1] - waits_s[p]
+    if not free:
         return Retimed(run, margin0, False)
-    new = _solve(run, keeps, originals, dwells, loop=loop, min_dwell_s=min_dwell_s)
+    new = _solve(run, keeps, originals, free, loop=loop)
     if new is None:
         return Retimed(run, margin0, False)
-    durations = {p: max(min_dwell_s, round(Fraction(x) / _ROUND) * _ROUND) for p, x in zip(dwells, new, strict=True)}
+    durations = {p: max(lo, round(Fraction(x) / _ROUND) * _ROUND) for (p, lo), x in zip(free.items(), new,
+                                                                                          strict=True)}
     times = [Fraction(0)]
     for p in range(1, run.size):
         step = durations.get(p, run.times[p] - run.times[p - 1])
@@ -167,17 +179,21 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
     return Retimed(candidate, margin, True)
 
 
-def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], dwells: list[int], *, loop: int,
-           min_dwell_s: Fraction) -> list[float] | None:
+def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: Mapping[int, Fraction], *,
+           loop: int) -> list[float] | None:
     import cvxpy as cp
 
-    col = {p: c for c, p in enumerate(dwells)}
-    x0 = np.array([float(run.times[p] - run.times[p - 1]) for p in dwells])
+    positions = list(free)
+    col = {p: c for c, p in enumerate(positions)}
+    x0 = np.array([float(run.times[p] - run.times[p - 1]) for p in positions])
+    lower = np.array([float(free[p]) for p in positions])
     rows: list[np.ndarray] = []
     consts: list[float] = []
-    for keep, d0 in zip(keeps, originals, strict=True):
-        # d = d0 + sum over free dwells between i (exclusive) and j (inclusive, capped at the loop start) of (x - x0)
-        coeff = np.zeros(len(dwells))
+    owner: list[int] = []  # keep index of each row
+    half: list[float] = []  # per keep: half width of a two-sided window (0: one-sided)
+    for idx, (keep, d0) in enumerate(zip(keeps, originals, strict=True)):
+        # d = d0 + sum over free steps between i (exclusive) and j (inclusive, capped at the loop start) of (x - x0)
+        coeff = np.zeros(len(positions))
         for p in range(keep.i + 1, min(keep.j, loop) + 1):
             c = col.get(p)
             if c is not None:
@@ -193,24 +209,43 @@ def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], dwells:
             sides.append((-1.0, float(iv.lo)))
         elif iv.hi is not None:
             sides.append((1.0, -float(iv.hi)))
+        two_sided = keep.inside and iv.hi is not None and bool(coeff.any())
+        half.append(float(iv.hi - iv.lo) / 2 if two_sided and iv.hi is not None else 0.0)
         for sign, offset in sides:
             rows.append(sign * coeff)
             consts.append(sign * base + offset)
+            owner.append(idx)
     a = np.array(rows)
     b = np.array(consts)
-    x = cp.Variable(len(dwells))
+    x = cp.Variable(len(positions))
     m = cp.Variable()
-    base_cons = [x >= float(min_dwell_s), m <= _MARGIN_CAP_S]
+    base_cons = [x >= lower, m <= _MARGIN_CAP_S]
+    centred = [k for k, h in enumerate(half) if h > 0]
     try:
         p1 = cp.Problem(cp.Maximize(m), [*base_cons, a @ x + b >= m])
         p1.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
         if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None or float(m.value) <= 1e-6:
             return None
-        best = float(m.value)
-        total = cp.sum(x)  # type: ignore[attr-defined]
-        p2 = cp.Problem(cp.Minimize(total), [*base_cons, a @ x + b >= best * (1 - 1e-6) - 1e-9])
-        p2.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
-        if p2.status not in ("optimal", "optimal_inaccurate") or x.value is None:
+        best = float(m.value) * (1 - 1e-6) - 1e-9
+        cons = [*base_cons, a @ x + b >= best]
+        if centred:
+            # each two-sided window's own slack s_k (<= both sides, <= half width), summed: witnesses move to centres
+            s = cp.Variable(len(centred))
+            pick = {k: n for n, k in enumerate(centred)}
+            sel = np.zeros((len(rows), len(centred)))
+            for r, k in enumerate(owner):
+                if k in pick:
+                    sel[r, pick[k]] = 1.0
+            mask = sel.any(axis=1)
+            link = [a[mask] @ x + b[mask] >= sel[mask] @ s, s <= np.array([half[k] for k in centred])]
+            p2 = cp.Problem(cp.Maximize(cp.sum(s)), [*cons, *link])  # type: ignore[attr-defined]
+            p2.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
+            if p2.status in ("optimal", "optimal_inaccurate") and p2.value is not None:
+                total_s = float(p2.value)
+                cons = [*cons, *link, cp.sum(s) >= total_s * (1 - 1e-6) - 1e-9]  # type: ignore[attr-defined]
+        p3 = cp.Problem(cp.Minimize(cp.sum(x)), cons)  # type: ignore[attr-defined]
+        p3.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
+        if p3.status not in ("optimal", "optimal_inaccurate") or x.value is None:
             return None
         return [float(v) for v in x.value]
     except cp.error.SolverError:

@@ -39,10 +39,13 @@ from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, t
 from tubempc.planning.semantics import LassoRun
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
 
-__all__ = ["DEFAULT_MAX_STATES", "SearchLimitError", "SearchResult", "export_dot", "find_run"]
+__all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
+           "find_run"]
 
 DEFAULT_MAX_STATES = 2_000_000
-MOVE, DWELL = "move", "dwell"
+MOVE, DWELL, STAY = "move", "dwell", "stay"
+SILENT, OBSERVED = "silent", "observed"
+DWELL_MODES = (SILENT, OBSERVED)
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
 
@@ -58,10 +61,10 @@ class _Product:
         self.region: list[int] = []
         self.obl: list[State] = []
         self.best: list[tuple[int, int]] = []
-        self.parent: list[tuple[int, int, str] | None] = []
+        self.parent: list[tuple[int, int, str, int] | None] = []  # (state, delta, kind, silent wait)
         self.settled: list[bool] = []
         self.pruned: list[bool] = []
-        self.edges: list[list[tuple[int, int, str]]] = []
+        self.edges: list[list[tuple[int, int, str, int]]] = []  # (state, delta, kind, silent wait)
         self.classes: list[int] = []  # label class of each region index
 
     def get(self, region: int, obl: State) -> tuple[int, bool]:
@@ -83,7 +86,12 @@ class _Product:
 
 @dataclass(frozen=True, slots=True)
 class SearchResult:
-    """A lasso run in exact seconds; ``kinds[i]`` is ``start``, ``move`` or ``dwell``."""
+    """A lasso run in exact seconds; ``kinds[i]`` is ``start``, ``move`` or ``dwell``.
+
+    ``waits_s[i]`` is the silent wait (seconds) in the previous region before the move that arrives at position
+    ``i`` (0 for the start, dwells and moves without a wait); ``closing_wait_s`` that of the move from the last
+    position back to ``loop_start`` (0 for a finite run). ``dwell`` is ``silent``, ``observed`` or ``none``.
+    A finite run (``run.loop_start is None``) stays in its last region forever without a further position."""
 
     run: LassoRun
     kinds: tuple[str, ...]
@@ -91,6 +99,9 @@ class SearchResult:
     states: int
     expanded: int
     seconds: float
+    waits_s: tuple[Fraction, ...]
+    closing_wait_s: Fraction
+    dwell: str
     automaton: TimedAutomaton = field(compare=False, repr=False)
     product: _Product = field(compare=False, repr=False)
     region_names: tuple[str, ...] = field(compare=False, repr=False, default=())
@@ -105,8 +116,13 @@ def _intervals(formula: Formula) -> list[Interval]:
 
 
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
-             max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True) -> SearchResult:
-    """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring)."""
+             max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT) -> SearchResult:
+    """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring).
+
+    ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` (a wait adds no
+    position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run)."""
+    if dwell not in DWELL_MODES:
+        raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()
     init = initial if initial is not None else wts.graph.get(INITIAL)
     if init is None or init not in wts:
@@ -119,21 +135,26 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     consts = [c for iv in _intervals(formula) for c in (iv.lo, iv.hi) if c is not None]
     tick = tick_of([Fraction(w) for w in weights] + consts, refine=2 if wait else 1)
     aut = compile_formula(formula, tick)
-    result = _search(wts, aut, init, wait=wait, prune=wait, max_states=max_states)
+    silent = wait and dwell == SILENT
+    result = _search(wts, aut, init, wait=wait, silent=silent, prune=wait, max_states=max_states)
     if result is None and wait:
-        result = _search(wts, aut, init, wait=wait, prune=False, max_states=max_states)
+        result = _search(wts, aut, init, wait=wait, silent=silent, prune=False, max_states=max_states)
     if result is None:
         if diagnose:
-            raise _no_run_error(wts, formula, wait=wait, initial=init, max_states=max_states)
+            raise _no_run_error(wts, formula, wait=wait, dwell=dwell, initial=init, max_states=max_states)
         raise NoAcceptingRunError(f"no timed run of the WTS satisfies {formula}", obligation=str(formula))
-    run, kinds, prod, expanded = result
+    run, kinds, waits, closing, prod, expanded = result
     return SearchResult(run=run, kinds=kinds, tick_s=tick, states=len(prod.region), expanded=expanded,
-                        seconds=time.perf_counter() - start, automaton=aut, product=prod,
-                        region_names=tuple(sorted(wts.nodes)))
+                        seconds=time.perf_counter() - start, waits_s=tuple(w * tick for w in waits),
+                        closing_wait_s=closing * tick, dwell=(dwell if wait else "none"), automaton=aut,
+                        product=prod, region_names=tuple(sorted(wts.nodes)))
 
 
-def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prune: bool,
-            max_states: int) -> tuple[LassoRun, tuple[str, ...], _Product, int] | None:
+_Found = tuple[LassoRun, tuple[str, ...], tuple[int, ...], int, _Product, int]
+
+
+def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, silent: bool, prune: bool,
+            max_states: int) -> _Found | None:
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
     cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
@@ -164,28 +185,47 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prun
             break
         prod.settled[sid] = True
         r, obl = prod.region[sid], prod.obl[sid]
-        if prune and _dominated(aut, prod, buckets, sid=sid, t=t, cls=cls[r]):
+        if prune and _dominated(aut, prod, buckets, sid=sid, t=t, cls=cls[r], silent=silent):
             prod.pruned[sid] = True
             continue
         expanded += 1
-        succs: list[tuple[int, State, int, int, str]] = []
+        succs: list[tuple[int, State, int, int, str, int]] = []  # (region, state, delta, travel, kind, wait)
         for j, w in adj[r]:
             for o2 in aut.step(obl, w, cls[j]):
-                succs.append((j, o2, w, w, MOVE))
-        if wait:
+                succs.append((j, o2, w, w, MOVE, 0))
+            if silent:
+                # event-driven silent waits: the arrival (or the one after it) lands on a goal of the state
+                delays = {g - w for g in aut.silent_goals(obl, cls[j]) if g > w}
+                for k, w2 in adj[j]:
+                    far = w + w2
+                    for g in aut.silent_goals(obl, cls[k], direct=False):
+                        if g > far:
+                            delays.add(g - far)
+                for d in sorted(delays):
+                    for o2 in aut.step(obl, w + d, cls[j]):
+                        succs.append((j, o2, w + d, w, MOVE, d))
+        if silent:
+            if aut.final(obl):
+                # stay here forever without a further position: a finite run that ends in an accepting way
+                succs.append((r, obl, _stay_ticks(aut), 0, STAY, 0))
+                if stop_at is None:
+                    stop_at = t
+        elif wait:
             delays = aut.event_delays(obl, cls[r]) | aut.targeted_delays(obl, arrivals[r])
             for d in sorted(delays):
                 for o2 in aut.step(obl, d, cls[r]):
-                    succs.append((r, o2, d, 0, DWELL))
+                    succs.append((r, o2, d, 0, DWELL, 0))
                     if o2 == obl and stop_at is None and all(aut.accepting(obl)):
                         stop_at = t
-        for j, o2, d, moved, kind in succs:
+        for j, o2, d, moved, kind, waited in succs:
             v, _ = prod.get(j, o2)
-            prod.edges[sid].append((v, d, kind))
+            prod.edges[sid].append((v, d, kind, waited))
+            if kind == STAY:
+                continue
             cand = (t + d, travel + moved)
             if cand < prod.best[v] and not prod.settled[v]:
                 prod.best[v] = cand
-                prod.parent[v] = (sid, d, kind)
+                prod.parent[v] = (sid, d, kind, waited)
                 heapq.heappush(heap, (cand[0], cand[1], v))
         if len(prod.region) > max_states:
             raise SearchLimitError(f"the product grew past max_states={max_states} states while searching for "
@@ -193,8 +233,13 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, prun
     return _best_lasso(prod, aut, nb=nb, names=names, tick=aut.tick, expanded=expanded)
 
 
+def _stay_ticks(aut: TimedAutomaton) -> int:
+    """Nominal length of a 'stay forever' self-loop (only its presence matters)."""
+    return max([n.cap for n in aut.nodes] + [1])
+
+
 def _dominated(aut: TimedAutomaton, prod: _Product, buckets: dict[tuple[int, tuple[int, ...]], list[int]], *,
-               sid: int, t: int, cls: int) -> bool:
+               sid: int, t: int, cls: int, silent: bool) -> bool:
     r, obl = prod.region[sid], prod.obl[sid]
     key = (r, tuple(sorted({nid for nid, _ in obl})))
     bucket = buckets.setdefault(key, [])
@@ -203,22 +248,26 @@ def _dominated(aut: TimedAutomaton, prod: _Product, buckets: dict[tuple[int, tup
         if t_other == t:
             if aut.weaker(prod.obl[other], obl):
                 return True
-        elif t_other < t and any(aut.weaker(o, obl) for o in aut.step(prod.obl[other], t - t_other, cls)):
-            return True
+        elif t_other < t:
+            # the earlier state waits until t (silently, or with one dwell position) and is then no harder
+            later = (aut.age(prod.obl[other], t - t_other),) if silent else aut.step(prod.obl[other], t - t_other,
+                                                                                     cls)
+            if any(aut.weaker(o, obl) for o in later):
+                return True
     bucket.append(sid)
     return False
 
 
 def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str], tick: Fraction,
-                expanded: int) -> tuple[LassoRun, tuple[str, ...], _Product, int] | None:
+                expanded: int) -> _Found | None:
     g = nx.DiGraph()
     live = [s for s in range(len(prod.region)) if prod.settled[s] and not prod.pruned[s]]
     alive = set(live)
     for s in live:
         g.add_node(s)
-        for v, d, kind in prod.edges[s]:
+        for v, d, kind, waited in prod.edges[s]:
             if v in alive and (not g.has_edge(s, v) or g.edges[s, v]["d"] > d):
-                g.add_edge(s, v, d=d, kind=kind)
+                g.add_edge(s, v, d=d, kind=kind, wait=waited)
     best: tuple[tuple[int, int], int, set[int]] | None = None
     for comp in nx.strongly_connected_components(g):
         if len(comp) == 1:
@@ -238,47 +287,60 @@ def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str
     cycle = _accepting_cycle(sub, entry, aut, prod, nb)
     if len(cycle) == 1 and cycle[0][2] == DWELL:
         # staying put: prefer one long dwell period (ages saturate at the caps) over a one-tick repetition
-        slow = max([n.cap for n in aut.nodes] + [1])
+        slow = _stay_ticks(aut)
         obl = prod.obl[entry]
         cls = prod.classes[prod.region[entry]]
         if obl in aut.step(obl, slow, cls):
-            cycle = [(entry, slow, DWELL)]
-    prefix: list[tuple[int, int, str]] = []  # (state, delta, kind) back to the initial state
+            cycle = [(entry, slow, DWELL, 0)]
+    prefix: list[tuple[int, int, str, int]] = []  # (state, delta, kind, wait) back to the initial state
     cur = entry
     while (p := prod.parent[cur]) is not None:
-        prefix.append((cur, p[1], p[2]))
+        prefix.append((cur, p[1], p[2], p[3]))
         cur = p[0]
     prefix.reverse()
     regions = [names[prod.region[cur]]]
     times = [Fraction(0)]
     kinds = ["start"]
+    waits = [0]
     t = 0
-    for s, d, kind in prefix:
+    for s, d, kind, waited in prefix:
         t += d
         regions.append(names[prod.region[s]])
         times.append(t * tick)
         kinds.append(kind)
+        waits.append(waited)
+    if len(cycle) == 1 and cycle[0][2] == STAY:
+        # a silent stay forever in the last region: a finite run (no further position)
+        run = LassoRun(tuple(regions), tuple(times))
+        return run, tuple(kinds), tuple(waits), 0, prod, expanded
     loop_start = len(regions) - 1
     period = 0
-    for k, (s, d, kind) in enumerate(cycle):
+    closing = 0
+    for k, (s, d, kind, waited) in enumerate(cycle):
         period += d
         if k == len(cycle) - 1:
+            closing = waited
             break  # the last step returns to the loop's first position
         t += d
         regions.append(names[prod.region[s]])
         times.append(t * tick)
         kinds.append(kind)
+        waits.append(waited)
     run = LassoRun(tuple(regions), tuple(times), loop_start=loop_start, period=period * tick)
-    return run, tuple(kinds), prod, expanded
+    return run, tuple(kinds), tuple(waits), closing, prod, expanded
 
 
 def _accepting_cycle(sub: nx.DiGraph, entry: int, aut: TimedAutomaton, prod: _Product,
-                     nb: int) -> list[tuple[int, int, str]]:
-    """A cycle from ``entry`` back to it through one accepting state per Büchi set: [(state, delta, kind)]."""
-    steps: list[tuple[int, int, str]] = []
+                     nb: int) -> list[tuple[int, int, str, int]]:
+    """A cycle from ``entry`` back to it through one accepting state per Büchi set: [(state, delta, kind, wait)].
+
+    A silent stay (a ``stay`` self-loop of a final state) is preferred when the entry has one."""
+    if sub.has_edge(entry, entry) and sub.edges[entry, entry]["kind"] == STAY:
+        return [(entry, sub.edges[entry, entry]["d"], STAY, 0)]
+    steps: list[tuple[int, int, str, int]] = []
     cur = entry
     for b in range(nb):
-        if aut.accepting(prod.obl[cur])[b] or any(aut.accepting(prod.obl[s])[b] for s, _, _ in steps):
+        if aut.accepting(prod.obl[cur])[b] or any(aut.accepting(prod.obl[s])[b] for s, _, _, _ in steps):
             continue
         dist, paths = nx.single_source_dijkstra(sub, cur, weight="d")
         target = min((s for s in sub if aut.accepting(prod.obl[s])[b]), key=lambda s: (dist.get(s, 1 << 62), s))
@@ -303,8 +365,9 @@ def _accepting_cycle(sub: nx.DiGraph, entry: int, aut: TimedAutomaton, prod: _Pr
     return steps
 
 
-def _path_steps(sub: nx.DiGraph, path: list[int]) -> list[tuple[int, int, str]]:
-    return [(b, sub.edges[a, b]["d"], sub.edges[a, b]["kind"]) for a, b in itertools.pairwise(path)]
+def _path_steps(sub: nx.DiGraph, path: list[int]) -> list[tuple[int, int, str, int]]:
+    return [(b, sub.edges[a, b]["d"], sub.edges[a, b]["kind"], sub.edges[a, b]["wait"])
+            for a, b in itertools.pairwise(path)]
 
 
 def _explored_graph(prod: _Product, aut: TimedAutomaton, names: list[str], tick: Fraction) -> nx.DiGraph:
@@ -316,9 +379,9 @@ def _explored_graph(prod: _Product, aut: TimedAutomaton, names: list[str], tick:
         g.add_node(s, region=names[prod.region[s]], time_s=t * tick, obligations=aut.describe(prod.obl[s]),
                    pruned=prod.pruned[s], accepting=all(aut.accepting(prod.obl[s])))
     for s in list(g.nodes):
-        for v, d, kind in prod.edges[s]:
+        for v, d, kind, waited in prod.edges[s]:
             if v in g:
-                g.add_edge(s, v, delta_s=d * tick, kind=kind)
+                g.add_edge(s, v, delta_s=d * tick, kind=kind, wait_s=waited * tick)
     return g
 
 
@@ -335,15 +398,15 @@ def export_dot(explored: nx.DiGraph) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, initial: str,
+def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, dwell: str, initial: str,
                   max_states: int) -> NoAcceptingRunError:
     """Name the conjunct that cannot be met (alone, or together with the ones before it)."""
     conjuncts = list(formula.args) if isinstance(formula, And) else [formula]
-    mode = "with waiting" if wait else "without waiting (--no-wait)"
+    mode = f"with {dwell} waiting" if wait else "without waiting (--no-wait)"
 
     def satisfiable(f: Formula) -> bool:
         try:
-            find_run(wts, f, wait=wait, initial=initial, max_states=max_states, diagnose=False)
+            find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=max_states, diagnose=False)
         except NoAcceptingRunError:
             return False
         return True
