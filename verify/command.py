@@ -1,37 +1,30 @@
-"""The ``tubempc certify`` subcommand: log paths + scenario -> certificate(s) on disk, a summary line, an exit code.
+"""The ``tubempc certify`` subcommand: log paths + scenario -> certificate(s) and reports on disk, summary, exit code.
 
-A thin front over ``verify.certify_log``: several logs are certified one after another (one sub-folder per log
-under ``--out`` when there is more than one); the exit code is the worst verdict (fail 1 > inconclusive 2 > pass 0).
-Unusable input raises ``UnusableInputError`` subclasses, which ``tubempc.cli.main`` turns into exit 3 and one line.
+One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
+``report.md``, ``report.html`` and ``junit.xml`` go into DIR. Unusable input raises ``UnusableInputError``, which
+``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
+
+Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
+``--dask tcp://host:port`` for Dask distributed), one sub-folder per log plus ``summary.md``/``.html``/``.csv``
+under ``--out``, and the worst exit code by severity: pass 0 < inconclusive 2 < violation 1 < unusable 3.
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Literal, cast
 
 import click
 
-__all__ = ["certify", "worst_exit_code"]
+__all__ = ["certify"]
 
 
-def worst_exit_code(codes: list[int]) -> int:
-    """fail (1) beats inconclusive (2) beats pass (0)."""
-    if 1 in codes:
-        return 1
-    if 2 in codes:
-        return 2
-    return 0
-
-
-def _subfolder(path: Path, used: set[str]) -> str:
-    base = path.name.replace(".", "_") or "log"
-    name, k = base, 1
-    while name in used:
-        k += 1
-        name = f"{base}_{k}"
-    used.add(name)
-    return name
+def _single_log(logs: tuple[Path, ...]) -> bool:
+    if len(logs) != 1:
+        return False
+    path = logs[0]
+    return not path.is_dir() or (path / "metadata.yaml").is_file()
 
 
 @click.command()
@@ -39,25 +32,30 @@ def _subfolder(path: Path, used: set[str]) -> str:
 @click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
 @click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
-              help="Write certificate.json here (one sub-folder per log when several logs are given).")
+              help="Write certificate.json and reports here (one sub-folder per log when several are given).")
 @click.option("--time-base", type=click.Choice(["header", "log"]), default="header", show_default=True,
               help="Header stamps or log (receive) time.")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
+@click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes for several logs (default: one per core).")
+@click.option("--dask", "dask", default=None, metavar="local|tcp://HOST:PORT",
+              help="Certify several logs on Dask distributed (a local cluster, or a running scheduler).")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
-            time_base: str, salvage: bool) -> None:
-    """Certify ROS logs (.bag, .mcap, .db3 or ROS2 bag folders) against a scenario and an MITL formula.
+            time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
+            progress: bool | None) -> None:
+    """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
     """
     from verify.certify import certify_log, resolve_scenario, write_certificate
 
     sc = resolve_scenario(scenario)
-    codes: list[int] = []
-    used: set[str] = set()
-    for log in logs:
-        result = certify_log(log, sc, spec=spec, time_base=time_base, salvage=salvage)
+    if _single_log(logs) and dask is None:
+        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage)
         cert = result.certificate
-        line = f"{log}: {cert['verdict']}"
+        line = f"{logs[0]}: {cert['verdict']}"
         failed = [c for c in cert["checks"] if c["verdict"] != "pass"]
         if failed:
             line += " (" + "; ".join(
@@ -65,10 +63,27 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                 + (f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
                 for c in failed) + ")"
         if out_dir is not None:
-            target = out_dir if len(logs) == 1 else out_dir / _subfolder(log, used)
-            line += f" -> {write_certificate(result, target)}"
+            line += f" -> {write_certificate(result, out_dir)}"
+            if not no_report:
+                from verify.report import write_reports
+
+                write_reports(result, sc, out_dir, suite_name=logs[0].name)
         click.echo(line)
-        codes.append(result.exit_code)
+        sys.stdout.flush()
+        # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting
+        sys.exit(result.exit_code)
+
+    from verify.batch import certify_many, summary_lines, write_batch
+
+    base = cast(Literal["header", "log"], time_base)
+    batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
+                         progress=progress)
+    for text in summary_lines(batch):
+        click.echo(text)
+    if out_dir is not None:
+        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress)
+        summary = written.get("summary.md")
+        if summary is not None:
+            click.echo(f"summary: {summary}")
     sys.stdout.flush()
-    # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting
-    sys.exit(worst_exit_code(codes))
+    sys.exit(batch.exit_code)
