@@ -385,11 +385,14 @@ class TimedAutomaton:
 
     def age(self, state: State, delta: int) -> State:
         """``state`` after ``delta`` ticks without any position (a silent wait): every age grows, capped."""
+        caps = self._caps
+        aged = tuple((nid, age + delta if age + delta < caps[nid] else caps[nid]) for nid, age in state)
+        if len({nid for nid, _ in state}) == len(state):
+            return aged  # one copy per node: still sorted, nothing to subsume
         key = (state, delta)
         out = self._age_memo.get(key)
         if out is None:
-            caps = self._caps
-            out = self._canon((nid, min(age + delta, caps[nid])) for nid, age in state)
+            out = self._canon(aged)
             self._age_memo[key] = out
         return out
 

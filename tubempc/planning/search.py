@@ -190,15 +190,20 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
             continue
         expanded += 1
         succs: list[tuple[int, State, int, int, str, int]] = []  # (region, state, delta, travel, kind, wait)
+        far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
         for j, w in adj[r]:
             for o2 in aut.step(obl, w, cls[j]):
                 succs.append((j, o2, w, w, MOVE, 0))
-            if silent:
+            if silent and obl:
                 # event-driven silent waits: the arrival (or the one after it) lands on a goal of the state
                 delays = {g - w for g in aut.silent_goals(obl, cls[j]) if g > w}
                 for k, w2 in adj[j]:
+                    ck = cls[k]
+                    goals = far_goals.get(ck)
+                    if goals is None:
+                        goals = far_goals[ck] = aut.silent_goals(obl, ck, direct=False)
                     far = w + w2
-                    for g in aut.silent_goals(obl, cls[k], direct=False):
+                    for g in goals:
                         if g > far:
                             delays.add(g - far)
                 for d in sorted(delays):
