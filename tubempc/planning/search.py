@@ -1,20 +1,24 @@
 """Product search: WTS x formula automaton -> a time-optimal accepting lasso timed run (exact, in ticks).
 
 input: a WTS (``tubempc.planning.wts``: nodes = safe regions with ``LABELS``, edges with exact ``WEIGHT``), a
-``Formula`` and whether the robot may wait (dwell) in a region -> output: a ``SearchResult`` with a ``LassoRun``
-(prefix + repeating suffix) and the explored product graph; ``NoAcceptingRunError`` naming the obligation that
-cannot be met when no run exists.
+``Formula``, whether the robot may wait in a region and what a wait is (``dwell``: ``silent`` — no position, the
+next move arrives later; ``observed`` — a position of the run) -> output: a ``SearchResult`` with a ``LassoRun``
+(prefix + repeating suffix, or a finite run that stays in its last region) and the explored product graph;
+``NoAcceptingRunError`` naming the obligation that cannot be met when no run exists.
 
 Times are scaled to integer ticks (the gcd of all weights and interval endpoints, halved when waiting is allowed
 so that "strictly after a constant" is one tick after it); every clock value is then an integer and the product is
 a finite graph. The search is Dijkstra over product states ``(region, automaton state)`` by (time, travel time):
 * moves follow WTS edges (one new position at the arrival);
-* a dwell creates one new position in the same region after an *event-driven* duration: until a pending
+* silent waits (default): a move may first wait an *event-driven* number of ticks, so that its arrival, or the
+  arrival after it, lands where a pending obligation changes status there (``TimedAutomaton.silent_goals``); a
+  state whose pending obligations all accept the end of the run (``final``) may stay forever (a finite run);
+* observed dwells: a dwell creates one new position in the same region after an *event-driven* duration: until a pending
   obligation changes status at the dwell position, or so that the next arrival in a region where the obligation
   can change value lands exactly on its window's lower end (or just past the upper end of a G/R window), or one
   tick (see ``TimedAutomaton.event_delays`` / ``targeted_delays``);
-* with waiting allowed, a state is pruned when an earlier state in the same region, after one dwell up to the
-  same time, has a weaker obligation set (it can do all the pruned state can);
+* with waiting allowed, a state is pruned when an earlier state in the same region, after one dwell (silent:
+  aging without a position) up to the same time, has a weaker obligation set (it can do all the pruned state can);
 * the first state (in time order) with an accepting dwell self-loop ends the search; then the strongly connected
   components of the explored graph that contain a cycle through every Büchi set give the accepting lassos, and the
   one entered earliest is returned (the cycle visits one accepting state per Büchi set). Without waiting, the
