@@ -38,8 +38,10 @@ from tubempc.mitl import (
     Or,
     Until,
     parse,
+    to_fraction,
 )
 from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, make_wts, plan_from_wts
+from tubempc.planning.search import OBSERVED, SILENT
 from tubempc.strategies import TimedRun
 from verify import check_timed_run
 
@@ -206,9 +208,9 @@ def lasso_wts(run: LassoRun, labels: Mapping[str, Sequence[str]]) -> nx.DiGraph:
     return make_wts(dict(labels), weights, initial=run.regions[0], oracle_name="lasso")
 
 
-def planner_accepts(wts: nx.DiGraph, f: Formula, *, wait: bool) -> LassoRun | None:
+def planner_accepts(wts: nx.DiGraph, f: Formula, *, wait: bool, dwell: str = SILENT) -> LassoRun | None:
     try:
-        return find_run(wts, f, wait=wait, max_states=MAX_STATES, diagnose=False).run
+        return find_run(wts, f, wait=wait, dwell=dwell, max_states=MAX_STATES, diagnose=False).run
     except NoAcceptingRunError:
         return None
 
@@ -337,26 +339,31 @@ def tiny_wts(draw: st.DrawFn) -> nx.DiGraph:
     return make_wts(dict(labels), weights, initial=names[0])
 
 
-@given(wts=tiny_wts(), f=bounded_formulas, wait=st.booleans())
+MODES = st.sampled_from([(False, SILENT), (True, SILENT), (True, OBSERVED)])  # (wait, dwell mode)
+
+
+@given(wts=tiny_wts(), f=bounded_formulas, mode=MODES)
 @settings(max_examples=CHEAP, suppress_health_check=[HealthCheck.too_slow])
-def test_every_plan_satisfies_its_formula_per_the_certifier(wts: nx.DiGraph, f: Formula, wait: bool) -> None:
+def test_every_plan_satisfies_its_formula_per_the_certifier(wts: nx.DiGraph, f: Formula,
+                                                            mode: tuple[bool, str]) -> None:
+    """A lasso plan is unrolled past the formula's horizon; a finite plan (the robot stays in its last region
+    without new positions: a silent wait adds none, Definition 3) is observed until after the horizon."""
+    wait, dwell = mode
     try:
-        plan = plan_from_wts(wts, f, wait=wait, max_states=MAX_STATES)
+        plan = plan_from_wts(wts, f, wait=wait, dwell=dwell, max_states=MAX_STATES)
     except (NoAcceptingRunError, SearchLimitError):
         assume(False)
         return
     labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
     regions = tuple(r for r, _ in plan.run)
     times = plan.exact_times
-    loop = plan.loop_start
-    period = Fraction(plan.period_s).limit_denominator(10**6) if plan.period_s > 0 else None
+    period = to_fraction(plan.period_s) if plan.period_s > 0 else None
     span = horizon(f) + (period or Fraction(0)) + 1
-    positions = unroll(regions, times, loop if period is not None else None, period, span)
-    end = positions[-1][1]
-    if period is None:
-        assume(end >= horizon(f))  # a finite plan: only judged when it covers the formula's horizon
-    verdict = check_timed_run(str(f), [(r, float(t)) for r, t in positions], {k: list(v) for k, v in labels.items()})
-    assert verdict.verdict == "pass", (str(f), plan.run, plan.loop_start, plan.period_s, verdict)
+    positions = unroll(regions, times, plan.loop_start if period is not None else None, period, span)
+    end = max(positions[-1][1], span)
+    verdict = check_timed_run(str(f), [(r, float(t)) for r, t in positions], {k: list(v) for k, v in labels.items()},
+                              end=float(end))
+    assert verdict.verdict == "pass", (str(f), plan.run, plan.loop_start, plan.period_s, dwell, verdict)
 
 
 def simple_lassos(wts: nx.DiGraph, init: str, max_len: int) -> list[LassoRun]:
@@ -385,12 +392,12 @@ def test_planner_finds_a_run_when_brute_force_does(wts: nx.DiGraph, f: Formula) 
     witness = next((run for run in simple_lassos(wts, init, 4) if certifier_on_lasso(f, run, labels) == "pass"),
                    None)
     assume(witness is not None)
-    for wait in (False, True):
+    for wait, dwell in ((False, SILENT), (True, SILENT), (True, OBSERVED)):
         try:
-            found = planner_accepts(wts, f, wait=wait)
+            found = planner_accepts(wts, f, wait=wait, dwell=dwell)
         except SearchLimitError:
             continue
-        assert found is not None, (str(f), witness, labels, wait)
+        assert found is not None, (str(f), witness, labels, wait, dwell)
 
 
 def test_oracle_examples() -> None:
