@@ -27,6 +27,7 @@ __all__ = [
     "label_margins",
     "region_margins",
     "step_bound_m",
+    "step_bound_regular_m",
     "workspace_margin",
 ]
 
@@ -44,20 +45,31 @@ def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> Floa
     return out
 
 
+#: elements per block of the fast margin computation: the temporaries of a block stay in the CPU cache
+_BLOCK = 1 << 15
+
+
 def _region_margin(x_m: FloatArray, y_m: FloatArray, center: tuple[float, float], offset_m: float,
                    exact: bool) -> FloatArray:
-    """``offset_m - |p - c|``; ``exact=False`` computes the distance as ``sqrt(dx*dx + dy*dy)`` in place (about 4x
-    faster than ``hypot``, within a few ulps of it)."""
+    """``offset_m - |p - c|``; ``exact=False`` computes the distance as ``sqrt(dx*dx + dy*dy)`` block by block
+    (about 4x faster than ``hypot``, within a few ulps of it)."""
     if exact:
         return offset_m - np.hypot(x_m - center[0], y_m - center[1])
-    d = x_m - center[0]
-    np.multiply(d, d, out=d)
-    dy = y_m - center[1]
-    np.multiply(dy, dy, out=dy)
-    np.add(d, dy, out=d)
-    np.sqrt(d, out=d)
-    np.subtract(offset_m, d, out=d)
-    return d
+    n = x_m.shape[0]
+    out = np.empty(n)
+    dx = np.empty(min(n, _BLOCK))
+    dy = np.empty(min(n, _BLOCK))
+    for s in range(0, n, _BLOCK):
+        e = min(n, s + _BLOCK)
+        a, b = dx[: e - s], dy[: e - s]
+        np.subtract(x_m[s:e], center[0], out=a)
+        np.multiply(a, a, out=a)
+        np.subtract(y_m[s:e], center[1], out=b)
+        np.multiply(b, b, out=b)
+        np.add(a, b, out=a)
+        np.sqrt(a, out=a)
+        np.subtract(offset_m, a, out=out[s:e])
+    return out
 
 
 def label_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario, names: set[str] | frozenset[str], *,
@@ -128,6 +140,21 @@ def step_bound_m(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, max_speed_mps
     if k.size:
         step_k = np.hypot(dx[k], dy[k])
         bound[k] = np.where(np.isnan(step_k), np.inf, np.fmax(speed_bound[k], step_k))
+    return bound
+
+
+def step_bound_regular_m(dt_ns: int, x_m: FloatArray, y_m: FloatArray, max_speed_mps: float) -> FloatArray:
+    """``step_bound_m`` for samples exactly ``dt_ns`` apart and finite positions (the same values, fewer passes)."""
+    speed_bound = max_speed_mps * (float(dt_ns) * 1e-9)
+    dx = np.diff(x_m)
+    dy = np.diff(y_m)
+    d2 = dx * dx
+    dy *= dy
+    d2 += dy
+    near = np.flatnonzero(~(d2 < (speed_bound * speed_bound) * (1.0 - 1e-9)))
+    bound = np.full(d2.shape[0], speed_bound)
+    if near.size:
+        bound[near] = np.fmax(speed_bound, np.hypot(np.diff(x_m)[near], np.diff(y_m)[near]))
     return bound
 
 

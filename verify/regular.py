@@ -166,9 +166,36 @@ def _window_reduce(x: FloatArray, a: int, b: int | None, *, nq: int, op: np.ufun
     return out
 
 
+def _shifted(x: FloatArray, offset: int, nq: int, identity: float) -> FloatArray:
+    """``out[i] = x[i + offset]`` (``identity`` past the end), ``offset >= 0``."""
+    out = np.full(nq, identity)
+    valid = max(0, min(nq, x.shape[0] - offset))
+    out[:valid] = x[offset : offset + valid]
+    return out
+
+
 def _reduce(p: FloatArray, g: FloatArray, r: _Range, *, nq: int, op: np.ufunc, identity: float) -> FloatArray:
-    return op(_window_reduce(p, r.pa, r.pb, nq=nq, op=op, identity=identity),  # type: ignore[no-any-return]
-              _window_reduce(g, r.ga, r.gb, nq=nq, op=op, identity=identity))
+    """``op`` over the samples ``p[i + r.pa .. i + r.pb]`` and the gaps ``g[i + r.ga .. i + r.gb]``.
+
+    When the two ranges differ by at most one position at each end (always the case on a grid unless a range is
+    empty), sample k and gap k (the one after it) are merged into one cell first, so that one sliding reduction
+    covers both, plus at most one extra sample or gap at the ends."""
+    left = r.ga in (r.pa, r.pa - 1)
+    right = r.gb is None if r.pb is None else (r.gb is not None and r.gb in (r.pb, r.pb - 1))
+    nonempty = (r.pb is None or r.pa <= r.pb) and (r.gb is None or r.ga <= r.gb)
+    if not (left and right and nonempty):
+        return op(_window_reduce(p, r.pa, r.pb, nq=nq, op=op, identity=identity),  # type: ignore[no-any-return]
+                  _window_reduce(g, r.ga, r.gb, nq=nq, op=op, identity=identity))
+    cells = np.empty(p.shape[0])
+    op(p[:-1], g, out=cells[:-1])
+    cells[-1] = p[-1]
+    c1 = None if r.pb is None or r.gb is None else min(r.pb, r.gb)
+    out = _window_reduce(cells, r.pa, c1, nq=nq, op=op, identity=identity)
+    if r.ga == r.pa - 1:
+        out = op(out, _shifted(g, r.ga, nq, identity))
+    if r.pb is not None and r.gb == r.pb - 1:
+        out = op(out, _shifted(p, r.pb, nq, identity))
+    return out
 
 
 # ---- evaluation -----------------------------------------------------------------------------------------------------
@@ -311,13 +338,8 @@ def _temporal(a: _Val, f: Eventually | Always, ctx: _Ctx, need_gaps: bool) -> _V
             inner = _range(e + lo_ns, None if hi_ns is None else s + hi_ns, dt, gap_query, empty)
         # F: lo over inner, hi over outer; G: lo over outer, hi over inner
         lo_rng, hi_rng = (outer, inner) if always else (inner, outer)
-        if lo_rng == hi_rng and a.p_lo is a.p_hi:
-            p_part = _window_reduce(a.p_lo, lo_rng.pa, lo_rng.pb, nq=nq, op=op, identity=ident)
-            lo = op(p_part, _window_reduce(g_lo, lo_rng.ga, lo_rng.gb, nq=nq, op=op, identity=ident))
-            hi = op(p_part, _window_reduce(g_hi, hi_rng.ga, hi_rng.gb, nq=nq, op=op, identity=ident))
-        else:
-            lo = _reduce(a.p_lo, g_lo, lo_rng, nq=nq, op=op, identity=ident)
-            hi = _reduce(a.p_hi, g_hi, hi_rng, nq=nq, op=op, identity=ident)
+        lo = _reduce(a.p_lo, g_lo, lo_rng, nq=nq, op=op, identity=ident)
+        hi = _reduce(a.p_hi, g_hi, hi_rng, nq=nq, op=op, identity=ident)
         if hi_ns is not None:
             # complete iff t_i + e + hi <= end, i.e. i * dt <= span - e - hi
             first_incomplete = max(0, (span_ns - e - hi_ns) // dt + 1)

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from tubempc.mitl import Formula, atoms
 from tubempc.scenario import Scenario
-from verify.geometry import gap_bounds, label_margins, step_bound_m
+from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
 from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, regular_grid
 
@@ -130,7 +130,7 @@ def _check_on_grid(formula: Formula, grid: Grid, t_ns: IntArray, x_m: FloatArray
     """Regularly sampled, NaN-free trajectory: ``verify.regular`` (same values as the interleaved engine). A pass
     far from a zero margin keeps the fast distances; otherwise the margins are recomputed with ``hypot`` and the
     witness is found on the interleaved positions. None: the formula needs the general engine (``Until``)."""
-    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
+    step = step_bound_regular_m(grid.dt_ns, x_m, y_m, max_speed_mps)
     if not bool(np.isfinite(step).all()):
         return None
     names = atoms(formula)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, parse
 from tubempc.scenario import builtin_scenario
-from verify.geometry import gap_bounds, label_margins, step_bound_m
+from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor import Truth, evaluate_at_points
 from verify.regular import Grid, UnsupportedFormulaError, evaluate_grid, regular_grid, sliding_clipped
 from verify.trajectory import check_trajectory, interleave, trajectory_positions
@@ -189,3 +189,8 @@ def test_exact_margins_agree_with_fast_margins_to_rounding() -> None:
     step = step_bound_m(t_ns, x, y, 0.3)
     want = np.fmax(0.3 * np.diff(t_ns) * 1e-9, np.hypot(np.diff(x), np.diff(y)))
     np.testing.assert_array_equal(step, want)  # the hypot-free shortcut is exact
+    np.testing.assert_array_equal(step_bound_regular_m(10_000_000, x, y, 0.3), want)
+    slow = np.linspace(0.0, 0.01, 1000)  # below the speed bound everywhere except where it jumps
+    slow[500] += 1.0
+    np.testing.assert_array_equal(step_bound_regular_m(10_000_000, slow, slow, 0.3),
+                                  step_bound_m(t_ns, slow, slow, 0.3))

@@ -17,6 +17,8 @@ import sqlite3
 import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import repeat
+from operator import attrgetter, itemgetter
 from pathlib import Path
 
 import numpy as np
@@ -141,21 +143,39 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         available = {c.topic: c.msgtype for c in conns}
         selected = [c for c in conns if c.topic in wanted]
         out = _topics_from(selected)
-        logs: dict[str, list[int]] = {t: [] for t in out}
-        payloads: dict[str, list[bytes]] = {t: [] for t in out}
+        rows: list[tuple[Connection, int, bytes | memoryview]] = []
         if selected:
             try:
-                for conn, log_ns, raw in reader.messages(connections=selected):
-                    logs[conn.topic].append(log_ns)
-                    payloads[conn.topic].append(bytes(raw) if not isinstance(raw, bytes) else raw)
+                rows = list(reader.messages(connections=selected))
             except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
                     KeyError, IndexError) as err:
                 raise _wrap_error(path, fmt, err) from err
     finally:
         reader.close()
-    for topic, t in out.items():
-        t.log_ns, t.payloads = logs[topic], payloads[topic]
+    for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
+        out[topic].log_ns, out[topic].payloads = log_ns, payloads
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _split_by_topic(rows: list[tuple[Connection, int, bytes | memoryview]], topics: list[str]
+                    ) -> dict[str, tuple[list[int], list[bytes]]]:
+    """(connection, log time, payload) rows in reading order -> per topic its log times and payloads (bytes), in
+    the same order; column-wise (no per-row Python statement)."""
+    if not rows:
+        return {t: ([], []) for t in topics}
+    logs: list[int] = list(map(itemgetter(1), rows))
+    raws = list(map(itemgetter(2), rows))
+    payloads: list[bytes] = raws if all(map(isinstance, raws, repeat(bytes))) else list(map(bytes, raws))
+    names = list(map(attrgetter("topic"), map(itemgetter(0), rows)))
+    if len(set(names)) == 1:
+        return {t: (logs, payloads) if t == names[0] else ([], []) for t in topics}
+    code = {t: k for k, t in enumerate(topics)}
+    codes = np.fromiter(map(code.__getitem__, names), dtype=np.int64, count=len(names))
+    out: dict[str, tuple[list[int], list[bytes]]] = {}
+    for t, k in code.items():
+        idx = np.flatnonzero(codes == k).tolist()
+        out[t] = ([logs[i] for i in idx], [payloads[i] for i in idx])
+    return out
 
 
 def _topics_from(conns: Iterable[Connection]) -> dict[str, RawTopic]:

@@ -153,7 +153,9 @@ def _op(header: dict[str, bytes], want: int) -> None:
 
 def _topic(name: str) -> str:
     """Topic normalisation as rosbags does it (single slashes, keep a leading one)."""
-    return f"{'/' * (name[:1] == '/')}{'/'.join(x for x in name.split('/') if x)}"
+    if not name:
+        raise _UnusualError("empty topic name")
+    return f"{'/' * (name[0] == '/')}{'/'.join(x for x in name.split('/') if x)}"
 
 
 def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
@@ -203,7 +205,7 @@ def _chunk_data(f: _File, pos: int, *, read: bool) -> tuple[U8Array | None, int]
     else:
         try:
             inner = bz2.decompress(raw) if compression == "bz2" else lz4_decompress(raw)
-        except (OSError, ValueError, RuntimeError) as err:
+        except (OSError, ValueError, RuntimeError, EOFError) as err:
             raise _UnusualError(f"chunk does not decompress ({err})") from err
     if len(inner) != size:
         raise _UnusualError("chunk size differs from its header")
@@ -306,7 +308,7 @@ def read_ros1_fast(path: Path, topics: Iterable[str]) -> Ros1Index | None:
     """Read the wanted topics of an indexed, unencrypted ROS1 bag; None when anything is unusual."""
     try:
         return _read(path, set(topics))
-    except (_UnusualError, KeyError, UnicodeDecodeError, struct.error, ValueError, OSError):
+    except (_UnusualError, KeyError, IndexError, UnicodeDecodeError, struct.error, ValueError, OSError, EOFError):
         return None
 
 
