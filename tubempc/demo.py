@@ -2,7 +2,8 @@
 
 input: an output folder, a seed and a disturbance model -> output: ``DemoResult`` (paths and key numbers), with
 ``demo.mcap`` and ``demo.bag`` (the run's ROS2 and ROS1 logs), ``plan.json``, ``certificate.json``, ``report.md``,
-``report.html``, ``junit.xml`` and ``comparison.md`` (our transition times beside the paper's) in the folder.
+``report.html`` and ``junit.xml`` in the folder; both reports end with the demo's sections that set our transition
+times beside the paper's and explain every difference.
 """
 
 from __future__ import annotations
@@ -14,14 +15,17 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import networkx as nx
 
 from tubempc.errors import TubeMPCError
 from tubempc.scenario import Scenario, builtin_scenario
 
-__all__ = ["PAPER_SEQUENCE", "PAPER_TIMES_S", "DemoResult", "comparison_markdown", "comparison_rows", "run_demo"]
+if TYPE_CHECKING:
+    from verify.report import ReportSection
+
+__all__ = ["PAPER_SEQUENCE", "PAPER_TIMES_S", "DemoResult", "comparison_rows", "demo_sections", "run_demo"]
 
 # Transition times reported by the paper for its run R1 -> R2 -> R3 -> R4 -> R5 -> R1 (Algorithm 1).
 PAPER_SEQUENCE = ("R1", "R2", "R3", "R4", "R5", "R1")
@@ -55,56 +59,47 @@ def comparison_rows(scenario: Scenario, wts: nx.DiGraph) -> list[dict[str, Any]]
     return rows
 
 
-def comparison_markdown(scenario: Scenario, wts: nx.DiGraph, plan_run: tuple[tuple[str, float], ...],
-                        executed: tuple[tuple[str, float], ...]) -> str:
+_DIFFERENCES = (
+    "Geometry: the paper's workspace figure is a sketch; we scale it to the 5 m x 5 m workspace (tubempc scenario "
+    "show). Distances, and so times, follow from that scaling, not from the lab.",
+    "Input box: with |u_1|, |u_2| <= {speed:g} m/s no leg can be faster than its centre distance divided by "
+    "{speed:g} m/s (last column; obstacles make the path longer still).{slow}",
+    "Algorithm 1: our t_ij is the first multiple of h at which the nominal state enters the terminal ball "
+    "|x_hat - x_j| <= eps / sqrt(lambda_min(P)) (the paper's Theorem prints lambda_max; see docs/errata.md), from "
+    "rest at the centre of the source region; the nominal never sees the disturbance, so t_ij does not depend on it.",
+    "Route: the planner picks the earliest run that satisfies the formula, waiting in a region when a window has not "
+    "opened yet; it need not be the paper's five-leg tour, whose times the table lists for comparison.",
+)
+
+
+def demo_sections(scenario: Scenario, wts: nx.DiGraph, plan_run: tuple[tuple[str, float], ...],
+                  executed: tuple[tuple[str, float], ...]) -> tuple[ReportSection, ...]:
+    """The report sections that set our run beside the paper's (tables + the reasons for every difference)."""
+    from verify.report import ReportSection
+
     rows = comparison_rows(scenario, wts)
     speed = min(scenario.inputs.max_abs[0], scenario.inputs.max_abs[1])
-    lines = [
-        "# Demo: our run beside the paper's",
-        "",
-        "## Transition times of the paper's route R1 -> R2 -> R3 -> R4 -> R5 -> R1",
-        "",
-        "| leg | paper t_ij (s) | ours t_ij (s) | centre distance (m) | distance / speed bound (s) |",
-        "|---|---:|---:|---:|---:|",
-    ]
-    for r in rows:
-        ours = "no transition" if r["ours_s"] is None else f"{r['ours_s']:.1f}"
-        lines.append(f"| {r['leg']} | {r['paper_s']:.1f} | {ours} | {r['distance_m']:.2f} | "
-                     f"{r['lower_bound_s']:.1f} |")
     slow = [r["leg"] for r in rows if r["lower_bound_s"] > r["paper_s"]]
-    lines += [
-        "",
-        "Why the numbers differ:",
-        "",
-        "- **Geometry.** The paper's workspace figure is a sketch; we scale it to the 5 m x 5 m workspace "
-        "(`tubempc scenario show`). Distances, and so times, follow from that scaling, not from the lab.",
-        f"- **Input box.** With |u_1|, |u_2| <= {speed:g} m/s no leg can be faster than its distance divided by "
-        f"{speed:g} m/s (last column; obstacles make the path longer still)."
-        + (f" For {', '.join(slow)} that bound alone exceeds the paper's time, so the paper's time cannot be "
-           "reproduced on the scaled geometry with its own input limits." if slow else ""),
-        "- **Algorithm 1.** Our t_ij is the first multiple of h = 0.1 s at which the nominal state enters the "
-        "terminal ball |x_hat - x_j| <= eps / sqrt(lambda_min(P)) (the paper's Theorem prints lambda_max; see "
-        "docs/errata.md), from rest at the centre of the source region.",
-        "- **Route.** Our planner is free to pick any route that satisfies the formula in the least time; it "
-        "need not be the paper's five-leg tour.",
-        "",
-        "## The planned run and the executed one",
-        "",
-        "| position | planned region | planned time (s) | executed region | executed time (s) |",
-        "|---:|---|---:|---|---:|",
-    ]
-    for k in range(max(len(plan_run), len(executed))):
-        pr, pt = plan_run[k] if k < len(plan_run) else ("", math.nan)
-        er, et = executed[k] if k < len(executed) else ("", math.nan)
-        lines.append(f"| {k} | {pr} | {pt:.1f} | {er} | {et:.1f} |")
-    lines += [
-        "",
-        "Planned times are Algorithm 1's (the nominal enters the terminal ball); executed times are when the "
-        "robot disc became fully contained in the region (Definition 3), which happens a little earlier. The "
-        "planner keeps a margin from every interval endpoint for that reason.",
-        "",
-    ]
-    return "\n".join(lines)
+    slow_text = (f" For {', '.join(slow)} that bound alone exceeds the paper's time, so the paper's time cannot be "
+                 "reproduced on the scaled geometry with its own input limits." if slow else "")
+    legs = ReportSection(
+        title="Demo: transition times of the paper's route R1 -> R2 -> R3 -> R4 -> R5 -> R1",
+        columns=("leg", "paper t_ij [s]", "ours t_ij [s]", "centre distance [m]", "distance / speed bound [s]"),
+        rows=tuple((r["leg"], r["paper_s"], "no transition" if r["ours_s"] is None else round(r["ours_s"], 1),
+                    round(r["distance_m"], 2), round(r["lower_bound_s"], 1)) for r in rows),
+        notes=tuple(d.format(speed=speed, slow=slow_text) for d in _DIFFERENCES),
+    )
+    n = max(len(plan_run), len(executed))
+    runs = ReportSection(
+        title="Demo: the planned run and the executed one",
+        columns=("position", "planned region", "planned time [s]", "executed region", "executed time [s]"),
+        rows=tuple((k, *(plan_run[k] if k < len(plan_run) else ("", None)),
+                    *(executed[k] if k < len(executed) else ("", None))) for k in range(n)),
+        notes=("Planned times are Algorithm 1's (the nominal enters the terminal ball); executed times are when the "
+               "robot disc became fully contained in the region (Definition 3), a little earlier. The planner keeps "
+               "a margin from every interval endpoint for that reason.",),
+    )
+    return legs, runs
 
 
 def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random", use_cache: bool = True,
@@ -157,10 +152,8 @@ def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random",
     cert = certify_log(mcap, scenario)
     seconds["certify"] = time.perf_counter() - t0
     files = {"mcap": mcap, "bag": bag, "plan": out / "plan.json", "certificate": write_certificate(cert, out)}
-    files.update({k: v for k, v in write_reports(cert, scenario, out).items() if "/" not in k})
     executed = tuple((str(e["region"]), float(e["time"])) for e in cert.certificate["timed_run"])
-    comparison = out / "comparison.md"
-    comparison.write_text(comparison_markdown(scenario, wts, plan.run, executed), encoding="utf-8")
-    files["comparison"] = comparison
+    sections = demo_sections(scenario, wts, plan.run, executed)
+    files.update({k: v for k, v in write_reports(cert, scenario, out, sections=sections).items() if "/" not in k})
     return DemoResult(out_dir=out, files=files, verdict=cert.verdict, exit_code=cert.exit_code, plan_run=plan.run,
                       executed_run=executed, margin_s=plan.margin_s, seconds=seconds)

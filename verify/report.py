@@ -17,7 +17,8 @@ import json
 import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -29,6 +30,7 @@ from verify.figures import FigureSpec, render_figures
 
 __all__ = [
     "CertifyResultLike",
+    "ReportSection",
     "ReportWriteError",
     "html_report",
     "junit_xml",
@@ -119,6 +121,22 @@ def _verdict(certificate: Mapping[str, Any]) -> str:
     return str(certificate.get("verdict", "inconclusive"))
 
 
+@dataclass(frozen=True, slots=True)
+class ReportSection:
+    """An extra section appended to the reports (e.g. the demo's comparison with the paper): a titled table and
+    notes. Every cell and note is escaped like any other string."""
+
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[Any, ...], ...] = ()
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        for i, row in enumerate(self.rows):
+            if len(row) != len(self.columns):
+                raise ValueError(f"rows[{i}] has {len(row)} cells for {len(self.columns)} columns")
+
+
 # ---- Markdown -----------------------------------------------------------------------------------------------------
 def _md(text: Any) -> str:
     """Escape for a Markdown table cell: HTML entities first, then Markdown punctuation, no line breaks."""
@@ -129,7 +147,7 @@ def _md(text: Any) -> str:
 
 
 def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec], *,
-                    figure_dir: str = "figures") -> str:
+                    figure_dir: str = "figures", sections: Sequence[ReportSection] = ()) -> str:
     """The report as Markdown; figures are referenced as ``figure_dir/<stem>.png``."""
     cert = result.certificate
     lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
@@ -158,6 +176,12 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     lines += ["", "## Figures", ""]
     for fig in figures:
         lines += [f"![{_md(fig.caption)}]({figure_dir}/{fig.stem}.png)", "", f"*{_md(fig.caption)}*", ""]
+    for sec in sections:
+        lines += ["", f"## {_md(sec.title)}", ""]
+        if sec.columns:
+            lines += ["| " + " | ".join(_md(c) for c in sec.columns) + " |", "|" + "---|" * len(sec.columns)]
+            lines += ["| " + " | ".join(_md(_fmt(v)) for v in row) + " |" for row in sec.rows]
+        lines += [""] + [f"- {_md(n)}" for n in sec.notes]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -179,7 +203,8 @@ def _badge(verdict: str) -> str:
     return f'<span class="badge" style="background:{colour}">{_e(verdict)}</span>'
 
 
-def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec]) -> str:
+def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec], *,
+                sections: Sequence[ReportSection] = ()) -> str:
     """A self-contained HTML page: inline CSS, figures as ``data:image/png;base64`` URIs, no script, no links."""
     cert = result.certificate
     verdict = _verdict(cert)
@@ -217,6 +242,14 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
         data = base64.b64encode(fig.png).decode("ascii")
         parts.append(f'<figure id="fig-{_e(fig.stem)}"><img alt="{_e(fig.caption)}" '
                      f'src="data:image/png;base64,{data}"><figcaption>{_e(fig.caption)}</figcaption></figure>')
+    for sec in sections:
+        parts.append(f"<h2>{_e(sec.title)}</h2>")
+        if sec.columns:
+            parts.append('<table class="section"><tr>' + "".join(f"<th>{_e(c)}</th>" for c in sec.columns) + "</tr>")
+            parts += ["<tr>" + "".join(f"<td>{_e(v)}</td>" for v in row) + "</tr>" for row in sec.rows]
+            parts.append("</table>")
+        if sec.notes:
+            parts.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in sec.notes) + "</ul>")
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"
 
@@ -268,11 +301,12 @@ def write_junit(suites: list[ET.Element], path: Path) -> Path:
 
 # ---- writing ------------------------------------------------------------------------------------------------------
 def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | Path, *,
-                  suite_name: str = "certify") -> dict[str, Path]:
+                  suite_name: str = "certify", sections: Sequence[ReportSection] = ()) -> dict[str, Path]:
     """Write ``report.md``, ``report.html``, ``junit.xml`` and ``figures/*.png`` into ``out_dir`` (created).
 
     Returns the written paths keyed by their path relative to ``out_dir`` (``"report.html"``,
     ``"figures/workspace.png"``, ...). ``suite_name`` names the JUnit suite (a batch passes the log's name).
+    ``sections`` are appended to both reports (the demo's comparison with the paper uses this).
     """
     out = Path(out_dir)
     figures = render_figures(result.certificate, scenario, trajectory=result.trajectory, nominal=result.nominal,
@@ -285,10 +319,10 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
             path.write_bytes(fig.png)
             written[f"figures/{fig.stem}.png"] = path
         md = out / "report.md"
-        md.write_text(markdown_report(result, scenario, figures), encoding="utf-8")
+        md.write_text(markdown_report(result, scenario, figures, sections=sections), encoding="utf-8")
         written["report.md"] = md
         page = out / "report.html"
-        page.write_text(html_report(result, scenario, figures), encoding="utf-8")
+        page.write_text(html_report(result, scenario, figures, sections=sections), encoding="utf-8")
         written["report.html"] = page
         written["junit.xml"] = write_junit([junit_xml(result, suite_name=suite_name)], out / "junit.xml")
     except OSError as err:

@@ -30,7 +30,7 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool) -> N
     result = run_demo(folder, seed=seed, disturbance=disturbance, use_cache=not no_cache,
                       log=click.echo)
     click.echo(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
-    for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml", "comparison"):
+    for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:
             click.echo(f"  {key:12s} {result.files[key]}")
     sys.exit(result.exit_code)
