@@ -13,9 +13,11 @@ are read by a stream walk (``verify.ingest.salvage``) and the result is marked p
 
 from __future__ import annotations
 
+import gc
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter, itemgetter
@@ -111,13 +113,28 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                       for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items()}
         return RawLog(str(p), fmt, True, topics_out, fast.available, False, tuple(notes))
     try:
-        return _read_indexed(p, fmt, wanted, notes)
+        with _gc_paused():
+            return _read_indexed(p, fmt, wanted, notes)
     except TruncatedLogError as err:
         if not salvage:
             raise
         if fmt == "sqlite3":
             raise TruncatedLogError(f"{err.reason}; --salvage supports ROS1 and MCAP logs only", path=str(p)) from err
-        return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
+        with _gc_paused():
+            return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
+
+
+@contextmanager
+def _gc_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector while millions of (acyclic) message tuples and payloads are kept: each
+    collection would rescan all of them (a third of the reading time on 1e6 messages). Restored afterwards."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
@@ -166,6 +183,8 @@ def _split_by_topic(rows: list[tuple[Connection, int, bytes | memoryview]], topi
     logs: list[int] = list(map(itemgetter(1), rows))
     raws = list(map(itemgetter(2), rows))
     payloads: list[bytes] = raws if all(map(isinstance, raws, repeat(bytes))) else list(map(bytes, raws))
+    if len(topics) == 1:
+        return {topics[0]: (logs, payloads)}
     names = list(map(attrgetter("topic"), map(itemgetter(0), rows)))
     if len(set(names)) == 1:
         return {t: (logs, payloads) if t == names[0] else ([], []) for t in topics}
