@@ -147,11 +147,12 @@ def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, ma
     The box is a ``grid`` of square cells of side ``cell_m``; each region sits in its own cell (distinct cells,
     jittered centre), so regions never overlap and always fit. At least one region is safe (the initial one), at
     most ``max_unsafe`` are unsafe; safe region ``k`` carries label ``mission_k``, unsafe region ``k`` label
-    ``obs_k``. The robot radius is at most the smallest safe region's radius minus ``room_m`` (room for the
-    terminal ball and the tube, so that the controller's design check usually passes; 0 allows any radius that
-    fits). ``models`` lists the dynamics models to draw from (``body`` gets a heading restriction in [0.3, 1.2]
-    rad). ``spec`` draws the MITL text (it may only use those labels); by default: always avoid every obstacle
-    and eventually visit ``mission_1``.
+    ``obs_k``. The robot radius is at most the smallest safe region's radius minus ``room_m``, and minus the
+    terminal ball plus the tube radius of the drawn disturbance bound, ``sigma_low`` and model (so that the
+    controller's design check passes unless ``region_radius_m`` is too small for that; ``room_m=0`` allows any
+    radius that fits). ``models`` lists the dynamics models to draw from (``body`` gets a heading restriction in
+    [0.3, 1.2] rad). ``spec`` draws the MITL text (it may only use those labels); by default: always avoid every
+    obstacle and eventually visit ``mission_1``.
     The value is built through ``scenario_from_dict``, so the scenario model's own validation applies.
     """
     nx, ny = grid
@@ -185,8 +186,16 @@ def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, ma
             "center": [round(x0 + (cx + 0.5) * cell_m + jx, 6), round(y0 + (cy + 0.5) * cell_m + jy, 6)],
             "radius": radius, "labels": labels, "unsafe": unsafe,
         })
+    bound = draw(_centi(*delta_bar))
+    sigma_low = draw(st.sampled_from([1.0, 2.0, 4.0]))
+    model = draw(st.sampled_from(list(models)))
+    theta_max = draw(_centi(0.3, 1.2)) if model == "body" else None
+    g_min = math.cos(theta_max) if theta_max is not None else 1.0
+    # room for the terminal ball eps/sqrt(min P) = 0.07/sqrt(0.5) and the tube radius of the drawn parameters
+    need = 0.07 / math.sqrt(0.5) + bound / (sigma_low * g_min) + 0.005
+    room = max(room_m, need) if room_m > 0 else 0.0
     smallest_safe = min(r["radius"] for r in regions if not r["unsafe"])
-    eta = draw(robot_radii(max(min(smallest_safe - room_m, 0.35), 0.06)))
+    eta = draw(robot_radii(max(min(smallest_safe - room, 0.35), 0.06)))
     obstacles = [f"obs_{k}" for k in range(1, n_obs + 1)]
     if spec is None:
         avoid = f"G[0,inf) !({' | '.join(obstacles)}) & " if obstacles else ""
@@ -198,17 +207,16 @@ def scenarios(draw: st.DrawFn, *, min_regions: int = 2, max_regions: int = 6, ma
         "workspace": {"x": [x0, -x0], "y": [y0, -y0]},
         "robot": {"radius": eta},
         "inputs": {"max_abs": [0.2, 0.2, 0.2]},
-        "disturbance": {"bound": draw(_centi(*delta_bar))},
-        "tube": {"sigma_low": draw(st.sampled_from([1.0, 2.0, 4.0]))},
+        "disturbance": {"bound": bound},
+        "tube": {"sigma_low": sigma_low},
         "mpc": {"h": 0.1, "horizon": 1.2, "Q": [0.5, 0.5, 0.5], "R": [0.5, 0.5, 0.5], "P": [0.5, 0.5, 0.5],
                 "eps": 0.07},
         "regions": regions,
         "initial_region": "R1",
         "spec": text,
     }
-    model = draw(st.sampled_from(list(models)))
-    if model == "body":
-        data["dynamics"] = {"model": "body", "theta_max": draw(_centi(0.3, 1.2))}
+    if theta_max is not None:
+        data["dynamics"] = {"model": "body", "theta_max": theta_max}
     return scenario_from_dict(data, source="<tubempc.strategies.scenarios>")
 
 
