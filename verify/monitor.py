@@ -14,7 +14,8 @@ A position's value is an interval ``[lo, hi]`` that contains the robustness at e
 is Kleene's 3-valued logic read off the interval: true iff ``lo > 0``, false iff ``hi < 0``, otherwise unknown
 (``and``/``or`` are ``min``/``max`` of intervals, which is exactly Kleene's conjunction/disjunction).
 Time windows use searchsorted over the span ends, and sliding max/min over the monotone index ranges are computed
-with a sparse table built level by level (O(n log w), vectorized), never a per-sample Python loop.
+with van Herk/Gil-Werman block scans per window-length class (O(n), vectorized), never a per-sample Python loop.
+Regularly sampled trajectories take the faster, value-identical path of ``verify.regular``.
 
 Finite logs (see docs/certifier.md): an unbounded interval ranges to the end of the log; a bounded window whose
 upper end ``t + hi`` lies after the end of observation ``end_ns`` is incomplete: positions that could still come

@@ -144,8 +144,9 @@ def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float) ->
     if width <= 1 or n == 0:
         return x
     m = -(-(n + width - 1) // width)
-    xp = np.full(m * width, identity)
+    xp = np.empty(m * width)
     xp[:n] = x
+    xp[n:] = identity
     prefix = op.accumulate(xp.reshape(m, width), axis=1).ravel()
     suffix = op.accumulate(xp[::-1].reshape(m, width), axis=1).ravel()[::-1]
     return op(suffix[:n], prefix[width - 1 : width - 1 + n])  # type: ignore[no-any-return]
@@ -251,7 +252,11 @@ def _eval(f: Formula, ctx: _Ctx, full: dict[Formula, _Val], part: dict[Formula, 
         if f.name not in ctx.margins:
             raise KeyError(f"atom={f.name!r} has no valuation")
         m = ctx.margins[f.name]
-        out = _Val(m, m, g_mid=0.5 * (m[:-1] + m[1:]) if need_gaps else None)
+        mid = None
+        if need_gaps:
+            mid = m[:-1] + m[1:]
+            mid *= 0.5  # the same operations as geometry.gap_bounds
+        out = _Val(m, m, g_mid=mid)
     elif isinstance(f, Const):
         v = INF if f.value else -INF
         p = np.full(n, v)
@@ -294,23 +299,25 @@ def _negate(a: _Val) -> _Val:
 
 def _combine(parts: list[_Val], op: np.ufunc, half: FloatArray, need_gaps: bool) -> _Val:
     shared = all(p.p_lo is p.p_hi for p in parts)
-    lo = parts[0].p_lo
-    hi = parts[0].p_hi
-    for p in parts[1:]:
-        lo = op(lo, p.p_lo)
-        hi = lo if shared else op(hi, p.p_hi)
+    lo = _fold([p.p_lo for p in parts], op)
+    hi = lo if shared else _fold([p.p_hi for p in parts], op)
     if not need_gaps:
         return _Val(lo, hi)
-    if all(p.g_lo is None and p.g_mid is not None for p in parts):
-        mid = parts[0].g_mid
-        for p in parts[1:]:
-            mid = op(mid, p.g_mid)
-        return _Val(lo, hi, g_mid=mid)
-    g_lo, g_hi = parts[0].gaps(half)
-    for p in parts[1:]:
-        pl, ph = p.gaps(half)
-        g_lo, g_hi = op(g_lo, pl), op(g_hi, ph)
-    return _Val(lo, hi, g_lo=g_lo, g_hi=g_hi)
+    mids = [p.g_mid for p in parts if p.g_lo is None and p.g_mid is not None]
+    if len(mids) == len(parts):
+        return _Val(lo, hi, g_mid=_fold(mids, op))
+    gaps = [p.gaps(half) for p in parts]
+    return _Val(lo, hi, g_lo=_fold([g[0] for g in gaps], op), g_hi=_fold([g[1] for g in gaps], op))
+
+
+def _fold(xs: list[FloatArray], op: np.ufunc) -> FloatArray:
+    """``op`` over the arrays (a new array unless there is only one; inputs untouched)."""
+    if len(xs) == 1:
+        return xs[0]
+    out: FloatArray = op(xs[0], xs[1])
+    for x in xs[2:]:
+        op(out, x, out=out)
+    return out
 
 
 def _temporal(a: _Val, f: Eventually | Always, ctx: _Ctx, need_gaps: bool) -> _Val:
