@@ -22,8 +22,7 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-import pytest
-from hypothesis import HealthCheck, assume, event, example, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
@@ -183,15 +182,8 @@ UNVERIFIABLE = {"truncate"}
 Case = tuple[Trajectory, npt.NDArray[np.float64], Format, LogFault]
 
 
-# Known certifier bug (found by the nightly profile, pinned below): set to False once verify/ingest wraps the
-# apsw.CorruptError rosbags raises while iterating a truncated .db3; the strict xfail below then reports XPASS.
-SQLITE3_TRUNCATION_CRASHES = True
-
-
 def check_damaged(case: Case) -> None:
     traj, cmd_u, fmt, fault = case
-    if SQLITE3_TRUNCATION_CRASHES:
-        assume(not (fmt == "sqlite3" and fault.kind == "truncate"))  # pinned separately, see below
     bad = violates(traj, cmd_u, SCENARIO)
     with tempfile.TemporaryDirectory() as tmp:
         path = _write_damaged(Path(tmp), traj, cmd_u, fmt, fault)
@@ -220,14 +212,12 @@ def test_damaged_logs_never_crash_and_never_pass_wrongly(case: Case) -> None:
 
 # Found by the nightly profile (seed 79787955990689291046924142033752259217), shrunk: a ROS2 sqlite3 bag whose
 # .db3 is cut to 90 % (or 99 %) of its bytes opens, then rosbags raises apsw.CorruptError ("database disk image is
-# malformed") while iterating messages; verify/ingest/raw.py does not wrap it, so the certifier crashes (exit 70)
-# instead of exit 3 / a partial verdict. Pinned here; remove the xfail marker when the certifier wraps the error.
+# malformed") while iterating messages; the certifier crashed (exit 70) until verify/ingest/raw.py wrapped apsw
+# errors as unusable input (exit 3). Pinned as a regression test.
 TRUNCATED_SQLITE3: Case = (Trajectory(t_s=(0.0, 0.01), xy_m=((-1.99, -1.78), (-1.99, -1.78)), yaw_rad=(0.0, 0.0)),
                            np.zeros((2, 3)), "sqlite3", LogFault(kind="truncate", start=0, count=1, fraction=0.9))
 
 
-@pytest.mark.xfail(SQLITE3_TRUNCATION_CRASHES, strict=True,
-                   reason="certifier bug: apsw.CorruptError from a truncated .db3 is not wrapped")
 def test_truncated_sqlite3_bag_is_unusable_input_not_a_crash() -> None:
     traj, cmd_u, _, fault = TRUNCATED_SQLITE3
     for fraction in (0.9, 0.99):

@@ -23,6 +23,7 @@ from itertools import repeat
 from operator import attrgetter, itemgetter
 from pathlib import Path
 
+import apsw  # rosbags reads sqlite3 bags through apsw; its errors must be wrapped like sqlite3's
 import numpy as np
 import numpy.typing as npt
 from rosbags.interfaces import Connection, MessageDefinitionFormat
@@ -137,12 +138,17 @@ def _gc_paused() -> Iterator[None]:
             gc.enable()
 
 
+# What the readers raise on a damaged file (apsw: rosbags' sqlite3 driver, e.g. CorruptError on a truncated .db3).
+_READ_ERRORS = (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw.Error, struct.error, EOFError,
+                ValueError, KeyError, IndexError)
+
+
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
     text = str(err) or err.__class__.__name__
     hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
     if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
         return TruncatedLogError(f"truncated or unindexed log ({text})", path=str(path))
-    if isinstance(err, sqlite3.DatabaseError):
+    if isinstance(err, sqlite3.DatabaseError | apsw.Error):
         return TruncatedLogError(f"unreadable sqlite3 database ({text})", path=str(path))
     return LogReadError(f"unreadable {fmt} log ({text})", path=str(path))
 
@@ -152,8 +158,7 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
     try:
         reader = Reader1(path) if fmt == "ros1" else Reader2(path)
         reader.open()
-    except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
-            KeyError, IndexError) as err:
+    except _READ_ERRORS as err:
         raise _wrap_error(path, fmt, err) from err
     try:
         conns = list(reader.connections)
@@ -164,8 +169,7 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         if selected:
             try:
                 rows = list(reader.messages(connections=selected))
-            except (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, struct.error, EOFError, ValueError,
-                    KeyError, IndexError) as err:
+            except _READ_ERRORS as err:
                 raise _wrap_error(path, fmt, err) from err
     finally:
         reader.close()
