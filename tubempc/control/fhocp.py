@@ -105,7 +105,11 @@ class FhocpProblem:
     def roll(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """Nominal states (N+1 x 3) of a plan (N x 3) from ``x0``, with the FHOCP's own discretisation."""
         if self.linear_world:
-            out: np.ndarray = np.vstack([x0, x0 + self.h_s * np.cumsum(inputs, axis=0)])
+            out = np.empty((len(inputs) + 1, STATE_DIM))
+            out[0] = x0
+            np.cumsum(inputs, axis=0, out=out[1:])
+            out[1:] *= self.h_s
+            out[1:] += x0
             return out
         return np.asarray(self.rollout(x0, inputs.T), dtype=float).T
 
