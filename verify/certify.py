@@ -19,9 +19,8 @@ from typing import Any, Protocol
 import numpy as np
 import pandas as pd
 
-from tubempc.errors import ScenarioError
 from tubempc.mitl import atoms
-from tubempc.scenario import Scenario, load_scenario
+from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containing_region

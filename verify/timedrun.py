@@ -14,8 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.errors import SpecSyntaxError
-from tubempc.mitl import Formula, atoms, parse
+from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
 from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
 

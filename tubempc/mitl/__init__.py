@@ -3,6 +3,7 @@
 ``parse(text)`` returns a hashable formula; ``str(formula)`` is canonical text that parses back to an equal formula.
 """
 
+from tubempc.errors import SpecSyntaxError
 from tubempc.mitl.ast import (
     FALSE,
     TRUE,
@@ -41,6 +42,7 @@ __all__ = [
     "Next",
     "Not",
     "Or",
+    "SpecSyntaxError",
     "Until",
     "atoms",
     "format_seconds",

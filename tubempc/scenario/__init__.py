@@ -1,5 +1,6 @@
 """Scenario model and built-in scenarios (shared by the planner and the certifier)."""
 
+from tubempc.errors import ScenarioError
 from tubempc.scenario.loader import (
     BUILTIN_SCENARIOS,
     builtin_scenario,
@@ -32,6 +33,7 @@ __all__ = [
     "Region",
     "RobotSpec",
     "Scenario",
+    "ScenarioError",
     "Topics",
     "TubeSpec",
     "Workspace",
