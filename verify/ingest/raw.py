@@ -31,10 +31,15 @@ from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import ReaderError as ReaderError1
 from rosbags.rosbag2 import Reader as Reader2
 from rosbags.rosbag2 import ReaderError as ReaderError2
+from rosbags.rosbag2.reader import DirectoryReader
+from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.errors import LogReadError, TruncatedLogError
+from verify.ingest.mcap import TopicMessages, read_mcap_storage
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
+from verify.ingest.sqlite import read_sqlite_storage
 
 __all__ = ["RawLog", "RawTopic", "detect_format", "read_raw"]
 
@@ -166,16 +171,77 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         selected = [c for c in conns if c.topic in wanted]
         out = _topics_from(selected)
         rows: list[tuple[Connection, int, bytes | memoryview]] = []
-        if selected:
+        fast = _read_rosbag2_fast(reader, selected) if selected and isinstance(reader, Reader2) else None
+        if selected and fast is None:
             try:
                 rows = list(reader.messages(connections=selected))
             except _READ_ERRORS as err:
                 raise _wrap_error(path, fmt, err) from err
     finally:
         reader.close()
+    if fast is not None:
+        for topic, raw_topic in out.items():
+            m = fast.get(topic)
+            if m is not None:
+                raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+        return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:
+    """(storage, its connections to read) in the order rosbags' ``Reader.messages(selected)`` reads them; None for
+    what the fast readers do not reproduce (per-message compression, unknown storage)."""
+    st = reader.storage
+    if isinstance(st, McapReader | Sqlite3Reader):
+        return [(st, selected)]
+    if not isinstance(st, DirectoryReader) or st.metadata.compression_mode == "message":
+        return None
+    plan: list[tuple[object, list[Connection]]] = []
+    for storage in st.storages:
+        # DirectoryReader.messages: a storage connection is read when a selected connection matches it
+        storage_conns = [x for x in storage.connections
+                         if any(y.topic == x.topic and y.msgtype == x.msgtype and y.ext == x.ext
+                                and (not x.digest or not y.digest or y.digest == x.digest) for y in selected)]
+        if storage_conns:
+            plan.append((storage, storage_conns))
+    return plan
+
+
+def _read_rosbag2_fast(reader: Reader2, selected: list[Connection]) -> dict[str, TopicMessages] | None:
+    """The selected topics' messages through our MCAP / sqlite3 readers (verify.ingest.mcap, .sqlite), storage
+    after storage as rosbags reads them; None when any storage declines (then rosbags reads the log)."""
+    plan = _storage_plan(reader, selected)
+    if plan is None:
+        return None
+    per_storage: list[dict[str, TopicMessages]] = []
+    for storage, conns in plan:
+        got: dict[str, TopicMessages] | None
+        if isinstance(storage, McapReader):
+            got = read_mcap_storage(storage, conns)
+        elif isinstance(storage, Sqlite3Reader):
+            got = read_sqlite_storage(storage, conns)
+        else:
+            return None
+        if got is None:
+            return None
+        per_storage.append(got)
+    out: dict[str, TopicMessages] = {}
+    for topic in {c.topic for c in selected}:
+        pieces = [got[topic] for got in per_storage if topic in got]
+        if not pieces:
+            continue
+        if len(pieces) == 1:
+            out[topic] = pieces[0]
+            continue
+        lengths = np.concatenate([m.lengths for m in pieces])
+        offsets = np.zeros(lengths.shape[0], dtype=np.int64)
+        if lengths.shape[0] > 1:
+            np.cumsum(lengths[:-1], out=offsets[1:])
+        out[topic] = TopicMessages(np.concatenate([m.log_ns for m in pieces]),
+                                   np.concatenate([m.data for m in pieces]), offsets, lengths)
+    return out
 
 
 def _split_by_topic(rows: list[tuple[Connection, int, bytes | memoryview]], topics: list[str]

@@ -1,0 +1,156 @@
+"""Our MCAP and sqlite3 message readers return exactly what rosbags' readers return (order, log times, payloads), on
+bag directories and bare files, uncompressed / zstd / lz4 MCAP chunks, out-of-order log times with ties, frame ids
+of different lengths, several topics; and they decline (rosbags reads the file as before) on damaged files."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lz4.frame import compress as lz4_compress  # type: ignore[import-untyped]  # a rosbags dependency
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from verify.errors import LogReadError, TruncatedLogError
+from verify.ingest import raw as raw_mod
+from verify.ingest.decode import decode_pose
+from verify.ingest.mcap import read_mcap_storage
+from verify.ingest.raw import read_raw
+from verify.ingest.ros1 import PayloadBuffer
+
+STORE = get_typestore(Stores.ROS2_HUMBLE)
+T = STORE.types
+POSE = "geometry_msgs/msg/PoseStamped"
+STRING = "std_msgs/msg/String"
+TWIST = "geometry_msgs/msg/Twist"
+TOPICS = ("/pose", "/status", "/cmd")
+
+
+def _pose(t_ns: int, x: float, frame: str) -> bytes:
+    hdr = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9),
+                                   frame_id=frame)
+    msg = T[POSE](header=hdr, pose=T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=-x, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+    return bytes(STORE.serialize_cdr(msg, POSE))
+
+
+def _write(path: Path, plugin: StoragePlugin, compression: str = "", *, chunk_every: int = 97,
+           frames: tuple[str, ...] = ("world",)) -> Path:
+    """Three topics; log times shuffled with many ties; MCAP chunks closed every ``chunk_every`` messages."""
+    rng = np.random.default_rng(11)
+    n = 700
+    times = 1_700_000_000 * 10**9 + rng.integers(0, 150, n) * 10_000_000  # ~5 messages per distinct time
+    topics = rng.integers(0, 3, n)
+    w = Writer(path, version=9, storage_plugin=plugin)
+    if compression == "zstd":
+        w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with w:
+        if compression == "lz4":
+            storage = w.storage
+            storage.compression, storage.compressor = "lz4", lz4_compress  # type: ignore[union-attr]
+        conns = [w.add_connection("/pose", POSE, typestore=STORE), w.add_connection("/status", STRING, typestore=STORE),
+                 w.add_connection("/cmd", TWIST, typestore=STORE)]
+        for i, (t, k) in enumerate(zip(times.tolist(), topics.tolist(), strict=True)):
+            if k == 0:
+                data = _pose(t, float(i), frames[i % len(frames)])
+            elif k == 1:
+                data = bytes(STORE.serialize_cdr(T[STRING](data="x" * (i % 7)), STRING))
+            else:
+                lin = T["geometry_msgs/msg/Vector3"](x=float(i), y=0.0, z=0.0)
+                data = bytes(STORE.serialize_cdr(T[TWIST](linear=lin, angular=lin), TWIST))
+            w.write(conns[k], t, data)
+            if plugin == StoragePlugin.MCAP and (i + 1) % chunk_every == 0:
+                w.storage.close_chunk()  # type: ignore[union-attr]
+    return path
+
+
+def _reference(path: Path, topics: tuple[str, ...], monkeypatch: pytest.MonkeyPatch) -> raw_mod.RawLog:
+    with monkeypatch.context() as m:
+        m.setattr(raw_mod, "_read_rosbag2_fast", lambda *_a: None)
+        return read_raw(path, topics)
+
+
+def _assert_same(path: Path, topics: tuple[str, ...], monkeypatch: pytest.MonkeyPatch) -> None:
+    fast = read_raw(path, topics)
+    ref = _reference(path, topics, monkeypatch)
+    assert fast.available == ref.available
+    assert set(fast.topics) == set(ref.topics) == set(topics)
+    for topic in topics:
+        a, b = fast.topics[topic], ref.topics[topic]
+        assert isinstance(a.payloads, PayloadBuffer), "the fast reader must have read this log"
+        assert (a.msgtype, a.has_definition) == (b.msgtype, b.has_definition)
+        assert np.array_equal(np.asarray(a.log_ns, dtype=np.int64), np.asarray(b.log_ns, dtype=np.int64))
+        assert list(a.payloads) == list(b.payloads)
+    if "/pose" in topics:
+        pa, pb = decode_pose(fast.topics["/pose"], False), decode_pose(ref.topics["/pose"], False)
+        assert np.array_equal(pa.stamp_ns, pb.stamp_ns) and np.array_equal(pa.x_m, pb.x_m)
+
+
+@pytest.mark.parametrize("compression", ["", "zstd", "lz4"])
+@pytest.mark.parametrize("bare", [False, True])
+def test_mcap_reader_matches_rosbags(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, compression: str,
+                                     bare: bool) -> None:
+    bag = _write(tmp_path / "bag", StoragePlugin.MCAP, compression, frames=("world", "map", "mocap_frame_long"))
+    path = next(bag.glob("*.mcap")) if bare else bag
+    for topics in (("/pose",), ("/pose", "/status"), TOPICS):
+        _assert_same(path, topics, monkeypatch)
+
+
+def test_mcap_reader_one_chunk_and_many_small_chunks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for every in (10_000, 3):
+        bag = _write(tmp_path / f"bag{every}", StoragePlugin.MCAP, chunk_every=every)
+        _assert_same(bag, TOPICS, monkeypatch)
+
+
+@pytest.mark.parametrize("bare", [False, True])
+def test_sqlite_reader_matches_rosbags(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, bare: bool) -> None:
+    bag = _write(tmp_path / "bag", StoragePlugin.SQLITE3, frames=("w", "world_frame"))
+    path = next(bag.glob("*.db3")) if bare else bag
+    for topics in (("/pose",), ("/status", "/pose"), TOPICS):
+        _assert_same(path, topics, monkeypatch)
+
+
+def test_mcap_damaged_chunk_record_falls_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A message record's length field is made huge inside an uncompressed chunk: our walk declines and rosbags
+    reports the damage exactly as without the fast path."""
+    bag = _write(tmp_path / "bag", StoragePlugin.MCAP)
+    mcap = next(bag.glob("*.mcap"))
+    raw = bytearray(mcap.read_bytes())
+    with Reader(mcap) as r:
+        chunk = r.storage.chunks[1]  # type: ignore[attr-defined]
+        start = chunk.chunk_start_offset + 9 + 40 + len(chunk.compression)
+        conns = [c for c in r.connections if c.topic == "/pose"]
+        assert read_mcap_storage(r.storage, conns) is not None  # type: ignore[arg-type]
+    assert raw[start] == 0x05  # the chunk starts with a message record
+    raw[start + 1 : start + 9] = (2**40).to_bytes(8, "little")
+    mcap.write_bytes(bytes(raw))
+    with Reader(mcap) as r:
+        assert read_mcap_storage(r.storage, [c for c in r.connections if c.topic == "/pose"]) is None  # type: ignore[arg-type]
+    with pytest.raises(LogReadError) as fast_err:
+        read_raw(bag, ["/pose"])
+    with pytest.raises(LogReadError) as ref_err:
+        _reference(bag, ("/pose",), monkeypatch)
+    assert (type(fast_err.value), str(fast_err.value)) == (type(ref_err.value), str(ref_err.value))
+
+
+@pytest.mark.parametrize("plugin", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_truncated_files_behave_as_before(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                          plugin: StoragePlugin) -> None:
+    bag = _write(tmp_path / "bag", plugin)
+    bare = tmp_path / f"cut{'.mcap' if plugin == StoragePlugin.MCAP else '.db3'}"
+    src = next(bag.glob("*.mcap" if plugin == StoragePlugin.MCAP else "*.db3"))
+    shutil.copyfile(src, bare)
+    with bare.open("r+b") as fh:
+        fh.truncate(bare.stat().st_size * 2 // 3)
+    with pytest.raises(LogReadError) as fast_err:
+        read_raw(bare, ["/pose"])
+    with pytest.raises(LogReadError) as ref_err:
+        _reference(bare, ("/pose",), monkeypatch)
+    assert (type(fast_err.value), str(fast_err.value)) == (type(ref_err.value), str(ref_err.value))
+    if plugin == StoragePlugin.MCAP:
+        assert isinstance(fast_err.value, TruncatedLogError)
+        salvaged = read_raw(bare, ["/pose"], salvage=True)
+        assert salvaged.partial and len(salvaged.topics["/pose"].payloads) > 0

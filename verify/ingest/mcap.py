@@ -1,0 +1,310 @@
+"""Fast MCAP message reader: an opened ``rosbags`` MCAP storage + its wanted channels -> their messages as packed
+numpy buffers, in exactly the order ``rosbags`` yields them.
+
+input: a ``rosbags.rosbag2.storage_mcap.McapReader`` that ``rosbags`` has opened (summary read: schemas, channels,
+chunk indexes) and the storage connections to read -> output: per storage connection id, log times (int64 ns) and
+payloads (one byte buffer + offsets + lengths); or ``None`` when anything is unusual (then the caller iterates
+``rosbags``' own reader, which also decides truncation and damage).
+
+What ``rosbags`` 0.11 does, and this reproduces: only chunks whose index lists a message count for a wanted
+channel are read; a chunk is read at the offsets its chunk index gives (CRC at ``start + 9 + 24``, compressed data
+at ``start + 9 + 40 + len(compression)``), decompressed (none / lz4 / zstd) and checked (size, CRC when non-zero)
+by ``rosbags``' own ``decompress``; its records (opcode u8, length u64, content) are walked from the start to the
+end of the chunk; message records (opcode 5: channel u16, sequence u32, log time u64, publish time u64, payload) of
+the wanted channels with ``message_start_time <= log time <= message_end_time`` (chunk index values) are kept and
+sorted stably by log time; the chunks are merged by (log time, chunk offset). Hence the order is (log time, chunk
+offset, record position).
+
+The record walk is vectorized: the message index records after each chunk give candidate record starts; at those
+candidates the opcode and length are read with numpy, and a run of candidates where each record ends exactly where
+the next candidate begins is taken in one step (by induction every candidate in the run is a true record start of
+the sequential walk). Records between runs (e.g. schema and channel records at the start of a chunk, or messages
+missing from the index) are walked one by one. The message index itself is only a hint: nothing is read from it
+that the walk does not confirm.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Collection
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from rosbags.interfaces import Connection
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
+from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
+
+__all__ = ["TopicMessages", "gather", "read_mcap_storage"]
+
+U8Array = npt.NDArray[np.uint8]
+IntArray = npt.NDArray[np.int64]
+
+_OP_MESSAGE = 0x05
+_OP_MESSAGE_INDEX = 0x07
+_MSG_HEAD = 22  # channel u16, sequence u32, log time u64, publish time u64
+
+
+@dataclass(frozen=True, slots=True)
+class TopicMessages:
+    """Messages of one topic in ``rosbags``' order: log times and payload ``i`` at
+    ``data[offsets[i] : offsets[i] + lengths[i]]`` (packed: offsets are the running sum of the lengths)."""
+
+    log_ns: IntArray
+    data: U8Array
+    offsets: IntArray
+    lengths: IntArray
+
+
+class _UnusualError(Exception):
+    """Anything the fast path does not reproduce exactly; the caller falls back to rosbags."""
+
+
+@dataclass(slots=True)
+class _Part:
+    """One topic's messages of one chunk, in the chunk's output order."""
+
+    log_ns: IntArray
+    data: U8Array  # packed payloads
+    lengths: IntArray
+
+
+def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) -> dict[str, TopicMessages] | None:
+    """Per topic, the messages of ``connections`` (storage connections) from an opened MCAP storage, in the order
+    ``storage.messages(connections)`` yields them; None when unusual."""
+    try:
+        return _read(storage, connections)
+    except (_UnusualError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
+            AttributeError, TypeError, MemoryError):
+        return None
+
+
+def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str, TopicMessages] | None:
+    if not isinstance(storage, McapReader) or not isinstance(storage.path, Path):
+        return None
+    chunks = list(storage.chunks)
+    if not chunks:
+        return None  # unindexed file: rosbags scans the data section (and checks the order); not reproduced here
+    topic_of = {int(c.id): c.topic for c in connections}
+    wanted = set(topic_of)
+    # the chunks rosbags reads, merged by chunk offset on equal log times
+    selected = sorted((c for c in chunks if any(c.channel_count.get(cid, 0) for cid in wanted)),
+                      key=lambda c: int(c.chunk_start_offset))
+    if len({int(c.chunk_start_offset) for c in selected}) != len(selected):
+        return None  # two index entries for one chunk: rosbags' merge would compare payloads
+    topics = sorted(set(topic_of.values()))
+    parts: dict[str, list[_Part]] = {t: [] for t in topics}
+    channels_of = {t: np.array(sorted(c for c, tc in topic_of.items() if tc == t), dtype=np.int64) for t in topics}
+    with storage.path.open("rb") as fh:
+        fd = fh.fileno()
+        size = os.fstat(fd).st_size
+        for chunk in selected:
+            channel, log_ns, starts, lens, u8 = _chunk_messages(fd, size, chunk, wanted)
+            for t in topics:
+                mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
+                parts[t].append(_Part(log_ns[mine], gather(u8, starts[mine], lens[mine]), lens[mine]))
+    return {t: _merge(p) for t, p in parts.items()}
+
+
+def _pread(fd: int, size: int, pos: int, n: int) -> bytes:
+    if pos < 0 or n < 0 or pos + n > size:
+        raise _UnusualError("read past the end of the file")
+    data = os.pread(fd, n, pos)
+    if len(data) != n:
+        raise _UnusualError("short read")
+    return data
+
+
+def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
+                    ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
+    """The wanted messages of one chunk in rosbags' order: channel, log time, payload start and length in the
+    decompressed chunk, and the chunk."""
+    start = int(chunk.chunk_start_offset)
+    (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
+    compressed = _pread(fd, size, start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size))
+    usize = int(chunk.uncompressed_size)
+    raw = rosbags_decompress(compressed, chunk.compression, usize, crc)
+    u8 = np.frombuffer(raw, dtype=np.uint8)
+    hints = _index_hints(fd, size, chunk, usize)
+    pos, op, length = _walk(raw, u8, hints)
+    is_msg = op == _OP_MESSAGE
+    pos, length = pos[is_msg], length[is_msg]
+    if np.any(length < _MSG_HEAD):
+        raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
+    channel = _read_u(u8, pos + 9, 2)
+    log_ns = _read_u(u8, pos + 9 + 6, 8)
+    lo, hi = int(chunk.message_start_time), int(chunk.message_end_time)
+    keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted))) & (log_ns >= lo) & (log_ns <= hi)
+    pos, length, channel, log_ns = pos[keep], length[keep], channel[keep], log_ns[keep]
+    if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
+        perm = np.argsort(log_ns, kind="stable")  # rosbags: sorted(..., key=timestamp), stable
+        pos, length, channel, log_ns = pos[perm], length[perm], channel[perm], log_ns[perm]
+    return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
+
+
+def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:
+    """Little-endian unsigned integers of ``width`` bytes (2 or 8) at byte offsets ``at``, as int64 (a u64 value of
+    2**63 or more raises ``_UnusualError``)."""
+    cols = np.ascontiguousarray(u8[at[:, None] + np.arange(width)])
+    if width == 2:
+        return cols.view("<u2").ravel().astype(np.int64)
+    values = cols.view("<u8").ravel()
+    if np.any(values >= np.uint64(2**63)):
+        raise _UnusualError("value beyond int64")
+    return values.astype(np.int64)
+
+
+def _index_hints(fd: int, size: int, chunk: ChunkInfo, usize: int) -> IntArray:
+    """Candidate record starts from the chunk's message index records (sorted, unique, inside the chunk). The index
+    is only a hint, so a message index that cannot be parsed just gives no candidates."""
+    offsets = sorted(int(v) for v in chunk.message_index_offsets.values())
+    if not offsets:
+        return np.zeros(0, dtype=np.int64)
+    end = int(chunk.chunk_start_offset) + int(chunk.chunk_length) + int(chunk.message_index_length)
+    lo = offsets[0]
+    if lo >= end or end > size:
+        return np.zeros(0, dtype=np.int64)
+    region = os.pread(fd, end - lo, lo)
+    found: list[IntArray] = []
+    for off in offsets:
+        rel = off - lo
+        if rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
+            continue
+        (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
+        if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
+            continue
+        pairs = np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15)
+        found.append(pairs[1::2].astype(np.int64))
+    if not found:
+        return np.zeros(0, dtype=np.int64)
+    cand = np.unique(np.concatenate(found))
+    return cand[(cand >= 0) & (cand + 9 <= usize)]
+
+
+def _walk(raw: bytes, u8: U8Array, cand: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """The sequential record walk of a decompressed chunk -> (record start, opcode, content length) of every record,
+    in order. Runs of chained candidates are taken at once; other records are stepped over one by one."""
+    usize = len(raw)
+    k = cand.shape[0]
+    if k:
+        c_op = u8[cand].astype(np.int64)
+        c_len = np.ascontiguousarray(u8[(cand + 1)[:, None] + np.arange(8)]).view("<u8").ravel()
+        ok = c_len <= np.uint64(usize)
+        c_len_i = np.where(ok, c_len, 0).astype(np.int64)
+        c_next = np.where(ok, cand + 9 + c_len_i, -1)
+        # run ends: candidate i whose record does not end at candidate i + 1
+        breaks = [*np.flatnonzero(c_next[:-1] != cand[1:]).tolist(), k - 1]
+    else:
+        c_op = c_len_i = c_next = np.zeros(0, dtype=np.int64)
+        breaks = []
+    cand_l = cand.tolist()
+    seg_pos: list[IntArray] = []
+    seg_op: list[IntArray] = []
+    seg_len: list[IntArray] = []
+    one_pos: list[int] = []
+    one_op: list[int] = []
+    one_len: list[int] = []
+
+    def flush_single() -> None:
+        if one_pos:
+            seg_pos.append(np.array(one_pos, dtype=np.int64))
+            seg_op.append(np.array(one_op, dtype=np.int64))
+            seg_len.append(np.array(one_len, dtype=np.int64))
+            one_pos.clear()
+            one_op.clear()
+            one_len.clear()
+
+    pos = 0
+    i = 0  # next candidate not behind pos
+    b = 0  # index into breaks
+    while pos < usize:
+        while i < k and cand_l[i] < pos:
+            i += 1
+        if i < k and cand_l[i] == pos and c_next[i] >= 0:
+            while breaks[b] < i:
+                b += 1
+            j = breaks[b]  # candidates i..j chain; j's record ends at c_next[j]
+            end = int(c_next[j])
+            if end > usize:
+                raise _UnusualError("record runs past the end of its chunk")
+            flush_single()
+            seg_pos.append(cand[i : j + 1])
+            seg_op.append(c_op[i : j + 1])
+            seg_len.append(c_len_i[i : j + 1])
+            pos = end
+            i = j + 1
+            continue
+        if pos + 9 > usize:
+            raise _UnusualError("cut record header in chunk")
+        op = raw[pos]
+        (rlen,) = struct.unpack_from("<Q", raw, pos + 1)
+        if pos + 9 + rlen > usize:
+            raise _UnusualError("record runs past the end of its chunk")
+        one_pos.append(pos)
+        one_op.append(op)
+        one_len.append(rlen)
+        pos += 9 + rlen
+    flush_single()
+    if not seg_pos:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    return np.concatenate(seg_pos), np.concatenate(seg_op), np.concatenate(seg_len)
+
+
+def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
+    """Bytes ``u8[starts[i] : starts[i] + lengths[i]]`` for all i, packed in order (strided view when evenly spaced,
+    a fancy index per row when of one length, else index arrays built in blocks of about 4 MiB of output)."""
+    n = starts.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.uint8)
+    d = int(lengths[0])
+    if np.all(lengths == d):
+        if n > 1:
+            step = int(starts[1] - starts[0])
+            if step >= d and np.all(np.diff(starts) == step):
+                view = np.lib.stride_tricks.as_strided(u8[int(starts[0]) :], shape=(n, d), strides=(step, 1),
+                                                       writeable=False)
+                return np.ascontiguousarray(view).ravel()
+        rows: U8Array = u8[starts[:, None] + np.arange(d)]
+        return rows.ravel()
+    out_off = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(lengths, out=out_off[1:])
+    out = np.empty(int(out_off[-1]), dtype=np.uint8)
+    block = 1 << 22
+    i = 0
+    while i < n:
+        j = max(i + 1, int(np.searchsorted(out_off, out_off[i] + block, side="right")) - 1)
+        j = min(j, n)
+        o0, o1 = int(out_off[i]), int(out_off[j])
+        idx = np.arange(o0, o1, dtype=np.int64) + np.repeat(starts[i:j] - out_off[i:j], lengths[i:j])
+        out[o0:o1] = u8[idx]
+        i = j
+    return out
+
+
+def _packed_offsets(lengths: IntArray) -> IntArray:
+    offsets = np.zeros(lengths.shape[0], dtype=np.int64)
+    if lengths.shape[0] > 1:
+        np.cumsum(lengths[:-1], out=offsets[1:])
+    return offsets
+
+
+def _merge(parts: list[_Part]) -> TopicMessages:
+    """One topic's chunk parts (by chunk offset, each in the chunk's output order) -> ordered by (log time, chunk
+    offset, position in the chunk's output): rosbags' heap merge of the chunks."""
+    if not parts:
+        empty = np.zeros(0, dtype=np.int64)
+        return TopicMessages(empty, np.zeros(0, dtype=np.uint8), empty, empty)
+    log_ns = np.concatenate([p.log_ns for p in parts])
+    lengths = np.concatenate([p.lengths for p in parts])
+    data = np.concatenate([p.data for p in parts]) if len(parts) > 1 else parts[0].data
+    offsets = _packed_offsets(lengths)
+    if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
+        perm = np.argsort(log_ns, kind="stable")
+        log_ns, lengths = log_ns[perm], lengths[perm]
+        data = gather(data, offsets[perm], lengths)
+        offsets = _packed_offsets(lengths)
+    return TopicMessages(log_ns, data, offsets, lengths)
