@@ -5,6 +5,7 @@ of different lengths, several topics; and they decline (rosbags reads the file a
 from __future__ import annotations
 
 import shutil
+import sqlite3
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from lz4.frame import compress as lz4_compress  # type: ignore[import-untyped]  
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from verify.errors import LogReadError, TruncatedLogError
+from verify.errors import LogReadError, TruncatedLogError, UnusableInputError
 from verify.ingest import raw as raw_mod
 from verify.ingest.decode import decode_pose
 from verify.ingest.mcap import read_mcap_storage
@@ -110,7 +111,40 @@ def test_sqlite_reader_matches_rosbags(tmp_path: Path, monkeypatch: pytest.Monke
     bag = _write(tmp_path / "bag", StoragePlugin.SQLITE3, frames=("w", "world_frame"))
     path = next(bag.glob("*.db3")) if bare else bag
     for topics in (("/pose",), ("/status", "/pose"), TOPICS):
+        assert raw_mod._read_sqlite_quick(path, set(topics), []) is not None, "our open must have read this log"
         _assert_same(path, topics, monkeypatch)
+
+
+@pytest.mark.parametrize("bare", [False, True])
+def test_sqlite_quick_open_without_message_definitions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                      bare: bool) -> None:
+    """A schema-2 database (no ``schema`` / ``message_definitions`` tables, as older rosbag2 wrote them): our open
+    finds the same topics, types and (absent) definitions as rosbags."""
+    bag = _write(tmp_path / "bag", StoragePlugin.SQLITE3)
+    db = next(bag.glob("*.db3"))
+    with sqlite3.connect(db) as con:
+        con.execute("DROP TABLE message_definitions")
+        con.execute("DROP TABLE schema")
+    con.close()
+    path = db if bare else bag
+    quick = raw_mod._read_sqlite_quick(path, set(TOPICS), [])
+    assert quick is not None
+    assert not any(t.has_definition for t in quick.topics.values())
+    _assert_same(path, TOPICS, monkeypatch)
+
+
+def test_sqlite_quick_open_declines_on_damage(tmp_path: Path) -> None:
+    """Our open declines (rosbags then opens the file) on a truncated file and on a file that grew past its header's
+    page count; and when no wanted topic is present (rosbags' counting scans still vet the whole database)."""
+    bag = _write(tmp_path / "bag", StoragePlugin.SQLITE3)
+    db = next(bag.glob("*.db3"))
+    assert raw_mod._read_sqlite_quick(db, {"/absent"}, []) is None
+    grown = tmp_path / "grown.db3"
+    grown.write_bytes(db.read_bytes() + bytes(4096))
+    assert raw_mod._read_sqlite_quick(grown, {"/pose"}, []) is None
+    cut = tmp_path / "cut.db3"
+    cut.write_bytes(db.read_bytes()[: db.stat().st_size - 4096])
+    assert raw_mod._read_sqlite_quick(cut, {"/pose"}, []) is None
 
 
 def test_mcap_damaged_chunk_record_falls_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -150,6 +184,7 @@ def test_truncated_files_behave_as_before(tmp_path: Path, monkeypatch: pytest.Mo
     with pytest.raises(LogReadError) as ref_err:
         _reference(bare, ("/pose",), monkeypatch)
     assert (type(fast_err.value), str(fast_err.value)) == (type(ref_err.value), str(ref_err.value))
+    assert isinstance(fast_err.value, UnusableInputError)  # exit code 3
     if plugin == StoragePlugin.MCAP:
         assert isinstance(fast_err.value, TruncatedLogError)
         salvaged = read_raw(bare, ["/pose"], salvage=True)

@@ -39,7 +39,7 @@ from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
-from verify.ingest.sqlite import read_sqlite_storage
+from verify.ingest.sqlite import QuickReader, read_sqlite_storage
 
 __all__ = ["RawLog", "RawTopic", "detect_format", "read_raw"]
 
@@ -159,6 +159,8 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
+    if fmt == "sqlite3" and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
+        return quick
     reader: Reader1 | Reader2
     try:
         reader = Reader1(path) if fmt == "ros1" else Reader2(path)
@@ -188,6 +190,37 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog | None:
+    """The wanted topics of a sqlite3 log through our open (``QuickReader``: rosbags' checks, connections and
+    definitions without its two counting scans of ``messages``) and our fast reader; None when no wanted topic is
+    present, on any error and on anything the fast reader declines: then rosbags opens and reads the log as before
+    (so errors, truncation and their messages are rosbags')."""
+    try:
+        reader = QuickReader(path)
+        reader.open()
+    except Exception:  # any failure: rosbags' own open decides and reports
+        return None
+    try:
+        conns = list(reader.connections)
+        selected = [c for c in conns if c.topic in wanted]
+        fast = _read_rosbag2_fast(reader, selected) if selected else None
+    except Exception:  # as above
+        fast = None
+    finally:
+        try:
+            reader.close()
+        except Exception:  # as above
+            fast = None
+    if fast is None:
+        return None
+    out = _topics_from(selected)
+    for topic, raw_topic in out.items():
+        m = fast.get(topic)
+        if m is not None:
+            raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+    return RawLog(str(path), "sqlite3", False, out, {c.topic: c.msgtype for c in conns}, False, tuple(notes))
 
 
 def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:

@@ -18,19 +18,115 @@ from __future__ import annotations
 from collections.abc import Collection
 from itertools import compress
 from operator import itemgetter
+from pathlib import Path
+from typing import Any
 
 import apsw
 import numpy as np
 import numpy.typing as npt
-from rosbags.interfaces import Connection
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition, MessageDefinitionFormat
+from rosbags.rosbag2 import Reader as Reader2
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.rosbag2.metadata import ReaderMetadata, parse_qos
+from rosbags.rosbag2.reader import DirectoryReader
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.ingest.mcap import TopicMessages
 
-__all__ = ["read_sqlite_storage", "rosbags_query"]
+__all__ = ["QuickReader", "QuickSqlite3Reader", "read_sqlite_storage", "rosbags_query"]
 
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
+
+
+_MSGDEF_FORMATS = {"ros2msg": MessageDefinitionFormat.MSG, "ros2idl": MessageDefinitionFormat.IDL}
+
+
+class QuickSqlite3Reader(Sqlite3Reader):
+    """``Sqlite3Reader`` whose ``open`` reads the schema version, ``message_definitions`` and ``topics`` exactly as
+    rosbags 0.11 does, but skips its two full scans of ``messages`` (per-topic ``count(messages.id)`` and the
+    ``MIN/MAX/COUNT`` of the timestamps): connections carry ``msgcount=0`` and ``metadata`` stays rosbags' empty
+    default. Only for reading the messages of selected topics; a damaged table surfaces when the messages are read
+    (the caller then reopens with rosbags' own reader, which reports the error as before)."""
+
+    def open(self) -> None:
+        if not isinstance(self.path, Path):
+            raise ReaderError(f"not a filesystem path: {self.path!r}")
+        _check_size(self.path)
+        self.dbconn = apsw.Connection(f"file:{self.path}?mode=ro&immutable=1",
+                                      flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+        try:
+            self._read_schema(self.dbconn)
+        except BaseException:
+            self.close()
+            raise
+
+    def _read_schema(self, conn: apsw.Connection) -> None:
+        cur = conn.cursor()
+        got = cur.execute('SELECT count(*) FROM sqlite_master WHERE type="table" AND name IN ("messages", "topics")'
+                          ).fetchone()
+        if got is None or got[0] != 2:
+            raise ReaderError(f"database {self.path} misses tables")
+        if cur.execute("PRAGMA table_info(schema)").fetchall():
+            row = cur.execute("SELECT schema_version FROM schema").fetchone()
+            schema = int(row[0]) if row is not None else -1
+        elif any(x[1] == "offered_qos_profiles" for x in cur.execute("PRAGMA table_info(topics)")):
+            schema = 2
+        else:
+            schema = 1
+        msgtypes: list[dict[str, str]] = []
+        if schema >= 4:
+            msgtypes = [{"name": x[0], "encoding": x[1], "msgdef": x[2], "digest": x[3]} for x in cur.execute(
+                "SELECT topic_type, encoding, encoded_message_definition, type_description_hash "
+                "FROM message_definitions ORDER BY id")]
+
+        def msgdef_of(name: str) -> MessageDefinition:  # rosbags: the first definition row of that type
+            if (m := next((x for x in msgtypes if x["name"] == name), None)) is not None:
+                return MessageDefinition(_MSGDEF_FORMATS[m["encoding"]], m["msgdef"])
+            return MessageDefinition(MessageDefinitionFormat.NONE, "")
+
+        columns = ["topics.id", "name", "type", "serialization_format"]
+        if schema >= 2:
+            columns.append("offered_qos_profiles")
+        if schema >= 4:
+            columns.append("type_description_hash")
+        query = f"SELECT {', '.join(columns)} FROM topics ORDER BY topics.id"
+        rows: list[tuple[Any, ...]] = cur.execute(query).fetchall()
+        if len({r[0] for r in rows}) != len(rows):
+            raise ReaderError(f"database {self.path}: topic ids are not unique")  # rosbags groups them
+        self.connections = [
+            Connection(r[0], r[1], r[2], msgdef_of(r[2]), r[5] if schema >= 4 else "", 0,
+                       ConnectionExtRosbag2(r[3], parse_qos(r[4]) if schema >= 2 else []), self)
+            for r in rows]
+        self.schema, self.msgtypes = schema, msgtypes
+        self.metadata = ReaderMetadata(0, 2**63 - 1, 0, 0, None, None, None, None)
+
+
+def _check_size(path: Path) -> None:
+    """Raise unless the file is exactly as long as its SQLite header says (page size x page count, when that count
+    is valid): a truncated or grown file goes to rosbags, whose full scans report the damage."""
+    with path.open("rb") as fh:
+        head = fh.read(100)
+        size_b = fh.seek(0, 2)
+    if len(head) < 100 or not head.startswith(b"SQLite format 3\x00"):
+        raise ReaderError(f"{path}: not an SQLite 3 file")
+    page_b = int.from_bytes(head[16:18], "big")
+    page_b = 65536 if page_b == 1 else page_b
+    pages = int.from_bytes(head[28:32], "big")
+    if head[24:28] != head[92:96] or pages == 0 or size_b != page_b * pages:
+        raise ReaderError(f"{path}: {size_b} bytes, header says {pages} pages of {page_b} bytes")
+
+
+class _QuickDirectoryReader(DirectoryReader):
+    STORAGE_PLUGINS = {"mcap": McapReader, "sqlite3": QuickSqlite3Reader}  # noqa: RUF012  # rosbags' own mapping
+
+
+class QuickReader(Reader2):
+    """rosbags' ``Reader`` (bag directory or bare ``.db3``) with ``QuickSqlite3Reader`` storages: the same
+    metadata.yaml checks, connections and message definitions, without the counting scans."""
+
+    STORAGE_PLUGINS = {"dir": _QuickDirectoryReader, ".db3": QuickSqlite3Reader}  # noqa: RUF012
 
 
 def rosbags_query(ids: tuple[int, ...]) -> str:
