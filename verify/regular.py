@@ -33,9 +33,11 @@ from verify.monitor import bounds_ns
 __all__ = [
     "Grid",
     "GridResult",
+    "RootBounds",
     "SplitTruth",
     "UnsupportedFormulaError",
     "evaluate_grid",
+    "evaluate_root",
     "regular_grid",
     "sliding_clipped",
 ]
@@ -101,12 +103,31 @@ class _Val:
     g_mid: FloatArray | None = None
 
     def gaps(self, half: FloatArray) -> tuple[FloatArray, FloatArray]:
-        if self.g_lo is None or self.g_hi is None:
-            if self.g_mid is None:
-                raise ValueError("gap values were not computed")
-            self.g_lo = self.g_mid - half
-            self.g_hi = self.g_mid + half
-        return self.g_lo, self.g_hi
+        return self.gap_lo(half), self.gap_hi(half)
+
+    def _mid(self) -> FloatArray:
+        if self.g_mid is None:
+            raise ValueError("gap values were not computed")
+        return self.g_mid
+
+    def gap_lo(self, half: FloatArray) -> FloatArray:
+        if self.g_lo is None:
+            self.g_lo = self._mid() - half
+        return self.g_lo
+
+    def gap_hi(self, half: FloatArray) -> FloatArray:
+        if self.g_hi is None:
+            self.g_hi = self._mid() + half
+        return self.g_hi
+
+    def gap_slice(self, bound: str, half: FloatArray, a: int, b: int | None) -> FloatArray:
+        """``gap_lo``/``gap_hi`` (``bound``) at the gaps ``a .. b`` only (the same operations, on the slice)."""
+        explicit = self.g_lo if bound == "lo" else self.g_hi
+        end = None if b is None else b + 1
+        if explicit is not None:
+            return explicit[a:end]
+        mid = self._mid()[a:end]
+        return mid - half[a:end] if bound == "lo" else mid + half[a:end]
 
 
 # ---- windows on the grid --------------------------------------------------------------------------------------------
@@ -241,6 +262,86 @@ def evaluate_grid(formula: Formula, grid: Grid, margins: Mapping[str, FloatArray
     return GridResult(SplitTruth(root.p_lo, root.p_hi, None, None), ctx, full, part)
 
 
+@dataclass(frozen=True, slots=True)
+class RootBounds:
+    """The formula's lower bound at every sample and its upper bound at the first sample."""
+
+    lo: FloatArray
+    hi_first: float
+
+
+def evaluate_root(formula: Formula, grid: Grid, margins: Mapping[str, FloatArray], step_m: FloatArray
+                  ) -> RootBounds:
+    """``evaluate_grid(...).root.p_lo`` and ``.p_hi[0]`` (the same values) without computing the upper bounds
+    elsewhere: the verdict at time 0 and the margin signal need nothing more when the verdict is a pass."""
+    if step_m.shape != (grid.n - 1,):
+        raise ValueError(f"step_m has shape {step_m.shape}, expected ({grid.n - 1},)")
+    ctx = _Ctx(grid, margins, 0.5 * step_m)
+    full: dict[Formula, _Val] = {}
+    memo: dict[tuple[Formula, str], FloatArray] = {}
+    lo = _samples_bound(formula, "lo", ctx, full, memo)
+    return RootBounds(lo, float(_first_bound(formula, "hi", ctx, full, memo)))
+
+
+def _other(bound: str) -> str:
+    return "hi" if bound == "lo" else "lo"
+
+
+def _samples_bound(f: Formula, bound: str, ctx: _Ctx, full: dict[Formula, _Val],
+                   memo: dict[tuple[Formula, str], FloatArray]) -> FloatArray:
+    """One bound of ``f`` at every sample, computing only what that bound needs (same operations as ``_eval``)."""
+    key = (f, bound)
+    if key in memo:
+        return memo[key]
+    out: FloatArray
+    if f in full or isinstance(f, Atom | Const | Next):
+        v = full[f] if f in full else _eval(f, ctx, full, {}, need_gaps=False)
+        out = v.p_lo if bound == "lo" else v.p_hi
+    elif isinstance(f, Not):
+        out = -_samples_bound(f.arg, _other(bound), ctx, full, memo)
+    elif isinstance(f, Implies):
+        out = np.maximum(-_samples_bound(f.left, _other(bound), ctx, full, memo),
+                         _samples_bound(f.right, bound, ctx, full, memo))
+    elif isinstance(f, And | Or):
+        out = _fold([_samples_bound(g, bound, ctx, full, memo) for g in f.args],
+                    np.minimum if isinstance(f, And) else np.maximum)
+    elif isinstance(f, Eventually | Always):
+        a = _eval(f.arg, ctx, full, {}, need_gaps=True)
+        out = _temporal_bound(a, f, ctx, _windows(f, ctx.grid, False, False), bound)
+    elif isinstance(f, Until):
+        raise UnsupportedFormulaError(f"{f} (until) is evaluated by the general engine")
+    else:
+        raise TypeError(f"unknown formula node {f!r}")
+    memo[key] = out
+    return out
+
+
+def _first_bound(f: Formula, bound: str, ctx: _Ctx, full: dict[Formula, _Val],
+                 memo: dict[tuple[Formula, str], FloatArray]) -> np.float64:
+    """One bound of ``f`` at the first sample (same values as ``_samples_bound(...)[0]``)."""
+    if (f, bound) in memo:
+        return np.float64(memo[(f, bound)][0])
+    if f in full or isinstance(f, Atom | Const | Next):
+        return np.float64(_samples_bound(f, bound, ctx, full, memo)[0])
+    if isinstance(f, Not):
+        return np.float64(-_first_bound(f.arg, _other(bound), ctx, full, memo))
+    if isinstance(f, Implies):
+        return np.float64(np.maximum(-_first_bound(f.left, _other(bound), ctx, full, memo),
+                                     _first_bound(f.right, bound, ctx, full, memo)))
+    if isinstance(f, And | Or):
+        op: np.ufunc = np.minimum if isinstance(f, And) else np.maximum
+        vals = [_first_bound(g, bound, ctx, full, memo) for g in f.args]
+        acc = vals[0]
+        for v in vals[1:]:
+            acc = op(acc, v)
+        return np.float64(acc)
+    if isinstance(f, Eventually | Always):
+        return _temporal_first(_eval(f.arg, ctx, full, {}, need_gaps=True), f, ctx, bound)
+    if isinstance(f, Until):
+        raise UnsupportedFormulaError(f"{f} (until) is evaluated by the general engine")
+    raise TypeError(f"unknown formula node {f!r}")
+
+
 def _eval(f: Formula, ctx: _Ctx, full: dict[Formula, _Val], part: dict[Formula, _Val], *, need_gaps: bool) -> _Val:
     if f in full:
         return full[f]
@@ -292,7 +393,7 @@ def _negate(a: _Val) -> _Val:
         p_lo = p_hi = neg
     else:
         p_lo, p_hi = -a.p_hi, -a.p_lo
-    if a.g_lo is not None and a.g_hi is not None:
+    if a.g_mid is None and a.g_lo is not None and a.g_hi is not None:
         return _Val(p_lo, p_hi, g_lo=-a.g_hi, g_hi=-a.g_lo)
     return _Val(p_lo, p_hi, g_mid=None if a.g_mid is None else -a.g_mid)
 
@@ -303,7 +404,7 @@ def _combine(parts: list[_Val], op: np.ufunc, half: FloatArray, need_gaps: bool)
     hi = lo if shared else _fold([p.p_hi for p in parts], op)
     if not need_gaps:
         return _Val(lo, hi)
-    mids = [p.g_mid for p in parts if p.g_lo is None and p.g_mid is not None]
+    mids = [p.g_mid for p in parts if p.g_mid is not None]  # a centred value keeps g_mid (g_lo/g_hi: caches)
     if len(mids) == len(parts):
         return _Val(lo, hi, g_mid=_fold(mids, op))
     gaps = [p.gaps(half) for p in parts]
@@ -320,48 +421,86 @@ def _fold(xs: list[FloatArray], op: np.ufunc) -> FloatArray:
     return out
 
 
-def _temporal(a: _Val, f: Eventually | Always, ctx: _Ctx, need_gaps: bool) -> _Val:
+@dataclass(frozen=True, slots=True)
+class _Windows:
+    """Windows of a temporal node for one kind of query position: the ranges its lo and hi bounds reduce over, and
+    the first query index whose window reaches past the end (``nq``: none)."""
+
+    lo: _Range
+    hi: _Range
+    nq: int
+    first_incomplete: int
+
+
+def _windows(f: Eventually | Always, grid: Grid, gap_query: bool, need_gaps: bool) -> _Windows:
     """``F_I a``: lo = max of a.lo over the inner window, hi = max of a.hi over the outer one (+inf if the window
     reaches past the end). ``G_I a``: lo = min of a.lo over the outer window (-inf if incomplete), hi = min of
     a.hi over the inner one."""
-    grid = ctx.grid
     dt, n = grid.dt_ns, grid.n
     lo_ns, hi_ns = bounds_ns(f.interval)
-    g_lo, g_hi = a.gaps(ctx.half)
+    s, e = (1, dt - 1) if gap_query else (0, 0)
+    nq = n - 1 if gap_query else n
+    outer = _range(s + lo_ns, None if hi_ns is None else e + hi_ns, dt, gap_query, False)
+    # inner window [e + lo, s + hi]; on samples queried alone it is the outer one (as in monitor._windows)
+    if not gap_query and not need_gaps:
+        inner = outer
+    else:
+        empty = hi_ns is not None and e + lo_ns > s + hi_ns
+        inner = _range(e + lo_ns, None if hi_ns is None else s + hi_ns, dt, gap_query, empty)
+    first_incomplete = nq
+    if hi_ns is not None:
+        # complete iff t_i + e + hi <= end, i.e. i * dt <= span - e - hi
+        first_incomplete = min(nq, max(0, ((n - 1) * dt - e - hi_ns) // dt + 1))
+    lo_rng, hi_rng = (outer, inner) if isinstance(f, Always) else (inner, outer)
+    return _Windows(lo_rng, hi_rng, nq, first_incomplete)
+
+
+def _temporal_bound(a: _Val, f: Eventually | Always, ctx: _Ctx, w: _Windows, bound: str) -> FloatArray:
+    """One bound (``"lo"`` or ``"hi"``) of ``f`` at every query position of ``w``."""
     always = isinstance(f, Always)
     op: np.ufunc = np.minimum if always else np.maximum
     ident = INF if always else -INF
-    span_ns = (n - 1) * dt
+    if bound == "lo":
+        out = _reduce(a.p_lo, a.gap_lo(ctx.half), w.lo, nq=w.nq, op=op, identity=ident)
+        if always:
+            out[w.first_incomplete:] = -INF
+    else:
+        out = _reduce(a.p_hi, a.gap_hi(ctx.half), w.hi, nq=w.nq, op=op, identity=ident)
+        if not always:
+            out[w.first_incomplete:] = INF
+    return out
 
-    def side(gap_query: bool) -> tuple[FloatArray, FloatArray]:
-        s, e = (1, dt - 1) if gap_query else (0, 0)
-        nq = n - 1 if gap_query else n
-        outer = _range(s + lo_ns, None if hi_ns is None else e + hi_ns, dt, gap_query, False)
-        # inner window [e + lo, s + hi]; on samples queried alone it is the outer one (as in monitor._windows)
-        if not gap_query and not need_gaps:
-            inner = outer
-        else:
-            empty = hi_ns is not None and e + lo_ns > s + hi_ns
-            inner = _range(e + lo_ns, None if hi_ns is None else s + hi_ns, dt, gap_query, empty)
-        # F: lo over inner, hi over outer; G: lo over outer, hi over inner
-        lo_rng, hi_rng = (outer, inner) if always else (inner, outer)
-        lo = _reduce(a.p_lo, g_lo, lo_rng, nq=nq, op=op, identity=ident)
-        hi = _reduce(a.p_hi, g_hi, hi_rng, nq=nq, op=op, identity=ident)
-        if hi_ns is not None:
-            # complete iff t_i + e + hi <= end, i.e. i * dt <= span - e - hi
-            first_incomplete = max(0, (span_ns - e - hi_ns) // dt + 1)
-            if first_incomplete < nq:
-                if always:
-                    lo[first_incomplete:] = -INF
-                else:
-                    hi[first_incomplete:] = INF
-        return lo, hi
 
-    p_lo, p_hi = side(False)
+def _temporal(a: _Val, f: Eventually | Always, ctx: _Ctx, need_gaps: bool) -> _Val:
+    """``f`` at the samples and, if ``need_gaps``, at the gaps (see ``_windows``)."""
+    w = _windows(f, ctx.grid, False, need_gaps)
+    p_lo, p_hi = _temporal_bound(a, f, ctx, w, "lo"), _temporal_bound(a, f, ctx, w, "hi")
     if not need_gaps:
         return _Val(p_lo, p_hi)
-    q_lo, q_hi = side(True)
-    return _Val(p_lo, p_hi, g_lo=q_lo, g_hi=q_hi)
+    wg = _windows(f, ctx.grid, True, need_gaps)
+    return _Val(p_lo, p_hi, g_lo=_temporal_bound(a, f, ctx, wg, "lo"), g_hi=_temporal_bound(a, f, ctx, wg, "hi"))
+
+
+def _temporal_first(a: _Val, f: Eventually | Always, ctx: _Ctx, bound: str) -> np.float64:
+    """One bound of ``f`` at the first sample only: the reduction over that sample's window (gap bounds computed
+    on the window only)."""
+    w = _windows(f, ctx.grid, False, False)
+    always = isinstance(f, Always)
+    if w.first_incomplete == 0 and always == (bound == "lo"):
+        return np.float64(-INF if always else INF)
+    r = w.lo if bound == "lo" else w.hi
+    ident = INF if always else -INF
+    p = a.p_lo if bound == "lo" else a.p_hi
+    parts = []
+    if r.pb is None or r.pa <= r.pb:
+        parts.append(p[r.pa: None if r.pb is None else r.pb + 1])
+    if r.gb is None or r.ga <= r.gb:
+        parts.append(a.gap_slice(bound, ctx.half, r.ga, r.gb))
+    red = np.min if always else np.max
+    vals = [red(x) for x in parts if x.shape[0]]
+    if not vals:
+        return np.float64(ident)
+    return np.float64(min(vals) if always else max(vals))
 
 
 def _next(a: _Val, f: Next, ctx: _Ctx) -> _Val:

@@ -20,7 +20,7 @@ from tubempc.mitl import Formula, atoms
 from tubempc.scenario import Scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
-from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, regular_grid
+from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 
 __all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
 
@@ -135,12 +135,12 @@ def _check_on_grid(formula: Formula, grid: Grid, t_ns: IntArray, x_m: FloatArray
         return None
     names = atoms(formula)
     try:
-        res = evaluate_grid(formula, grid, label_margins(x_m, y_m, scenario, names, exact=False), step)
+        root = evaluate_root(formula, grid, label_margins(x_m, y_m, scenario, names, exact=False), step)
     except UnsupportedFormulaError:
         return None
-    lo0, hi0 = float(res.root.p_lo[0]), float(res.root.p_hi[0])
+    lo0, hi0 = float(root.lo[0]), root.hi_first
     if verdict_of(lo0, hi0) == "pass" and lo0 > NEAR_ZERO_MARGIN_M:
-        return TrajectoryVerdict("pass", lo0, hi0, None, None, None, t_ns, res.root.p_lo)
+        return TrajectoryVerdict("pass", lo0, hi0, None, None, None, t_ns, root.lo)
     res = evaluate_grid(formula, grid, label_margins(x_m, y_m, scenario, names, exact=True), step)
     lo0, hi0 = float(res.root.p_lo[0]), float(res.root.p_hi[0])
     verdict = verdict_of(lo0, hi0)

@@ -12,7 +12,7 @@ from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interv
 from tubempc.scenario import builtin_scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor import Truth, evaluate_at_points
-from verify.regular import Grid, UnsupportedFormulaError, evaluate_grid, regular_grid, sliding_clipped
+from verify.regular import Grid, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid, sliding_clipped
 from verify.trajectory import check_trajectory, interleave, trajectory_positions
 
 NS = Fraction(1, 10**9)
@@ -98,11 +98,32 @@ def test_grid_values_equal_general_engine(f: Formula, case: tuple[Grid, dict[str
             np.testing.assert_array_equal(v.g_hi, want[g].hi[gap_at], err_msg=str(g))
 
 
+@given(grid_formulas(), grids())
+@example(Not(Eventually(Interval(0, 4 * NS, True, True), Atom("p"))),
+         (Grid(0, 2, 5), {"p": np.array([1.0, -1.0, 0.5, 1.0, -0.5]), "q": np.zeros(5), "none": np.full(5, -np.inf)},
+          np.ones(4)))  # the root's lower bound is the negated upper bound of F (computed at every sample)
+def test_root_bounds_equal_grid_values(f: Formula, case: tuple[Grid, dict[str, np.ndarray], np.ndarray]) -> None:
+    """``evaluate_root``: the root's lower bound at every sample and upper bound at the first, as the general
+    engine gives them (bit-identical: the same operations, only fewer of them)."""
+    grid, margins, step = case
+    want, point_at = _general(f, grid, margins, step)
+    got = evaluate_root(f, grid, margins, step)
+    np.testing.assert_array_equal(got.lo, want[f].lo[point_at])
+    assert got.hi_first == want[f].hi[0]
+    np.testing.assert_array_equal(got.lo, evaluate_grid(f, grid, margins, step).root.p_lo)
+
+
 def test_until_is_left_to_the_general_engine() -> None:
     grid = Grid(0, 2, 3)
     margins = {"p": np.ones(3), "q": np.ones(3)}
     try:
         evaluate_grid(parse("p U[0,1] q"), grid, margins, np.ones(2))
+    except UnsupportedFormulaError:
+        pass
+    else:
+        raise AssertionError("until must be refused")
+    try:
+        evaluate_root(parse("F[0,1] (p U[0,1] q)"), grid, margins, np.ones(2))
     except UnsupportedFormulaError:
         return
     raise AssertionError("until must be refused")
