@@ -159,11 +159,21 @@ def _range(a_rel: int, b_rel: int | None, dt: int, gap_query: bool, empty: bool)
     return _Range(pa, b_rel // dt, ga, (b_rel - 1) // dt)
 
 
-def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float) -> FloatArray:
-    """``out[k] = op(x[k : k + width])`` for every k < len(x) (windows clipped at the end), van Herk/Gil-Werman."""
+#: widths up to this use the blocked doubling (log2(width) cache-resident passes), wider ones van Herk/Gil-Werman
+_DOUBLING_MAX_WIDTH = 1 << 13
+#: query positions per block of the doubling (plus width - 1 of overlap); the block's two buffers stay in cache
+_DOUBLING_BLOCK = 1 << 15
+
+
+def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float, *, block: int = 0) -> FloatArray:
+    """``out[k] = op(x[k : k + width])`` for every k < len(x) (windows clipped at the end; ``op`` is min or max,
+    exact, so every evaluation order gives the same values). ``block`` > 0 forces the doubling with that block
+    size (tests)."""
     n = x.shape[0]
     if width <= 1 or n == 0:
         return x
+    if block > 0 or width <= _DOUBLING_MAX_WIDTH:
+        return _sliding_doubling(x, width, op, block or max(_DOUBLING_BLOCK, 4 * width))
     m = -(-(n + width - 1) // width)
     xp = np.empty(m * width)
     xp[:n] = x
@@ -171,6 +181,37 @@ def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float) ->
     prefix = op.accumulate(xp.reshape(m, width), axis=1).ravel()
     suffix = op.accumulate(xp[::-1].reshape(m, width), axis=1).ravel()[::-1]
     return op(suffix[:n], prefix[width - 1 : width - 1 + n])  # type: ignore[no-any-return]
+
+
+def _sliding_doubling(x: FloatArray, width: int, op: np.ufunc, block: int) -> FloatArray:
+    """Sparse-table sliding reduction, block by block: after the pass with shift s, ``c[k] = op(x[k : k + 2s])``
+    (clipped at the end of the loaded part, which reaches ``width - 1`` past the block or to the end of ``x``);
+    the last step combines two overlapping windows of the largest power of two <= width."""
+    n = x.shape[0]
+    out = np.empty(n)
+    cur = np.empty(min(n, block + width - 1))
+    nxt = np.empty_like(cur)
+    for s0 in range(0, n, block):
+        e0 = min(n, s0 + block)
+        m = min(n, e0 + width - 1) - s0
+        c, t = cur[:m], nxt[:m]
+        c[:] = x[s0 : s0 + m]
+        s = 1
+        while 2 * s <= width:
+            k = max(m - s, 0)
+            op(c[:k], c[s : s + k], out=t[:k])
+            t[k:] = c[k:]
+            c, t = t, c
+            s *= 2
+        q = e0 - s0
+        if s < width:
+            sh = width - s
+            k = max(min(q, m - sh), 0)
+            op(c[:k], c[sh : sh + k], out=out[s0 : s0 + k])
+            out[s0 + k : e0] = c[k:q]
+        else:
+            out[s0:e0] = c[:q]
+    return out
 
 
 def _window_reduce(x: FloatArray, a: int, b: int | None, *, nq: int, op: np.ufunc, identity: float) -> FloatArray:

@@ -144,6 +144,26 @@ def test_sliding_clipped_matches_naive() -> None:
         np.testing.assert_array_equal(sliding_clipped(x, w, np.maximum, -np.inf), want)
 
 
+def test_sliding_wide_windows_van_herk_matches_doubling() -> None:
+    """Widths above the doubling limit use van Herk/Gil-Werman: the same values as the doubling and a naive scan."""
+    x = np.random.default_rng(5).normal(size=20_000)
+    for w in (9000, 19_999, 25_000):
+        got = sliding_clipped(x, w, np.minimum, np.inf)
+        np.testing.assert_array_equal(got, sliding_clipped(x, w, np.minimum, np.inf, block=4096))
+        for k in (0, 1, 10_000, 10_999, 11_001, 19_999):
+            assert got[k] == x[k : k + w].min()
+
+
+@given(st.integers(1, 80), st.integers(1, 90), st.integers(1, 40), st.booleans(), st.integers(0, 10**6))
+def test_sliding_doubling_blocks_match_naive(n: int, width: int, block: int, use_min: bool, seed: int) -> None:
+    """The blocked doubling with tiny blocks (block edges, overlaps past the end, width > n) and ties, -inf."""
+    x = np.random.default_rng(seed).choice(np.array([-np.inf, -1.0, 0.0, 0.5, 2.0]), size=n)
+    red, op, ident = (np.min, np.minimum, np.inf) if use_min else (np.max, np.maximum, -np.inf)
+    want = np.array([red(x[k : k + width]) for k in range(n)])
+    np.testing.assert_array_equal(sliding_clipped(x, width, op, ident, block=block), want)
+    np.testing.assert_array_equal(sliding_clipped(x, width, op, ident), want)
+
+
 def _paper_like(n: int, dt_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sc = builtin_scenario()
     t_ns = np.arange(n, dtype=np.int64) * dt_ns
