@@ -235,3 +235,19 @@ def test_exact_margins_agree_with_fast_margins_to_rounding() -> None:
     slow[500] += 1.0
     np.testing.assert_array_equal(step_bound_regular_m(10_000_000, slow, slow, 0.3),
                                   step_bound_m(t_ns, slow, slow, 0.3))
+
+
+def test_step_bound_regular_blocks_equal_hypot_everywhere() -> None:
+    """Several cache blocks: slow motion with jumps at block edges and inside blocks, one NaN position (its block
+    takes the hypot path): the same values as ``max(v dt, hypot)`` with NaN ignored by ``fmax``."""
+    n = 3 * (1 << 15) + 17
+    x = np.linspace(0.0, 1.0, n)
+    y = np.linspace(0.0, -0.5, n)
+    for k in (1 << 15, (1 << 15) - 1, 2 * (1 << 15) + 3, n - 2):
+        x[k] += 0.5
+    y[40_000] = np.nan
+    want = np.fmax(0.3 * 0.01, np.hypot(np.diff(x), np.diff(y)))
+    got = step_bound_regular_m(10_000_000, x, y, 0.3)
+    np.testing.assert_array_equal(got, want)
+    assert got[(1 << 15) - 2] > 0.4 and got[39_999] == 0.3 * 0.01  # a jump; the NaN step keeps v dt
+    assert step_bound_regular_m(10_000_000, x[:1], y[:1], 0.3).shape == (0,)
