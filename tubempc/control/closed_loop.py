@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
@@ -185,10 +185,16 @@ class _Leg:
     path: GuidePath
     obstacles: np.ndarray  # K x 3: cx, cy, required distance of the nominal
     departed_s: float
+    obstacle_cols: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False, repr=False)  # contiguous columns
     s_m: float = 0.0
     entered_s: float | None = None
     inside_s: float | None = None
     departure_s: float | None = None
+
+    def __post_init__(self) -> None:
+        obs = self.obstacles
+        self.obstacle_cols = (np.ascontiguousarray(obs[:, 0]), np.ascontiguousarray(obs[:, 1]),
+                              np.ascontiguousarray(obs[:, 2]))
 
 
 def _start_leg(scenario: Scenario, tube: TubeDesign, *, index: int, target: Target, source: str, x_hat: np.ndarray,
@@ -211,47 +217,58 @@ def _disc(scenario: Scenario, name: str) -> tuple[float, float, float]:
 
 
 def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
-    if len(leg.obstacles):
-        gap = np.hypot(leg.obstacles[:, 0] - pos[0], leg.obstacles[:, 1] - pos[1]) - leg.obstacles[:, 2]
-        active = leg.obstacles[gap <= reach_m]
-    else:
-        active = np.zeros((0, 3))
-    n = max(MIN_OBSTACLE_SLOTS, len(active))
-    slots = np.tile(np.array([[pos[0] + FAR_AWAY_M, pos[1], 0.0]]), (n, 1))  # unused: far, zero radius
-    slots[: len(active)] = active
-    return slots.T.copy()
+    """3 x M obstacle slots: the leg's discs within ``reach_m`` of ``pos``, then unused ones (far, zero radius)."""
+    ox, oy, orad = leg.obstacle_cols
+    active = leg.obstacles[np.hypot(ox - pos[0], oy - pos[1]) - orad <= reach_m] if len(ox) else leg.obstacles
+    k = len(active)
+    slots = np.empty((3, max(MIN_OBSTACLE_SLOTS, k)))
+    slots[:, :k] = active.T
+    slots[0, k:] = pos[0] + FAR_AWAY_M
+    slots[1, k:] = pos[1]
+    slots[2, k:] = 0.0
+    return slots
 
 
 def _world_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np.ndarray, *, xs: np.ndarray,
                  xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t_arr: np.ndarray, dist: Disturbance,
                  rng: np.random.Generator, sigma: float, dt: float, noise_m: float, powers: np.ndarray,
-                 lower: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 lower: np.ndarray, k_dt: np.ndarray | None = None,
+                 drift: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``m_blk`` samples of the linear world model in closed form (exactly the per-sample recursion).
 
     q_k = x_k - x_hat_k obeys ``q+ = a q + dt (delta - sigma n)`` with a = 1 - sigma dt. Under ``worst`` (no
-    noise) q keeps its direction e and ``|q|+ = a |q| + dt delta_bar``.
+    noise) q keeps its direction e and ``|q|+ = a |q| + dt delta_bar``. ``k_dt`` ((m+1) x 1, k dt) and ``drift``
+    (m+1, the delta_bar part of |q|_k) are per-run constants for ``m_blk <= m`` (computed here when omitted).
     """
-    ks = np.arange(m_blk + 1)
-    nominal = x_hat + (ks * dt)[:, None] * u_hat  # m+1 x 3
+    if k_dt is None:
+        k_dt = (np.arange(m_blk + 1) * dt)[:, None]
+    nominal = x_hat + k_dt[: m_blk + 1] * u_hat  # m+1 x 3
     q0 = x - x_hat
-    noise = np.zeros((m_blk, 3))
+    noise = None
     if noise_m > 0:
+        noise = np.zeros((m_blk, 3))
         noise[:, :2] = rng.normal(scale=noise_m, size=(m_blk, 2))
     if dist.kind == "worst":
-        r0 = float(np.linalg.norm(q0))
+        r0 = math.sqrt(float(q0.dot(q0)))  # np.linalg.norm's own formula
         e = q0 / r0 if r0 > 1e-15 else dist.direction
-        a_pow = powers[: m_blk + 1]
-        radius = r0 * a_pow + dt * dist.bound * (1.0 - a_pow) / (sigma * dt)
-        q = radius[:, None] * e[None, :]
+        if drift is None:
+            drift = dt * dist.bound * (1.0 - powers) / (sigma * dt)
+        radius = r0 * powers[: m_blk + 1] + drift[: m_blk + 1]
+        q = radius[:, None] * e
     else:
-        w = dt * (dist.batch(t_arr[i:i + m_blk]) - sigma * noise)
-        q = powers[: m_blk + 1, None] * q0[None, :] + lower[: m_blk + 1, :m_blk] @ w
+        w = dt * dist.batch(t_arr[i:i + m_blk]) if noise is None else dt * (dist.batch(t_arr[i:i + m_blk])
+                                                                            - sigma * noise)
+        q = powers[: m_blk + 1, None] * q0 + lower[: m_blk + 1, :m_blk] @ w
     states = nominal + q
     xs[i:i + m_blk] = states[:m_blk]
-    xms[i:i + m_blk] = states[:m_blk] + noise
     xhs[i:i + m_blk] = nominal[:m_blk]
-    uw[i:i + m_blk] = u_hat - sigma * (q[:m_blk] + noise)
-    return states[m_blk].copy(), nominal[m_blk].copy()
+    if noise is None:
+        xms[i:i + m_blk] = states[:m_blk]
+        uw[i:i + m_blk] = u_hat - sigma * q[:m_blk]
+    else:
+        xms[i:i + m_blk] = states[:m_blk] + noise
+        uw[i:i + m_blk] = u_hat - sigma * (q[:m_blk] + noise)
+    return states[m_blk], nominal[m_blk]
 
 
 def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
@@ -322,12 +339,16 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     powers = a_step ** np.arange(per_step + 1)  # a^k, k = 0..m
     lower = np.array([[a_step ** (k - 1 - j) if j < k else 0.0 for j in range(per_step)]
                       for k in range(per_step + 1)])  # (m+1) x m: q_k = a^k q_0 + sum_j a^(k-1-j) w_j
+    k_dt = (np.arange(per_step + 1) * dt)[:, None]  # k dt, k = 0..m
+    drift = dt * dist.bound * (1.0 - powers) / (sigma * dt)  # |q|_k - a^k |q|_0 under the worst case
+    step_m = speed * h
     i = 0
     while i < n_max:
         t = float(t_arr[i])
         leg = legs[-1]
         if i % per_step == 0:
-            if leg.entered_s is None and float(np.linalg.norm(x_hat - leg.goal)) <= terminal:
+            to_goal = x_hat - leg.goal
+            if leg.entered_s is None and math.sqrt(float(to_goal.dot(to_goal))) <= terminal:  # np.linalg.norm
                 leg.entered_s = t
             if leg.entered_s is not None and leg.inside_s is not None:
                 ready = leg.target.depart_after_s is None or t >= leg.target.depart_after_s - 1e-9
@@ -341,8 +362,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
                     done_at = i
             leg.s_m = leg.path.project(x_hat[:2], leg.s_m, 1.0)
             refs = np.empty((n_stages + 1, 3))
-            refs[:, :2] = references(leg.path, leg.s_m, lookahead_m=LOOKAHEAD_M, step_m=speed * h,
-                                     stages=n_stages + 1)
+            references(leg.path, leg.s_m, lookahead_m=LOOKAHEAD_M, step_m=step_m, stages=n_stages + 1, out=refs)
             refs[:, 2] = leg.goal[2]
             slots = _slots(leg, x_hat[:2], reach)
             m = slots.shape[1]
@@ -360,7 +380,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
         if block_fn is None:
             x_next, xh_next = _world_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t_arr=t_arr,
                                            dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,
-                                           powers=powers, lower=lower)
+                                           powers=powers, lower=lower, k_dt=k_dt, drift=drift)
         else:
             x_next, xh_next = _casadi_block(i, m_blk, x, x_hat, u_hat, xs=xs, xms=xms, xhs=xhs, uw=uw, t0_s=t,
                                             dist=dist, rng=rng, sigma=sigma, dt=dt, noise_m=mocap_noise_m,

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -83,6 +84,7 @@ class FhocpProblem:
     solver: ca.Function
     fallback: ca.Function
     rollout: ca.Function  # (x0, U 3xN) -> X 3x(N+1)
+    check: ca.Function  # (x0, U 3xN, obs 3xM) -> (X 3x(N+1) = roll(x0, U), largest violation of the true sets)
     lbx: np.ndarray
     ubx: np.ndarray
     lbg: np.ndarray
@@ -94,13 +96,11 @@ class FhocpProblem:
     u_box_arr: np.ndarray = field(init=False)
     ws_lo: np.ndarray = field(init=False)
     ws_hi: np.ndarray = field(init=False)
-    bounds_dm: tuple[ca.DM, ca.DM, ca.DM, ca.DM] = field(init=False)  # lbx, ubx, lbg, ubg converted once
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "u_box_arr", np.asarray(self.tube.u_box, dtype=float))
         object.__setattr__(self, "ws_lo", np.array([self.tube.workspace_x[0], self.tube.workspace_y[0]]))
         object.__setattr__(self, "ws_hi", np.array([self.tube.workspace_x[1], self.tube.workspace_y[1]]))
-        object.__setattr__(self, "bounds_dm", tuple(ca.DM(v) for v in (self.lbx, self.ubx, self.lbg, self.ubg)))
 
     def roll(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """Nominal states (N+1 x 3) of a plan (N x 3) from ``x0``, with the FHOCP's own discretisation."""
@@ -175,6 +175,7 @@ def build_fhocp(scenario: Scenario, model: DynamicsModel, tube: TubeDesign, obst
         ubx[nx + i::STATE_DIM] = tube.u_box[i] - tol
     u_sym = ca.SX.sym("u", STATE_DIM, n)
     rollout = ca.Function("rollout", [x0, u_sym], [ca.horzcat(x0, F.mapaccum(n)(x0, u_sym))])
+    check = _check_function(model, tube, F, n=n, h=h, obstacle_slots=obstacle_slots)
     # a chord between two nodes outside a disc of radius r cuts at most r - sqrt(r^2 - (v h / 2)^2) into it
     rho_max = max((r.radius for r in scenario.regions), default=0.0) + tube.clearance_m
     half_chord = tube.max_planar_speed_mps * h / 2
@@ -183,11 +184,52 @@ def build_fhocp(scenario: Scenario, model: DynamicsModel, tube: TubeDesign, obst
         steps=n, h_s=h, obstacle_slots=obstacle_slots,
         solver=ca.nlpsol("fhocp", "sqpmethod", nlp, _SQP_OPTIONS),
         fallback=ca.nlpsol("fhocp_ipopt", "ipopt", nlp, _IPOPT_OPTIONS),
-        rollout=rollout, lbx=lbx, ubx=ubx, lbg=np.asarray(lbg), ubg=np.asarray(ubg), tube=tube,
+        rollout=rollout, check=check, lbx=lbx, ubx=ubx, lbg=np.asarray(lbg), ubg=np.asarray(ubg), tube=tube,
         chord_margin_m=chord, weights=(tuple(Q), tuple(R), tuple(P)), linear_world=model.linear_world,
     )
     _CACHE[key] = problem
     return problem
+
+
+def _check_function(model: DynamicsModel, tube: TubeDesign, F: ca.Function, *, n: int, h: float,
+                    obstacle_slots: int) -> ca.Function:
+    """``(x0, U, obs) -> (X, worst)``: ``FhocpProblem.roll`` and ``_violation`` (unclipped) in one CasADi call.
+
+    The same floating-point operations as the numpy versions, so the results are bitwise equal: the linear
+    rollout is ``x0 + h * cumsum(U)`` (running sum, then scaled, then shifted), the nonlinear one the
+    ``rollout`` function's expression; the maxima are exact whatever the order, and sqrt and the subtraction of
+    a bound are monotone, so ``sqrt(max) - b`` is the maximum of ``sqrt - b``.
+    """
+    x0 = ca.SX.sym("x0", STATE_DIM)
+    u = ca.SX.sym("U", STATE_DIM, n)
+    obs = ca.SX.sym("obs", 3, obstacle_slots)
+    if model.linear_world:
+        cols = [x0]
+        run = u[:, 0]
+        for k in range(n):
+            if k > 0:
+                run = run + u[:, k]
+            cols.append(run * h + x0)
+        states = ca.horzcat(*cols)
+    else:
+        states = ca.horzcat(x0, F.mapaccum(n)(x0, u))
+    lo_x, hi_x = tube.workspace_x
+    lo_y, hi_y = tube.workspace_y
+    terms: list[ca.SX] = []
+    for k in range(n):
+        for i in range(STATE_DIM):
+            terms.append(ca.fabs(u[i, k]) - tube.u_box[i])
+        if tube.planar_disc_mps is not None:
+            terms.append(ca.sqrt(u[0, k] * u[0, k] + u[1, k] * u[1, k]) - tube.planar_disc_mps)
+    for k in range(1, n + 1):
+        px, py = states[0, k], states[1, k]
+        terms += [lo_x - px, lo_y - py, px - hi_x, py - hi_y]
+        for m in range(obstacle_slots):
+            dx, dy = px - obs[0, m], py - obs[1, m]
+            terms.append(obs[2, m] - ca.sqrt(dx * dx + dy * dy))
+        if tube.theta_bound_rad is not None:
+            terms.append(ca.fabs(states[2, k]) - tube.theta_bound_rad)
+    return ca.Function("plan_check", [x0, u, obs], [states, ca.mmax(ca.vertcat(*terms))])
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,23 +272,30 @@ class NominalMPC:
 
     problem: FhocpProblem
     _prev_inputs: np.ndarray | None = field(default=None, init=False)
+    _bound: dict[int, _BoundSolver] = field(default_factory=dict, init=False, repr=False)
 
     def solve(self, x_hat: np.ndarray, refs: np.ndarray, obstacles: np.ndarray) -> SolveOutcome:
         """Solve from nominal state ``x_hat`` with references ``refs`` (N+1 x 3) and obstacle slots (3 x M)."""
         prob = self.problem
-        n = prob.steps
-        p = np.concatenate([x_hat, refs.ravel(), obstacles.T.ravel()])
-        w0 = self._warm_start(x_hat)
-        status, success, iters, elapsed, inputs, states = self._attempt(prob.solver, w0, p, obstacles, x_hat)
+        n, nx = prob.steps, prob.n_x
+        main = self._buffer(prob.solver)
+        main.set_parameters(x_hat, refs, obstacles)
+        self._warm_start(main)
+        status, success, iters, elapsed, inputs, states = self._attempt(main)
         if not success:  # one SQP restart from the rolled-out iterate (cheap), then IPOPT
-            w1 = np.concatenate([states.ravel(), inputs.ravel()])
-            s1, ok1, it1, t1, in1, st1 = self._attempt(prob.solver, w1, p, obstacles, x_hat)
+            w0 = main.w0.copy()
+            main.w0[:nx] = states.ravel()
+            main.w0[nx:] = inputs.ravel()
+            s1, ok1, it1, t1, in1, st1 = self._attempt(main)
             status, success, iters, elapsed = f"{status}; restart: {s1}", ok1, iters + it1, elapsed + t1
             inputs, states = in1, st1
-        if not success:
-            s2, ok2, it2, t2, in2, st2 = self._attempt(prob.fallback, w0, p, obstacles, x_hat)
-            status, success, iters, elapsed = f"{status}; ipopt: {s2}", ok2, iters + it2, elapsed + t2
-            inputs, states = in2, st2
+            if not success:
+                fallback = self._buffer(prob.fallback)
+                fallback.p[:] = main.p
+                fallback.w0[:] = w0
+                s2, ok2, it2, t2, in2, st2 = self._attempt(fallback)
+                status, success, iters, elapsed = f"{status}; ipopt: {s2}", ok2, iters + it2, elapsed + t2
+                inputs, states = in2, st2
         if success:
             self._prev_inputs = inputs
             return SolveOutcome(inputs=inputs, states=states, status=status, success=True, iterations=iters,
@@ -265,39 +314,99 @@ class NominalMPC:
         """Take the plan applied by another solver instance as this one's warm start."""
         self._prev_inputs = outcome.inputs
 
-    def _warm_start(self, x_hat: np.ndarray) -> np.ndarray:
-        prob = self.problem
-        n = prob.steps
-        if self._prev_inputs is None:
-            inputs = np.zeros((n, STATE_DIM))
+    def _warm_start(self, bound: _BoundSolver) -> None:
+        """The shifted previous plan (last input repeated; zeros without one) and its rollout, into ``bound.w0``."""
+        nx = self.problem.n_x
+        inputs = bound.w0[nx:].reshape(self.problem.steps, STATE_DIM)
+        prev = self._prev_inputs
+        if prev is None:
+            inputs[:] = 0.0
         else:
-            inputs = np.vstack([self._prev_inputs[1:], self._prev_inputs[-1:]])
-        states = prob.roll(x_hat, inputs)
-        return np.concatenate([states.ravel(), inputs.ravel()])
+            inputs[:-1] = prev[1:]
+            inputs[-1] = prev[-1]
+        bound.roll_warm_start()  # w0[:nx] = roll(x_hat, w0[nx:])
 
-    def _attempt(self, solver: ca.Function, w0: np.ndarray, p: np.ndarray, obstacles: np.ndarray,
-                 x_hat: np.ndarray) -> tuple[str, bool, int, float, np.ndarray, np.ndarray]:
+    def _buffer(self, solver: ca.Function) -> _BoundSolver:
+        bound = self._bound.get(id(solver))
+        if bound is None:
+            bound = self._bound[id(solver)] = _BoundSolver(solver, self.problem)
+        return bound
+
+    def _attempt(self, bound: _BoundSolver) -> tuple[str, bool, int, float, np.ndarray, np.ndarray]:
+        """One solve from ``bound.w0`` with ``bound.p``; the plan is checked against the true (tightened) sets."""
         prob = self.problem
-        n = prob.steps
+        n, nx = prob.steps, prob.n_x
         start = time.perf_counter()
         try:
-            lbx, ubx, lbg, ubg = prob.bounds_dm
-            out = solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            bound.evaluate()  # solver(x0=w0, p=p, lbx=..., ubx=..., lbg=..., ubg=...) without DM conversions
         except RuntimeError as err:  # CasADi reports numerical breakdowns as RuntimeError
             elapsed = time.perf_counter() - start
             return f"exception: {err}".splitlines()[0][:200], False, 0, elapsed, np.zeros((n, 3)), np.zeros((n + 1, 3))
         elapsed = time.perf_counter() - start
-        stats = solver.stats()
+        stats = bound.buffer.stats()
         status = str(stats.get("return_status", "unknown"))
         iters = int(stats.get("iter_count", 0))
-        w = np.asarray(out["x"], dtype=float).ravel()
-        inputs = w[prob.n_x:].reshape(n, STATE_DIM)
+        w = bound.w
         # the applied nominal is the rollout of the inputs from x_hat, never the solver's state iterate
-        states = prob.roll(x_hat, inputs)
-        success = bool(stats.get("success", False)) and np.all(np.isfinite(w))
+        bound.check_plan()  # states = roll(x_hat, w[nx:]), worst = largest violation of the true sets
+        inputs = w[nx:].reshape(n, STATE_DIM).copy()  # the bound arrays are overwritten by the next call
+        states = bound.states.reshape(n + 1, STATE_DIM).copy()
+        success = bool(stats.get("success", False)) and bool(np.isfinite(w).all())
         if success:
-            viol = _violation(prob, states, inputs, obstacles)
+            worst = float(bound.worst[0])
+            viol = worst if worst > 1e-12 else 0.0  # as _violation
             if viol > 0:
                 status = f"{status} (rejected: constraint violated by {viol:.3g})"
                 success = False
-        return status, bool(success), iters, elapsed, inputs, states
+        return status, success, iters, elapsed, inputs, states
+
+
+class _BoundSolver:
+    """An nlpsol and the plan check bound to arrays owned here (CasADi ``FunctionBuffer``): no DM conversions.
+
+    The solver reads x0 = ``w0``, ``p`` and the problem's bounds (lam_x0, lam_g0 unbound: zero, as in a keyword
+    call without them) and writes only x into ``w``. ``check_plan`` evaluates ``FhocpProblem.check`` on
+    (x_hat = p[:3], the inputs in ``w``, the obstacle slots in ``p``) into ``states`` and ``worst``;
+    ``roll_warm_start`` rolls the inputs in ``w0`` out into the states part of ``w0``. One per ``NominalMPC`` and
+    solver, so that the CasADi memory is never shared between runs or threads.
+    """
+
+    __slots__ = ("_keep", "buffer", "check_plan", "evaluate", "p", "roll_warm_start", "states", "w", "w0", "worst")
+
+    def __init__(self, solver: ca.Function, problem: FhocpProblem) -> None:
+        nx = problem.n_x
+        self.w0 = np.zeros(solver.nnz_in(0))
+        self.p = np.zeros(solver.nnz_in(1))
+        self.w = np.zeros(solver.nnz_out(0))
+        self.states = np.zeros(nx)
+        self.worst = np.zeros(1)
+        scratch = np.zeros(1)
+        self.buffer, self.evaluate = solver.buffer()
+        for i, arr in enumerate((self.w0, self.p, problem.lbx, problem.ubx, problem.lbg, problem.ubg)):
+            _bind(self.buffer.set_arg, i, arr)
+        _bind(self.buffer.set_res, 0, self.w)
+        x_hat, obstacles = self.p[:STATE_DIM], self.p[STATE_DIM * (problem.steps + 2):]
+        check, self.check_plan = problem.check.buffer()
+        warm, self.roll_warm_start = problem.check.buffer()
+        for buf, inputs, states, worst in ((check, self.w[nx:], self.states, self.worst),
+                                          (warm, self.w0[nx:], self.w0[:nx], scratch)):
+            for i, arr in enumerate((x_hat, inputs, obstacles)):
+                _bind(buf.set_arg, i, arr)
+            _bind(buf.set_res, 0, states)
+            _bind(buf.set_res, 1, worst)
+        self._keep = (check, warm, scratch)  # the evaluators need their FunctionBuffer objects alive
+
+    def set_parameters(self, x_hat: np.ndarray, refs: np.ndarray, obstacles: np.ndarray) -> None:
+        """p = [x_hat, vec(refs^T), vec(obstacles)] (column-major, as the NLP's parameter)."""
+        k = STATE_DIM * (len(refs) + 1)
+        p = self.p
+        p[:STATE_DIM] = x_hat
+        p[STATE_DIM:k] = refs.ravel()
+        p[k:] = obstacles.T.ravel()
+
+
+def _bind(setter: Callable[..., None], i: int, arr: np.ndarray) -> None:
+    """``FunctionBuffer.set_arg``/``set_res`` on a contiguous float64 array (or a contiguous slice of one)."""
+    if arr.dtype != np.float64 or not arr.flags.c_contiguous:
+        raise ValueError(f"argument {i}: a CasADi buffer needs contiguous float64 data, not {arr.dtype} {arr.strides}")
+    setter(i, arr.data)  # the memoryview carries the size (the stubs' third argument is not in the Python API)

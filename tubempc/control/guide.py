@@ -12,7 +12,7 @@ import bisect
 import heapq
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,6 +31,15 @@ class NoGuidePathError(DesignError):
 class GuidePath:
     points: np.ndarray  # k x 2, from start to goal
     cum_length_m: np.ndarray  # k, arc length at each vertex
+    # per-call constants, derived once: contiguous coordinate columns and plain-float copies for ``project``
+    _x: np.ndarray = field(init=False, repr=False, compare=False)
+    _y: np.ndarray = field(init=False, repr=False, compare=False)
+    _floats: tuple[list[float], list[float], list[float]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_x", np.ascontiguousarray(self.points[:, 0], dtype=float))
+        object.__setattr__(self, "_y", np.ascontiguousarray(self.points[:, 1], dtype=float))
+        object.__setattr__(self, "_floats", (self._x.tolist(), self._y.tolist(), self.cum_length_m.tolist()))
 
     @property
     def length_m(self) -> float:
@@ -52,11 +61,10 @@ class GuidePath:
         Called once per MPC step on a polyline of a handful of vertices: plain float arithmetic is several times
         faster than numpy here (the candidates and the tie-breaking, first minimum, are the same).
         """
-        n = len(self.points)
+        xs, ys, cum = self._floats
+        n = len(xs)
         if n < 2:
             return s_from_m
-        xs, ys = self.points[:, 0].tolist(), self.points[:, 1].tolist()
-        cum = self.cum_length_m.tolist()
         length = cum[-1]
         px, py = float(p[0]), float(p[1])
         lo, hi = s_from_m, s_from_m + window_m
@@ -152,8 +160,16 @@ def guide_path(start: Sequence[float], goal: Sequence[float], discs: Sequence[tu
     return GuidePath(points=poly, cum_length_m=cum)
 
 
-def references(path: GuidePath, s_m: float, *, lookahead_m: float, step_m: float, stages: int) -> np.ndarray:
-    """``stages`` planar reference points at arc length ``s + lookahead + k * step`` (clamped at the goal)."""
-    s = np.clip(s_m + lookahead_m + step_m * np.arange(stages), 0.0, path.length_m)
-    return np.column_stack([np.interp(s, path.cum_length_m, path.points[:, 0]),
-                            np.interp(s, path.cum_length_m, path.points[:, 1])])
+def references(path: GuidePath, s_m: float, *, lookahead_m: float, step_m: float, stages: int,
+               out: np.ndarray | None = None) -> np.ndarray:
+    """``stages`` planar reference points at arc length ``s + lookahead + k * step`` (clamped at the goal).
+
+    With ``out`` (stages x >= 2) the points are written into its first two columns and ``out`` is returned.
+    """
+    # np.minimum(np.maximum(.)) is np.clip without its Python-level dispatch (the same values)
+    s = np.minimum(np.maximum(s_m + lookahead_m + step_m * np.arange(stages), 0.0), path.length_m)
+    if out is None:
+        out = np.empty((stages, 2))
+    out[:, 0] = np.interp(s, path.cum_length_m, path._x)
+    out[:, 1] = np.interp(s, path.cum_length_m, path._y)
+    return out
