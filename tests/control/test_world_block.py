@@ -71,3 +71,23 @@ def test_casadi_block_matches_the_closed_form_on_the_world_model(kind: str) -> N
         assert np.allclose(values, rk4[name], rtol=0, atol=1e-13), name
     assert np.allclose(end_a[0], end_b[0], rtol=0, atol=1e-13)
     assert np.allclose(end_a[1], end_b[1], rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize(("kind", "m_blk"), [("worst", 10), ("worst", 1), ("random", 10), ("random", 3)])
+def test_per_run_constants_give_the_same_block(kind: str, m_blk: int) -> None:
+    m, dt, sigma, bound = 10, 0.01, 2.0, 0.02
+    a = 1.0 - sigma * dt
+    powers = a ** np.arange(m + 1)
+    lower = np.array([[a ** (k - 1 - j) if j < k else 0.0 for j in range(m)] for k in range(m + 1)])
+    x, x_hat, u_hat = np.array([0.1, -0.2, 0.01]), np.array([0.105, -0.2, 0.0]), np.array([0.18, 0.0, 0.0])
+    t_arr = np.arange(m) * dt + 3.0
+    outs = []
+    for consts in ({}, {"k_dt": (np.arange(m + 1) * dt)[:, None],
+                        "drift": dt * bound * (1.0 - powers) / (sigma * dt)}):
+        arrays = {name: np.zeros((m, 3)) for name in ("xs", "xms", "xhs", "uw")}
+        dist = make_disturbance(kind, bound, np.random.default_rng(5))
+        ends = _world_block(0, m_blk, x, x_hat, u_hat, t_arr=t_arr, dist=dist, rng=np.random.default_rng(6),
+                            sigma=sigma, dt=dt, noise_m=0.0, powers=powers, lower=lower, **consts, **arrays)
+        outs.append((*ends, *arrays.values()))
+    # exact: the constants are the same expressions, evaluated once per run instead of once per block
+    assert all(np.array_equal(p, q) for p, q in zip(*outs, strict=True))
