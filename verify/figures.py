@@ -227,7 +227,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     nom = (_envelope(nominal, [c for c in ("x_m", "y_m", "theta_rad") if c in nominal.columns])
            if nominal is not None and _usable(nominal, ("t_s", "x_m", "y_m")) else None)
     fig = Figure(figsize=(8.0, 7.5))
-    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
+    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     eta = scenario.robot.radius
     r_q = scenario.tube_radius_m
@@ -248,6 +248,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     _mark_violations(axes, certificate)
     axes[0].legend(loc="upper right", fontsize=7)
     axes[-1].set_xlabel("t [s]")
+    fig.align_ylabels(axes)
     axes[0].set_title("States over time")
     return _png(fig)
 
@@ -258,7 +259,7 @@ def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd
         return None
     data = _envelope(inputs, ("u1", "u2", "u3"))
     fig = Figure(figsize=(8.0, 7.5))
-    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
+    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     units = ("m/s", "m/s", "rad/s")
     for i, ax in enumerate(axes):
@@ -324,6 +325,16 @@ def robustness_figure(certificate: Mapping[str, Any], robustness: pd.DataFrame |
     ax.plot(t, rho, color="black", lw=1.0, label="robustness")
     ax.fill_between(t, rho, 0.0, where=rho < 0, color=_FAIL_COLOUR, alpha=0.3, lw=0, label="violated")
     ax.axhline(0.0, color="grey", lw=0.8)
+    # Where a bounded window of the formula reaches past the end of the log, rho(t) is undecided (no finite bound):
+    # show that span instead of letting the curve stop without explanation.
+    duration = certificate.get("duration_s")
+    decided = t[np.isfinite(rho)]
+    if isinstance(duration, int | float) and math.isfinite(duration) and len(t):
+        last = float(decided[-1]) if len(decided) else 0.0
+        if last < duration - 1e-9:
+            ax.axvspan(last, duration, color="grey", alpha=0.15, lw=0,
+                       label="undecided: a window reaches past the end of the log")
+        ax.set_xlim(min(0.0, float(t[0])), duration)
     _mark_violations([ax], certificate)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("rho [m]")
