@@ -57,6 +57,20 @@ class LogData:
     partial: bool
 
 
+
+def _json_objects(raw: RawLog, topic: str) -> list[dict[str, Any]]:
+    """The JSON objects carried by a std_msgs/String topic (solver status, run metadata); other strings skipped."""
+    out: list[dict[str, Any]] = []
+    if topic in raw.topics:
+        for _, text in decode_strings(raw.topics[topic], raw.ros1):
+            try:
+                item = json.loads(text)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(item, dict):
+                out.append(item)
+    return out
+
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file, or of a bag directory (every file's relative name and bytes, in name order)."""
     h = hashlib.sha256()
@@ -149,28 +163,12 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
     else:
         quality["cmd_vel"] = {"count": 0, "missing": True}
 
-    statuses: list[dict[str, Any]] = []
-    if t.solver in raw.topics:
-        for _, text in decode_strings(raw.topics[t.solver], raw.ros1):
-            try:
-                item = json.loads(text)
-            except json.JSONDecodeError:
-                continue
-            if isinstance(item, dict):
-                statuses.append(item)
+    statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
     quality["solver"] = {"count": len(statuses), "failed": len(failed), "backup": sum(1 for s in statuses
                                                                                      if s.get("backup"))}
-    metadata = None
-    if t.metadata in raw.topics:
-        for _, text in decode_strings(raw.topics[t.metadata], raw.ros1):
-            try:
-                item = json.loads(text)
-            except json.JSONDecodeError:
-                continue
-            if isinstance(item, dict):
-                metadata = item
-                break
+    documents = _json_objects(raw, t.metadata)
+    metadata = documents[0] if documents else None
     if raw.partial:
         quality["partial"] = True
     return LogData(str(p), raw.format, file_sha256(p), time_base, t0, pose,
