@@ -112,15 +112,20 @@ def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, seri
     return out
 
 
+def _write_all(writer: Any, messages: list[tuple[str, str, int, bytes | memoryview]], typestore: Any) -> None:
+    """One connection per topic (in first-message order), then every message; the same for ROS1 and ROS2 writers."""
+    conns: dict[str, Any] = {}
+    for topic, msgtype, _, _ in messages:
+        if topic not in conns:
+            conns[topic] = writer.add_connection(topic, msgtype, typestore=typestore)
+    for topic, _, stamp, data in messages:
+        writer.write(conns[topic], stamp, data)
+
+
 def _write_ros2(messages: list[tuple[str, str, int, bytes | memoryview]], directory: Path, plugin: StoragePlugin,
                 typestore: Any) -> None:
     with Writer2(directory, version=_ROS2_VERSION, storage_plugin=plugin) as writer:
-        conns: dict[str, Any] = {}
-        for topic, msgtype, _, _ in messages:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msgtype, typestore=typestore)
-        for topic, _, stamp, data in messages:
-            writer.write(conns[topic], stamp, data)
+        _write_all(writer, messages, typestore)
 
 
 def write_log(result: ClosedLoopResult, scenario: Scenario, path: str | Path, *, storage: str = "mcap",
@@ -139,12 +144,7 @@ def write_log(result: ClosedLoopResult, scenario: Scenario, path: str | Path, *,
             store = get_typestore(Stores.ROS1_NOETIC)
             msgs = _messages(result, scenario, store, store.serialize_ros1, extra=metadata, ros1=True)
             with Writer1(target) as writer:
-                conns: dict[str, Any] = {}
-                for topic, msgtype, _, _ in msgs:
-                    if topic not in conns:
-                        conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-                for topic, _, stamp, data in msgs:
-                    writer.write(conns[topic], stamp, data)
+                _write_all(writer, msgs, store)
             return target
         store = get_typestore(Stores.ROS2_HUMBLE)
         msgs = _messages(result, scenario, store, store.serialize_cdr, extra=metadata, ros1=False)
