@@ -267,7 +267,9 @@ def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
             if step >= d and np.all(np.diff(starts) == step):
                 view = np.lib.stride_tricks.as_strided(u8[int(starts[0]) :], shape=(n, d), strides=(step, 1),
                                                        writeable=False)
-                return np.ascontiguousarray(view).ravel()
+                packed = np.empty((n, d), dtype=np.uint8)  # a copy even when contiguous: never a view of the chunk
+                packed[...] = view
+                return packed.ravel()
         rows: U8Array = u8[starts[:, None] + np.arange(d)]
         return rows.ravel()
     out_off = np.zeros(n + 1, dtype=np.int64)

@@ -262,7 +262,10 @@ def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) ->
     stamp = np.ascontiguousarray(rec[:, time_at : time_at + 8]).view("<u4").reshape(k, 2).astype(np.int64)
     if np.any(conn != cid) or not np.array_equal(stamp[:, 0] * 1_000_000_000 + stamp[:, 1], times):
         raise _UnusualError("index and message records disagree")
-    return times, np.ascontiguousarray(rec[:, 8 + h :]).ravel(), np.full(k, d, dtype=np.int64)
+    # a copy, never a view: a view (e.g. of a single record) would keep the whole decompressed chunk alive
+    payloads = np.empty((k, d), dtype=np.uint8)
+    payloads[...] = rec[:, 8 + h :]
+    return times, payloads.ravel(), np.full(k, d, dtype=np.int64)
 
 
 def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) -> tuple[IntArray, U8Array,
