@@ -3,6 +3,7 @@ on uncompressed, bz2 and lz4 bags, and declines (falls back to rosbags) on anyth
 
 from __future__ import annotations
 
+import os
 import tracemalloc
 from pathlib import Path
 from typing import Any
@@ -171,4 +172,29 @@ def test_kept_payloads_do_not_hold_their_chunks(tmp_path: Path, compression: str
     # bounds: the returned arrays are ~10 KiB; a chunk is ~1 MiB and at most a few are alive at once
     assert kept_b < 1 << 20, f"the result holds {kept_b} bytes"
     assert peak_b < 8 << 20, f"peak {peak_b} bytes while reading"
+    _same_as_rosbags(path, {"/pose"})
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                         compression: str | None) -> None:
+    """/pose is ~200 bytes of every ~1 MiB chunk: from an uncompressed chunk only its records (and the index) are
+    read; a compressed chunk has to be read whole."""
+    path = _sparse_bag(tmp_path / "sparse.bag", compression, 20)
+    real_pread = os.pread
+    read_b = [0]
+
+    def counting(fd: int, n: int, pos: int) -> bytes:
+        read_b[0] += n
+        return real_pread(fd, n, pos)
+
+    monkeypatch.setattr(os, "pread", counting)
+    fast = read_ros1_fast(path, {"/pose"})
+    monkeypatch.undo()
+    assert fast is not None and len(fast.topics["/pose"][3]) == 20
+    size_b = path.stat().st_size
+    if compression is None:
+        assert read_b[0] < size_b // 50, f"read {read_b[0]} of {size_b} bytes"
+    else:
+        assert read_b[0] > size_b // 2
     _same_as_rosbags(path, {"/pose"})
