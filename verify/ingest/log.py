@@ -101,7 +101,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
         raise UnusableInputError(f"time_base={time_base!r} must be 'header' or 'log'")
     p = Path(path)
     t = scenario.topics
-    wanted = {t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC}
+    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -140,7 +140,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
     quality["pose"] = pq
 
     nominal = None
-    if t.nominal in raw.topics and raw.topics[t.nominal].payloads:
+    if t.nominal is not None and t.nominal in raw.topics and raw.topics[t.nominal].payloads:
         ncols = decode_pose(raw.topics[t.nominal], raw.ros1)
         nst = ncols.stamp_ns if time_base == "header" else ncols.log_ns
         norder = clean_order(nst)
@@ -150,10 +150,10 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
         quality["nominal"] = stream_findings(nst, None, norder, expected_rate_hz=scenario.mocap.rate_hz,
                                              time0_ns=t0)
     else:
-        quality["nominal"] = {"count": 0, "missing": True}
+        quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
     cmd_t = cmd_u = None
-    if t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
+    if t.cmd_vel is not None and t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
         tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
         corder = clean_order(tw.log_ns)
         cmd_t, cmd_u = tw.log_ns[corder.index], tw.u[corder.index]
@@ -161,7 +161,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         quality["cmd_vel"] = cq
     else:
-        quality["cmd_vel"] = {"count": 0, "missing": True}
+        quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
     statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
