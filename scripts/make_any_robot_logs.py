@@ -90,6 +90,30 @@ def odometry_messages(run: UnicycleRun, topic: str, *, ros1: bool, time0_ns: int
     return out
 
 
+def command_messages(run: UnicycleRun, topic: str, *, ros1: bool, stamped: bool, time0_ns: int = TIME0_NS,
+                     lateral: np.ndarray | None = None, header_offset_ns: int = 0,
+                     frame_id: str = "base_link") -> list[tuple[str, str, int, Any]]:
+    """The run's commands as Twist or TwistStamped (linear.x = v, angular.z = w, linear.y = ``lateral`` or 0)."""
+    T = _store(ros1).types
+    V3 = T["geometry_msgs/msg/Vector3"]
+    side = np.zeros_like(run.v) if lateral is None else lateral
+    out = []
+    for t, v, w, vy in zip(run.t_s, run.v, run.w, side, strict=True):
+        t_ns = time0_ns + round(float(t) * 1e9)
+        twist = T["geometry_msgs/msg/Twist"](linear=V3(x=float(v), y=float(vy), z=0.0),
+                                             angular=V3(x=0.0, y=0.0, z=float(w)))
+        if not stamped:
+            out.append((topic, "geometry_msgs/msg/Twist", t_ns, twist))
+            continue
+        stamp = t_ns + header_offset_ns
+        header = T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), frame_id=frame_id,
+                                         stamp=T["builtin_interfaces/msg/Time"](sec=stamp // 10**9,
+                                                                                nanosec=stamp % 10**9))
+        out.append((topic, "geometry_msgs/msg/TwistStamped", t_ns,
+                    T["geometry_msgs/msg/TwistStamped"](header=header, twist=twist)))
+    return out
+
+
 def _store(ros1: bool) -> Any:
     return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
 

@@ -146,6 +146,10 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
         return CheckResult("input_box", "inconclusive", None, None, {**details, "reason": "no cmd_vel logged"})
     per = bounds[None, :] + INPUT_TOLERANCE - np.abs(u[:, cols])
     margin = np.min(per, axis=1)
+    with np.errstate(all="ignore"):
+        worst = np.nanmin(per, axis=0) if np.isfinite(per).any() else np.full(3, np.nan)
+    details["component_margins"] = {n: (float(m) if np.isfinite(m) else None) for n, m in zip(names, worst,
+                                                                                              strict=True)}
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))

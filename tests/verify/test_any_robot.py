@@ -163,3 +163,66 @@ def test_plan_and_simulate_name_what_the_planner_lacks(tmp_path: Path) -> None:
     assert out.returncode == 3
     assert out.stderr.strip() == ("tubempc: error: diffdrive-lab: inputs.model: cannot plan on this scenario: "
                                   "unicycle: the paper's tube MPC needs a fully actuated (holonomic) input model")
+
+
+# ---- input models: holonomic / unicycle, Twist / TwistStamped ------------------------------------------------------
+def _cmd_log(tmp_path: Path, run: Any, suffix: str, *, stamped: bool, lateral: np.ndarray | None = None,
+             header_offset_ns: int = 0) -> Path:
+    ros1 = suffix == ".bag"
+    msgs = KIT.odometry_messages(run, "/odom", ros1=ros1) + KIT.command_messages(
+        run, "/cmd_vel", ros1=ros1, stamped=stamped, lateral=lateral, header_offset_ns=header_offset_ns)
+    return KIT.write_messages(tmp_path / f"cmd{suffix}", msgs)
+
+
+@pytest.mark.parametrize("suffix", [".bag", ".mcap"])
+@pytest.mark.parametrize("stamped", [False, True])
+def test_unicycle_commands_pass_and_fail_per_component(tmp_path: Path, suffix: str, stamped: bool) -> None:
+    run = _run(3.4)
+    sc = lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    ok = certify_log(_cmd_log(tmp_path, run, suffix, stamped=stamped), sc).certificate
+    box = _check(ok, "input_box")
+    assert box["verdict"] == "pass" and box["model"] == "unicycle"
+    # v 0.4 of 0.5, w 0.8 of 1.0, lateral 0 of the 1 mm/s tolerance (the tightest: the check's margin)
+    assert box["component_margins"] == pytest.approx({"linear.x": 0.1, "angular.z": 0.2, "linear.y": 0.001},
+                                                     abs=1e-8)
+    assert box["margin"] == pytest.approx(0.001, abs=1e-8)
+    assert ok["data_quality"]["cmd_vel"]["type"].endswith("TwistStamped" if stamped else "Twist")
+    assert ok["data_quality"]["cmd_vel"]["time_base"] == ("header" if stamped else "log")
+    # a lateral velocity of 2 cm/s at sample 300 is a violation for a differential drive (tolerance 1 mm/s)
+    lateral = np.zeros_like(run.v)
+    lateral[300] = 0.02
+    (tmp_path / "b").mkdir()
+    bad = certify_log(_cmd_log(tmp_path / "b", run, suffix, stamped=stamped, lateral=lateral), sc).certificate
+    box = _check(bad, "input_box")
+    assert box["verdict"] == "fail" and box["component"] == "linear.y"
+    assert box["first_violation_time"] == pytest.approx(run.t_s[300], abs=1e-9)
+    assert box["margin"] == pytest.approx(0.001 - 0.02, abs=1e-8)
+    # the same commands under a holonomic box [0.5, 0.5, 1.0]: the lateral 2 cm/s is allowed
+    holo = lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"}, inputs={"max_abs": [0.5, 0.5, 1.0]})
+    again = certify_log(tmp_path / "b" / f"cmd{suffix}", holo).certificate
+    assert _check(again, "input_box")["verdict"] == "pass"
+    assert again["speed_bound_mps"] == pytest.approx(np.hypot(0.5, 0.5))
+
+
+def test_twist_stamped_uses_its_header_on_the_header_time_base(tmp_path: Path) -> None:
+    """The command's header runs 0.5 s behind its log time: on the header time base the spike is reported at the
+    header time; the fast decode and rosbags' deserialize agree."""
+    run = _run(3.4)
+    spike = run.w.copy()
+    spike[400] = 1.5
+    run = KIT.UnicycleRun(run.t_s, run.x, run.y, run.theta, run.v, spike)
+    sc = lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    log = _cmd_log(tmp_path, run, ".mcap", stamped=True, header_offset_ns=-500_000_000)
+    header = _check(certify_log(log, sc).certificate, "input_box")
+    assert header["component"] == "angular.z" and header["margin"] == pytest.approx(-0.5, abs=1e-8)
+    assert header["first_violation_time"] == pytest.approx(run.t_s[400] - 0.5, abs=1e-9)
+    logged = _check(certify_log(log, sc, time_base="log").certificate, "input_box")
+    assert logged["first_violation_time"] == pytest.approx(run.t_s[400], abs=1e-9)
+
+    from verify.ingest.decode import decode_twist
+    from verify.ingest.raw import read_raw
+
+    raw = read_raw(log, {"/cmd_vel"}).topics["/cmd_vel"]
+    fast, slow = decode_twist(raw, False), decode_twist(raw, False, fast=False)
+    assert fast.fast and not slow.fast
+    assert np.array_equal(fast.u, slow.u) and np.array_equal(fast.stamp_ns, slow.stamp_ns)

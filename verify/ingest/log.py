@@ -155,10 +155,15 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
     cmd_t = cmd_u = None
     if t.cmd_vel is not None and t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
         tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
-        corder = clean_order(tw.log_ns)
-        cmd_t, cmd_u = tw.log_ns[corder.index], tw.u[corder.index]
-        cq = stream_findings(tw.log_ns, None, corder, expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
+        cst = tw.stamp_ns if (tw.stamp_ns is not None and time_base == "header") else tw.log_ns
+        corder = clean_order(cst)
+        cmd_t, cmd_u = cst[corder.index], tw.u[corder.index]
+        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
+                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
+        cq["type"] = raw.topics[t.cmd_vel].msgtype
+        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
         quality["cmd_vel"] = cq
     else:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
