@@ -36,6 +36,9 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="auto", show_default=True,
               help="auto: header stamps unless they cannot order the samples (then log time, noted in the "
                    "certificate); header: header stamps (no pass if they cannot order the samples); log: receive time.")
+@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
+              help="Checks to run: spec, obstacle_clearance, workspace, tube, input_box (default: the scenario's "
+                   "checks:, else every check whose data the scenario names).")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
@@ -45,16 +48,18 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
-            progress: bool | None) -> None:
+            progress: bool | None, checks_text: str | None) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
     """
     from verify.certify import certify_log, resolve_scenario, write_certificate
+    from verify.selection import parse_check_list
 
     sc = resolve_scenario(scenario)
+    checks = parse_check_list(checks_text) if checks_text is not None else None
     if _single_log(logs) and dask is None:
-        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage)
+        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks)
         cert = result.certificate
         line = f"{logs[0]}: {cert['verdict']}"
         failed = [c for c in cert["checks"] if c["verdict"] != "pass"]
@@ -63,6 +68,10 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                 f"{c['name']}: {c['verdict']}"
                 + (f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
                 for c in failed) + ")"
+        line += f" [checks: {', '.join(cert['checks_selected'])}"
+        if cert["not_checked"]:
+            line += f"; not checked: {', '.join(c['name'] for c in cert['not_checked'])}"
+        line += "]"
         if out_dir is not None:
             line += f" -> {write_certificate(result, out_dir)}"
             if not no_report:
@@ -78,7 +87,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
-                         progress=progress)
+                         progress=progress, checks=checks)
     for text in summary_lines(batch):
         click.echo(text)
     if out_dir is not None:
