@@ -51,8 +51,9 @@ def failing_report(tmp_path_factory: pytest.TempPathFactory,
 
 def test_files_and_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
     tmp_path, written, _ = failing_report
-    expected = {"report.md", "report.html", "junit.xml", "figures/workspace.png", "figures/states.png",
-                "figures/tube.png", "figures/inputs.png", "figures/robustness.png", "figures/sampling.png"}
+    expected = {"report.md", "report.html", "junit.xml", "figures/workspace.png", "figures/obligations.png",
+                "figures/clearance.png", "figures/states.png", "figures/tube.png", "figures/inputs.png",
+                "figures/sampling.png"}
     assert set(written) == expected
     for rel, path in written.items():
         assert path == tmp_path / rel and path.stat().st_size > 0
@@ -60,16 +61,16 @@ def test_files_and_figures(failing_report: tuple[Path, dict[str, Path], Any]) ->
             assert path.read_bytes().startswith(PNG_MAGIC)
     md = (tmp_path / "report.md").read_text()
     assert md.startswith("# Certificate: FAIL")
-    for stem in ("workspace", "states", "tube", "inputs", "robustness", "sampling"):
+    for stem in ("workspace", "obligations", "clearance", "states", "tube", "inputs", "sampling"):
         assert f"(figures/{stem}.png)" in md
-    assert "| tube | fail |" in md and "12.5" in md
+    assert "| tube | fail |" in md and "12.50 s" in md
 
 
 def test_html_is_self_contained_with_embedded_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
     tmp_path = failing_report[0]
     page = _parse(tmp_path / "report.html")
     imgs = [attrs for tag, attrs in page.tags if tag == "img"]
-    assert len(imgs) == 6
+    assert len(imgs) == 7
     for attrs in imgs:
         src = attrs["src"] or ""
         assert src.startswith("data:image/png;base64,")
@@ -90,7 +91,7 @@ def test_strings_from_log_and_scenario_are_escaped(tmp_path: Path, scenario: Sce
     page = _parse(tmp_path / "report.html")
     tags = [t for t, _ in page.tags]
     assert "script" not in tags
-    assert tags.count("img") == 6  # the injected <img> stayed text
+    assert tags.count("img") == 7  # the injected <img> stayed text
     text = "".join(page.text)
     assert '<script>alert("x")</script>' in text and '<script>alert("s")</script>' in text
     md = (tmp_path / "report.md").read_text()
@@ -122,8 +123,9 @@ def test_passing_run_and_missing_optional_data(tmp_path: Path, scenario: Scenari
                                                make_result: Callable[..., Any]) -> None:
     written = write_reports(make_result(verdict="pass", with_optional=False), scenario, tmp_path)
     # without nominal/inputs/robustness the figures that need them are left out rather than drawn empty
-    assert {k for k in written if k.startswith("figures/")} == {"figures/workspace.png", "figures/states.png",
-                                                                  "figures/sampling.png"}
+    assert {k for k in written if k.startswith("figures/")} == {
+        "figures/workspace.png", "figures/obligations.png", "figures/clearance.png", "figures/states.png",
+        "figures/sampling.png"}
     suite = ET.parse(tmp_path / "junit.xml").getroot().find("testsuite")
     assert suite is not None and suite.get("failures") == "0" and suite.get("skipped") == "0"
     assert (tmp_path / "report.md").read_text().startswith("# Certificate: PASS")
