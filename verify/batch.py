@@ -343,17 +343,14 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
 
 def summary_lines(batch: BatchResult) -> list[str]:
     """One line per log for a terminal: ``path: verdict (failed checks with first violation times)``."""
+    from verify.certify import verdict_line
+
     lines = []
     for item in batch.items:
         if item.result is None:
             lines.append(f"{item.path}: {item.verdict} ({item.error})")
             continue
-        bad = [c for c in item.result.certificate.get("checks", []) or []
-               if isinstance(c, dict) and c.get("verdict") != "pass"]
-        detail = "; ".join(f"{c.get('name')}: {c.get('verdict')}" + (
-            f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
-            for c in bad)
-        lines.append(f"{item.path}: {item.verdict}" + (f" ({detail})" if detail else ""))
+        lines.append(verdict_line(item.path, item.result.certificate))
     counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
     lines.append(f"{len(batch.items)} log(s): {counts}; exit code {batch.exit_code}")
     return lines

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import click
 
+from tubempc.commands.output import progress_line, say
+
 __all__ = ["regress"]
 
 
@@ -55,17 +57,17 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         raise click.UsageError("--reports needs --out DIR")
     cases = expand_suite(loaded)
     if update_baseline:
-        click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+        progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
         outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
         path = write_baseline(baseline_path, loaded.suite, outcomes)
-        click.echo(f"regress: baseline written to {path} ({len(outcomes)} runs)")
+        say(f"regress: baseline written to {path} ({len(outcomes)} runs)")
         return
     baseline = read_baseline(baseline_path)  # before the runs: a missing baseline fails fast
-    click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+    progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
     outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
     comparison = compare(baseline, outcomes, loaded.suite.tolerances)
     text = format_diff(comparison)
-    click.echo(text)
+    say(text)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
