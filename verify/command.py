@@ -56,16 +56,20 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--dask", "dask", default=None, metavar="local|tcp://HOST:PORT",
               help="Certify several logs on Dask distributed (a local cluster, or a running scheduler).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+@click.option("--junit-inconclusive", type=click.Choice(["failure", "skipped"]), default="failure", show_default=True,
+              help="junit.xml: an inconclusive check is a <failure type=\"inconclusive\"> (CI turns red: not a pass) "
+                   "or <skipped> (shown green or grey by most dashboards).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the certificate as JSON on stdout (a list for several logs); the summary goes to stderr.")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
-            progress: bool | None, as_json: bool) -> None:
+            progress: bool | None, junit_inconclusive: str, as_json: bool) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
     """
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
+    from verify.junit import InconclusiveAs
 
     level = _verbosity()
     sc = resolve_scenario(scenario)
@@ -77,7 +81,8 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
             if not no_report:
                 from verify.report import write_reports
 
-                write_reports(result, sc, out_dir, suite_name=logs[0].name)
+                write_reports(result, sc, out_dir, suite_name=logs[0].name,
+                              junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
         if as_json:
             click.echo(json.dumps(result.certificate, indent=2))
         if level >= 0:
@@ -99,7 +104,8 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
         for text in summary_lines(batch):
             click.echo(text, err=as_json)
     if out_dir is not None:
-        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress)
+        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
+                              junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
         summary = written.get("summary.md")
         if summary is not None and level >= 0:
             click.echo(f"summary: {summary}", err=as_json)

@@ -2,8 +2,8 @@
 
 input: a ``CertifyResult`` (certificate dict plus trajectory/nominal/inputs/robustness frames) and the scenario
 -> output: ``report.md`` (figures as files under ``figures/``), a self-contained ``report.html`` (figures embedded
-as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (one test case per check: ``failure`` for a
-failed check, ``skipped`` for an inconclusive one) so that CI systems show the checks natively.
+as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (``verify.junit``: one test case per check, a
+``failure`` for a failed check and, by default, for an inconclusive one) so that CI systems show the checks natively.
 
 Every string that comes from a log or a scenario is escaped: ``html.escape`` in HTML, entity and backslash escapes
 in Markdown, ElementTree (plus removal of characters XML 1.0 cannot carry) in JUnit.
@@ -27,6 +27,7 @@ import pandas as pd
 from tubempc.scenario import Scenario
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
+from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
 
 __all__ = [
     "CertifyResultLike",
@@ -35,12 +36,12 @@ __all__ = [
     "html_report",
     "junit_xml",
     "markdown_report",
+    "write_junit",
     "write_reports",
 ]
 
 _MAIN_KEYS = ("checks", "timed_run", "data_quality")
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
-_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 _MD_ENTITY = re.compile(r"&(?=#?\w+;)")  # only an '&' that would start an entity is escaped: 'a & b' stays
 _MD_SPECIAL = re.compile(r"([\\`*\[\]|~]|(?<!\w)_|_(?!\w))")  # links, emphasis, code, tables; not intraword _
 
@@ -331,58 +332,23 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
 
 
 # ---- JUnit --------------------------------------------------------------------------------------------------------
-def _x(value: Any) -> str:
-    return _XML_INVALID.sub("\ufffd", _fmt(value) if not isinstance(value, str) else value)
-
-
-def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify") -> ET.Element:
-    """``<testsuite>`` with one ``<testcase>`` per check (``failure`` / ``skipped`` for fail / inconclusive)."""
-    cert = result.certificate
-    checks = _check_rows(cert)
-    failures = sum(1 for c in checks if c.get("verdict") == "fail")
-    skipped = sum(1 for c in checks if c.get("verdict") not in ("pass", "fail"))
-    suite = ET.Element("testsuite", {"name": _x(suite_name), "tests": str(len(checks)), "failures": str(failures),
-                                     "errors": "0", "skipped": str(skipped), "time": "0"})
-    props = ET.SubElement(suite, "properties")
-    for key in ("verdict", "formula", "scenario_sha256", "log_sha256", "partial"):
-        if key in cert:
-            ET.SubElement(props, "property", {"name": key, "value": _x(cert[key])})
-    for check in checks:
-        case = ET.SubElement(suite, "testcase", {"classname": _x(suite_name), "name": _x(check.get("name", "?")),
-                                                 "time": "0"})
-        verdict = check.get("verdict")
-        summary = (f"verdict {_fmt(verdict)}, margin {_fmt(check.get('margin'))}, first violation at "
-                   f"{_fmt(check.get('first_violation_time'))} s")
-        details = _check_details(check)
-        if verdict == "fail":
-            node = ET.SubElement(case, "failure", {"message": _x(summary), "type": "violation"})
-            node.text = _x(details or summary)
-        elif verdict != "pass":
-            ET.SubElement(case, "skipped", {"message": _x(f"{summary}. {details}".strip(" ."))})
-    return suite
-
-
-def write_junit(suites: list[ET.Element], path: Path) -> Path:
-    """Write ``<testsuites>`` around the given suites (one per log in a batch)."""
-    root = ET.Element("testsuites", {
-        "tests": str(sum(int(s.get("tests", "0")) for s in suites)),
-        "failures": str(sum(int(s.get("failures", "0")) for s in suites)),
-        "errors": str(sum(int(s.get("errors", "0")) for s in suites)),
-        "skipped": str(sum(int(s.get("skipped", "0")) for s in suites))})
-    root.extend(suites)
-    ET.indent(root)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
-    return path
+def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify",
+              inconclusive: InconclusiveAs = "failure") -> ET.Element:
+    """``<testsuite>`` with one ``<testcase>`` per check (``verify.junit``: a failed check is a ``failure`` of type
+    ``violation``, an inconclusive one a ``failure`` of type ``inconclusive`` unless ``inconclusive="skipped"``)."""
+    return suite_element(certificate_suite(result.certificate, suite_name=suite_name, inconclusive=inconclusive))
 
 
 # ---- writing ------------------------------------------------------------------------------------------------------
 def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | Path, *,
-                  suite_name: str = "certify", sections: Sequence[ReportSection] = ()) -> dict[str, Path]:
+                  suite_name: str = "certify", sections: Sequence[ReportSection] = (),
+                  junit_inconclusive: InconclusiveAs = "failure") -> dict[str, Path]:
     """Write ``report.md``, ``report.html``, ``junit.xml`` and ``figures/*.png`` into ``out_dir`` (created).
 
     Returns the written paths keyed by their path relative to ``out_dir`` (``"report.html"``,
     ``"figures/workspace.png"``, ...). ``suite_name`` names the JUnit suite (a batch passes the log's name).
     ``sections`` are appended to both reports (the demo's comparison with the paper uses this).
+    ``junit_inconclusive``: how ``junit.xml`` reports an inconclusive check (``verify.junit``).
     """
     out = Path(out_dir)
     figures = render_figures(result.certificate, scenario, trajectory=result.trajectory, nominal=result.nominal,
@@ -400,7 +366,8 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
         page = out / "report.html"
         page.write_text(html_report(result, scenario, figures, sections=sections), encoding="utf-8")
         written["report.html"] = page
-        written["junit.xml"] = write_junit([junit_xml(result, suite_name=suite_name)], out / "junit.xml")
+        suite = certificate_suite(result.certificate, suite_name=suite_name, inconclusive=junit_inconclusive)
+        written["junit.xml"] = write_junit([suite], out / "junit.xml")
     except OSError as err:
         raise ReportWriteError(f"{out}: cannot write the reports ({err.__class__.__name__}: {err})") from err
     return written

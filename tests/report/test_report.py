@@ -107,16 +107,39 @@ def test_junit_one_case_per_check(failing_report: tuple[Path, dict[str, Path], A
     assert root.tag == "testsuites"
     (suite,) = root.findall("testsuite")
     assert suite.get("name") == "run.mcap"
-    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("4", "1", "1",
+    # the inconclusive check is a failure too (dashboards paint <skipped> green): 2 failures, nothing skipped
+    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("4", "2", "0",
                                                                                                       "0")
     cases = {c.get("name"): c for c in suite.findall("testcase")}
     assert list(cases) == [c["name"] for c in result.certificate["checks"]]
     failure = cases["tube"].find("failure")
     assert failure is not None and "12.5" in (failure.get("message") or "")
-    assert cases["inputs"].find("skipped") is not None and cases["inputs"].find("failure") is None
+    assert failure.get("type") == "violation"
+    undecided = cases["inputs"].find("failure")
+    assert undecided is not None and undecided.get("type") == "inconclusive" and cases["inputs"].find("skipped") is None
     assert list(cases["mitl_timed_run"]) == []  # a passing check has no child element
     props = {p.get("name"): p.get("value") for p in suite.iter("property")}
     assert props["verdict"] == "fail" and props["log_sha256"] == "cd" * 32
+
+
+def test_junit_inconclusive_can_stay_skipped(tmp_path: Path, scenario: Scenario,
+                                            make_result: Callable[..., Any]) -> None:
+    write_reports(make_result(verdict="inconclusive"), scenario, tmp_path, junit_inconclusive="skipped")
+    suite = ET.parse(tmp_path / "junit.xml").getroot().find("testsuite")
+    assert suite is not None and (suite.get("failures"), suite.get("skipped")) == ("0", "1")
+    write_reports(make_result(verdict="inconclusive"), scenario, tmp_path / "default")
+    suite = ET.parse(tmp_path / "default" / "junit.xml").getroot().find("testsuite")
+    assert suite is not None and (suite.get("failures"), suite.get("skipped")) == ("1", "0")
+
+
+def test_one_junit_writer_for_certify_batch_and_regress() -> None:
+    """certify, batch and regress all build ``verify.junit`` suites; no other module writes JUnit XML."""
+    import re as _re
+
+    root = Path(__file__).resolve().parents[2]
+    writers = [p for folder in ("verify", "tubempc") for p in (root / folder).rglob("*.py")
+               if _re.search(r"SubElement\([^)]*\"testcase\"|Element\(\"testsuites?\"", p.read_text(encoding="utf-8"))]
+    assert [p.relative_to(root).as_posix() for p in writers] == ["verify/junit.py"]
 
 
 def test_passing_run_and_missing_optional_data(tmp_path: Path, scenario: Scenario,

@@ -7,7 +7,6 @@ With ``--out DIR``: every run's log and certificate under ``DIR/<run>/``, plus `
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import click
@@ -46,6 +45,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_baseline,
     )
     from tubempc.regress.compare import BaselineError
+    from verify.junit import write_junit
 
     loaded = load_suite(suite_path)
     if baseline_path is None:
@@ -72,7 +72,6 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         (out / "diff.txt").write_text(text + "\n", encoding="utf-8")
-        ET.ElementTree(comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)).write(
-            out / "junit.xml", encoding="utf-8", xml_declaration=True)
+        write_junit([comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)], out / "junit.xml")
     if comparison.regressed:
         raise click.exceptions.Exit(1)
