@@ -275,6 +275,8 @@ class OnlineMonitor:
         self._closed = False
         self._result: OnlineResult | None = None
         self._final: list[CheckResult] | None = None
+        self._unreturned: list[Decision] = []
+        self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
 
     # ---- input ----------------------------------------------------------------------------------------------------
     def _accept(self, stream: str, t_ns: int) -> bool:
@@ -293,23 +295,29 @@ class OnlineMonitor:
         if self._accept("pose", int(t_ns)):
             self._pose.append((int(t_ns), float(x_m), float(y_m)))
             if len(self._pose) >= self.max_pending:
-                self.update()
+                self._process()
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         if self._accept("nominal", int(t_ns)):
             self._nom.append((int(t_ns), float(x_m), float(y_m)))
             if len(self._nom) >= self.max_pending:
-                self.update()
+                self._process()
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
         if self._accept("cmd", int(t_ns)):
             self._cmd.append((int(t_ns), float(u1), float(u2), float(u3)))
             if len(self._cmd) >= self.max_pending:
-                self.update()
+                self._process()
 
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
-        """Judge the buffered samples; the checks and obligations decided since the last call."""
+        """Judge the buffered samples; the checks and obligations decided since the last call (including those
+        decided when ``max_pending`` samples made a push judge the buffer)."""
+        self._process()
+        out, self._unreturned = self._unreturned, []
+        return out
+
+    def _process(self) -> None:
         if self._nom:
             self._feed_nominal(np.array(self._nom, dtype=np.float64).reshape(-1, 3),
                                np.array([s[0] for s in self._nom], dtype=np.int64))
@@ -325,7 +333,7 @@ class OnlineMonitor:
             self._cmd.clear()
             self._feed_cmd(t, u)
         self._resolve_tube(closing=False)
-        return self._new_decisions()
+        self._unreturned.extend(self._new_decisions())
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray) -> None:
         sc = self.scenario
@@ -382,6 +390,7 @@ class OnlineMonitor:
             if hit is not None:
                 self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
         self._tube_pending.append((t_abs[k0:], x[k0:], y[k0:]))
+        self._tube_last_t = int(t_abs[-1])
 
     def _feed_nominal(self, rows: FloatArray, t: IntArray) -> None:
         nt, nx, ny = self._nominal
@@ -403,6 +412,7 @@ class OnlineMonitor:
         if nt.size == 0:
             self._tube_pending = [(t, x, y)] if not closing else []
             return
+        nt, nx, ny = self._nominal
         k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
         if k:
             res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self.scenario.tube_radius_m,
@@ -410,20 +420,23 @@ class OnlineMonitor:
             self._tube.feed(res, k)
         self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
         # keep the nominal samples a later pose sample can still match: from the last one before it
-        keep_from = int(t[k]) if k < t.shape[0] else int(nt[-1])
+        keep_from = int(t[k]) if k < t.shape[0] else self._tube_last_t + 1
         j = max(int(np.searchsorted(nt, keep_from, side="left")) - 1, 0)
         self._nominal = (nt[j:], nx[j:], ny[j:])
 
     # ---- state -------------------------------------------------------------------------------------------------------
     def _head_state(self, name: str, h: Head, *, margin: bool) -> CheckState:
+        """Margin so far: the guaranteed robustness (lower bound) unless false, then its upper bound (how far
+        from being satisfied it is at best)."""
         verdict = h.verdict
-        decided = h.decided
-        m = h.lo if margin and verdict != "inconclusive" else (h.lo if margin and math.isfinite(h.lo) else None)
-        return CheckState(name, verdict, decided, _rel_s(h.decided_ns + (self.t0_ns or 0), self.t0_ns)
-                          if decided and h.decided_ns is not None else None,
-                          m if m is None or math.isfinite(m) else None,
-                          _rel_s(h.witness_ns + (self.t0_ns or 0), self.t0_ns)
-                          if verdict == "fail" and h.witness_ns is not None else None)
+        t0 = self.t0_ns or 0
+        m: float | None = None
+        if margin:
+            m = h.hi if verdict == "fail" else h.lo
+            m = m if math.isfinite(m) else None
+        decided_at = _rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
+        first = _rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        return CheckState(name, verdict, h.decided, decided_at, m, first)
 
     def _check_states(self) -> list[CheckState]:
         t0 = self.t0_ns
@@ -452,7 +465,7 @@ class OnlineMonitor:
     def state(self) -> MonitorState:
         """The current state of every check and obligation (judges the buffered samples first)."""
         if not self._closed:
-            self.update()
+            self._process()
         if self._result is not None:
             return self._result.state
         return self._state(closed=False)
@@ -485,14 +498,15 @@ class OnlineMonitor:
         for a log with the same samples (``partial``: the log was salvaged, never a pass)."""
         if self._result is not None:
             return self._result
-        self.update()
+        self._process()
         self._closed = True
         for sem in (self._traj, self._run):
             sem.evaluation.step(closing=True)
         self._resolve_tube(closing=True)
         checks = self._final_checks()
         self._final = checks
-        self._final_decisions = self._new_decisions()
+        self._final_decisions = self._unreturned + self._new_decisions()
+        self._unreturned = []
         verdicts = [c.verdict for c in checks]
         why: str | None = None
         if "fail" in verdicts:
