@@ -30,11 +30,11 @@ from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
-from verify.geometry import containing_region, gap_bounds, label_margins, region_margins, step_bound_m, workspace_margin
+from verify.geometry import gap_bounds, step_bound_m, workspace_margin
 from verify.ingest import LogData
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.timedrun import parse_spec
-from verify.trajectory import interleave, trajectory_positions
+from verify.trajectory import trajectory_positions
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
@@ -232,7 +232,7 @@ class OnlineMonitor:
     """Incremental certifier of one run. ``push_pose`` / ``push_nominal`` / ``push_cmd`` in time order (per stream),
     ``update`` for the new decisions, ``state`` for everything so far, ``close`` for the final verdicts."""
 
-    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 256) -> None:
+    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100) -> None:
         if max_pending < 1:
             raise ValueError(f"max_pending={max_pending!r} must be >= 1")
         sc = resolve_scenario(scenario)
@@ -248,16 +248,28 @@ class OnlineMonitor:
         self._traj = _Semantics(self.formula)
         self._run = _Semantics(self.formula)
         self._obligation_names = [str(h.formula) for h in self._traj.obligations]
+        eta = sc.robot.radius
+        self._cx = np.array([r.center[0] for r in sc.regions], dtype=np.float64)
+        self._cy = np.array([r.center[1] for r in sc.regions], dtype=np.float64)
+        self._radius = np.array([r.radius for r in sc.regions], dtype=np.float64)
+        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in sc.regions])
+        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels] for name in self._names]
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
         self._tol_m = 3.0 * sc.mocap.noise_std
         # pending input
-        self._pose: list[tuple[int, float, float]] = []
-        self._nom: list[tuple[int, float, float]] = []
-        self._cmd: list[tuple[int, float, float, float]] = []
-        self._last = {"pose": -(2**63), "nominal": -(2**63), "cmd": -(2**63)}
-        self.counts = {"pose": 0, "nominal": 0, "cmd": 0}
+        # pending input: one list per column (cheap appends; one numpy conversion per batch)
+        self._pose_t: list[int] = []
+        self._pose_x: list[float] = []
+        self._pose_y: list[float] = []
+        self._nom_t: list[int] = []
+        self._nom_x: list[float] = []
+        self._nom_y: list[float] = []
+        self._cmd_t: list[int] = []
+        self._cmd_u: list[tuple[float, float, float]] = []
+        self._last_pose = self._last_nom = self._last_cmd = -(2**63)
+        self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
         self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
         self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
         # judged state
@@ -279,35 +291,52 @@ class OnlineMonitor:
         self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
 
     # ---- input ----------------------------------------------------------------------------------------------------
-    def _accept(self, stream: str, t_ns: int) -> bool:
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples accepted per stream."""
+        return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
+                len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
+
+    def _reject(self, stream: str, t_ns: int, last: int) -> None:
+        """A sample at or before the stream's last one: counted (equal stamps as duplicates), never judged."""
         if self._closed:
             raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
-        last = self._last[stream]
-        if t_ns <= last:
-            (self.duplicates if t_ns == last else self.out_of_order)[stream] += 1
-            return False
-        self._last[stream] = t_ns
-        self.counts[stream] += 1
-        return True
+        (self.duplicates if t_ns == last else self.out_of_order)[stream] += 1
 
     def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
-        """A pose sample (``yaw_rad`` is accepted for the caller's convenience; no check uses it)."""
-        if self._accept("pose", int(t_ns)):
-            self._pose.append((int(t_ns), float(x_m), float(y_m)))
-            if len(self._pose) >= self.max_pending:
+        """A pose sample (absolute ns; ``yaw_rad`` is accepted for the caller's convenience, no check uses it)."""
+        if t_ns > self._last_pose and not self._closed:
+            self._last_pose = t_ns
+            self._pose_t.append(t_ns)
+            self._pose_x.append(x_m)
+            self._pose_y.append(y_m)
+            if len(self._pose_t) >= self.max_pending:
                 self._process()
+        else:
+            self._reject("pose", t_ns, self._last_pose)
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
-        if self._accept("nominal", int(t_ns)):
-            self._nom.append((int(t_ns), float(x_m), float(y_m)))
-            if len(self._nom) >= self.max_pending:
+        """A sample of the MPC's nominal state (absolute ns)."""
+        if t_ns > self._last_nom and not self._closed:
+            self._last_nom = t_ns
+            self._nom_t.append(t_ns)
+            self._nom_x.append(x_m)
+            self._nom_y.append(y_m)
+            if len(self._nom_t) >= self.max_pending:
                 self._process()
+        else:
+            self._reject("nominal", t_ns, self._last_nom)
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
-        if self._accept("cmd", int(t_ns)):
-            self._cmd.append((int(t_ns), float(u1), float(u2), float(u3)))
-            if len(self._cmd) >= self.max_pending:
+        """An applied input (absolute ns; body frame as logged: vx, vy, wz)."""
+        if t_ns > self._last_cmd and not self._closed:
+            self._last_cmd = t_ns
+            self._cmd_t.append(t_ns)
+            self._cmd_u.append((u1, u2, u3))
+            if len(self._cmd_t) >= self.max_pending:
                 self._process()
+        else:
+            self._reject("cmd", t_ns, self._last_cmd)
 
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
@@ -318,19 +347,23 @@ class OnlineMonitor:
         return out
 
     def _process(self) -> None:
-        if self._nom:
-            self._feed_nominal(np.array(self._nom, dtype=np.float64).reshape(-1, 3),
-                               np.array([s[0] for s in self._nom], dtype=np.int64))
-            self._nom.clear()
-        if self._pose:
-            t = np.array([s[0] for s in self._pose], dtype=np.int64)
-            xy = np.array([(s[1], s[2]) for s in self._pose], dtype=np.float64)
-            self._pose.clear()
-            self._feed_pose(t, xy[:, 0].copy(), xy[:, 1].copy())
-        if self._cmd:
-            t = np.array([s[0] for s in self._cmd], dtype=np.int64)
-            u = np.array([s[1:] for s in self._cmd], dtype=np.float64)
-            self._cmd.clear()
+        if self._nom_t:
+            self._judged["nominal"] += len(self._nom_t)
+            self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
+                               np.array(self._nom_y, dtype=np.float64))
+            self._nom_t, self._nom_x, self._nom_y = [], [], []
+        if self._pose_t:
+            self._judged["pose"] += len(self._pose_t)
+            t = np.array(self._pose_t, dtype=np.int64)
+            x = np.array(self._pose_x, dtype=np.float64)
+            y = np.array(self._pose_y, dtype=np.float64)
+            self._pose_t, self._pose_x, self._pose_y = [], [], []
+            self._feed_pose(t, x, y)
+        if self._cmd_t:
+            self._judged["cmd"] += len(self._cmd_t)
+            t = np.array(self._cmd_t, dtype=np.int64)
+            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
+            self._cmd_t, self._cmd_u = [], []
             self._feed_cmd(t, u)
         self._resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
@@ -355,18 +388,35 @@ class OnlineMonitor:
         tr = self._traj
         start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
         known = np.where(is_point, start, stop + 1)
-        for name, margin in label_margins(x, y, sc, frozenset(self._names)).items():
-            nan = np.isnan(margin)
-            plo, phi = (np.where(nan, -np.inf, margin), np.where(nan, np.inf, margin)) if nan.any() else (margin,
-                                                                                                         margin)
-            gb = gap_bounds(margin, step)
-            v = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
-            tr.atoms[name].push(v.lo[first:], v.hi[first:], known)
+        # every region's margin in one pass (the arithmetic of verify.geometry, bit for bit)
+        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        region_m = self._offset[:, None] - dist
+        atom_m = np.empty((len(self._names), x.shape[0]))
+        for k, rows in enumerate(self._atom_rows):
+            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        nan = np.isnan(atom_m)
+        p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
+                                                                                                      atom_m)
+        mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
+        half = 0.5 * step
+        g_lo, g_hi = mid - half, mid + half
+        g_lo[np.isnan(g_lo)] = -np.inf
+        g_hi[np.isnan(g_hi)] = np.inf
+        lo = np.empty((len(self._names), pos.size))
+        hi = np.empty_like(lo)
+        lo[:, point_at], hi[:, point_at] = p_lo, p_hi
+        ok = gap_at >= 0
+        lo[:, gap_at[ok]], hi[:, gap_at[ok]] = g_lo[:, ok], g_hi[:, ok]
+        for k, name in enumerate(self._names):
+            tr.atoms[name].push(lo[k, first:], hi[k, first:], known)
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
         # timed-run semantics (paper, Definition 3): an entry where the containing region changes
-        region = containing_region(x[k0:], y[k0:], sc)
+        inside = dist[:, k0:] + sc.robot.radius <= self._radius[:, None]  # geometry.containing_region
+        region = np.full(inside.shape[1], -1, dtype=np.int64)
+        for k in range(inside.shape[0]):
+            region[inside[k]] = k
         before = np.concatenate(([self._prev_region], region[:-1]))
         self._prev_region = int(region[-1])
         entry = np.flatnonzero((region != before) & (region >= 0))
@@ -385,16 +435,16 @@ class OnlineMonitor:
         ws_hit = self._ws.feed(t_abs, workspace_margin(x, y, sc), step, k0)
         del ws_hit
         if self._unsafe:
-            margins = region_margins(x, y, sc)[self._unsafe]
+            margins = region_m[self._unsafe]
             hit = self._clear.feed(t_abs, -np.max(margins, axis=0), step, k0)
             if hit is not None:
                 self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
         self._tube_pending.append((t_abs[k0:], x[k0:], y[k0:]))
         self._tube_last_t = int(t_abs[-1])
 
-    def _feed_nominal(self, rows: FloatArray, t: IntArray) -> None:
+    def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
-        self._nominal = (np.concatenate((nt, t)), np.concatenate((nx, rows[:, 1])), np.concatenate((ny, rows[:, 2])))
+        self._nominal = (np.concatenate((nt, t)), np.concatenate((nx, x)), np.concatenate((ny, y)))
         self._nominal_seen += t.shape[0]
 
     def _feed_cmd(self, t: IntArray, u: FloatArray) -> None:
