@@ -32,7 +32,7 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
-from verify.ingest.records import ROS1, SpanError, read_records
+from verify.ingest.records import ROS1, SpanError, in_order, read_records
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -372,6 +372,7 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
     parts: dict[str, _Parts] = {}
     for c in selected.values():
         parts.setdefault(c.topic, _Parts([], [], []))
+    plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]] = []
     for chunk_pos, n_conns, ids in chunks:
         # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
         compression, size, start, dlen, after = _chunk_head(f, chunk_pos)
@@ -384,15 +385,16 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         for cid, index in mine.items():
             offsets = index["offset"].astype(np.int64)
             mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
-        chunk, mine = _wanted_records(f, (compression, size, start, dlen), mine,
-                                      sum(len(x) for x in indexes.values()))
+        plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
+    # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
+    for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan):
         for cid, idx in mine.items():
             times, packed, lens = _messages_in_chunk(chunk, cid, idx)
             p = parts[selected[cid].topic]
             p.times.append(times)
             p.blocks.append(packed)
             p.lengths.append(lens)
-        del chunk  # one chunk's bytes alive at a time
+        del chunk  # only the chunks in flight are alive
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
         tconns = [c for c in selected.values() if c.topic == topic]
