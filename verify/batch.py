@@ -184,6 +184,7 @@ class _Job:
     spec: str | None
     time_base: str
     salvage: bool
+    digest: str = "blake3"
 
 
 def _certify_function() -> Callable[..., CertifyResultLike]:
@@ -197,7 +198,7 @@ def _certify_one(job: _Job) -> BatchItem:
     start = time.perf_counter()
     try:
         result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
-                                     salvage=job.salvage)
+                                     salvage=job.salvage, digest=job.digest)
     except VerifyError as err:
         return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
     except Exception as err:  # a bug in one log's certification must not take the other logs down
@@ -319,7 +320,7 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["header", "log"] = "header", salvage: bool = False, workers: int | None = None,
-                 dask: str | None = None, progress: bool | None = None) -> BatchResult:
+                 dask: str | None = None, progress: bool | None = None, digest: str = "blake3") -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
     Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
@@ -335,7 +336,7 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     logs, problems = discover_logs(raw)
     ordered = [str(p) for p in logs] + [p for p, _ in problems]
     names = dict(zip(ordered, _folder_names(ordered), strict=True))
-    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage) for p in logs]
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, digest) for p in logs]
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)

@@ -42,9 +42,11 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--dask", "dask", default=None, metavar="local|tcp://HOST:PORT",
               help="Certify several logs on Dask distributed (a local cluster, or a running scheduler).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+@click.option("--digest", type=click.Choice(["blake3", "sha256"]), default="blake3", show_default=True,
+              help="Hash of the log's bytes in the certificate (b3sum's / sha256sum's value for a file).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
-            progress: bool | None) -> None:
+            progress: bool | None, digest: str) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
@@ -53,7 +55,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     sc = resolve_scenario(scenario)
     if _single_log(logs) and dask is None:
-        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage)
+        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, digest=digest)
         cert = result.certificate
         line = f"{logs[0]}: {cert['verdict']}"
         failed = [c for c in cert["checks"] if c["verdict"] != "pass"]
@@ -77,7 +79,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     base = cast(Literal["header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
-                         progress=progress)
+                         progress=progress, digest=digest)
     for text in summary_lines(batch):
         click.echo(text)
     if out_dir is not None:
