@@ -44,7 +44,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
-from verify.ingest.records import MCAP, SpanError, in_order, read_records, read_scratch
+from verify.ingest.records import MCAP, WORKERS, SpanError, in_order, read_records, read_scratch
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -115,7 +115,9 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         fd = fh.fileno()
         size = os.fstat(fd).st_size
         # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
-        for channel, log_ns, starts, lens, u8 in in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected):
+        workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
+        for channel, log_ns, starts, lens, u8 in in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected,
+                                                          workers=workers):
             for t in topics:
                 mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
                 parts[t].append(_Part(log_ns[mine], gather(u8, starts[mine], lens[mine]), lens[mine]))

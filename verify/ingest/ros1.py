@@ -32,7 +32,7 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
-from verify.ingest.records import ROS1, SpanError, in_order, read_records, read_scratch
+from verify.ingest.records import ROS1, WORKERS, SpanError, in_order, read_records, read_scratch
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -390,7 +390,8 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
             mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
         plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
     # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
-    for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan):
+    workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads only for decompression
+    for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
         for cid, idx in mine.items():
             times, packed, lens = _messages_in_chunk(chunk, cid, idx)
             p = parts[selected[cid].topic]
