@@ -444,13 +444,10 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     """
     import xml.etree.ElementTree as ET
 
+    from verify.outputs import prepare_output_dir
     from verify.report import write_junit
 
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UnusableInputError(f"cannot create the output folder ({err})", path=str(out)) from err
+    out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports) for item in batch.items]
     suites = [ET.fromstring(x) for x in parallel_map(_write_item, jobs, workers=workers, dask=dask,
                                                      progress=progress, desc="reports")]

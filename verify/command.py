@@ -1,8 +1,9 @@
 """The ``tubempc certify`` subcommand: log paths + scenario -> certificate(s) and reports on disk, summary, exit code.
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
-``report.md``, ``report.html`` and ``junit.xml`` go into DIR. Unusable input raises ``UnusableInputError``, which
-``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
+``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
+``--force`` (``verify.outputs`` states the policy shared by every command). Unusable input raises
+``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
 ``--dask tcp://host:port`` for Dask distributed), one sub-folder per log plus ``summary.md``/``.html``/``.csv``
@@ -16,6 +17,8 @@ from pathlib import Path
 from typing import Literal, cast
 
 import click
+
+from verify.errors import UnusableInputError
 
 __all__ = ["certify"]
 
@@ -37,6 +40,7 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
               help="auto: header stamps unless they cannot order the samples (then log time, noted in the "
                    "certificate); header: header stamps (no pass if they cannot order the samples); log: receive time.")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
+@click.option("--force", is_flag=True, help="Replace the reports in an existing, non-empty --out folder.")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes for several logs (default: one per core).")
@@ -44,15 +48,18 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
               help="Certify several logs on Dask distributed (a local cluster, or a running scheduler).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
-            time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
+            time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
             progress: bool | None) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
     """
     from verify.certify import certify_log, resolve_scenario, write_certificate
+    from verify.outputs import prepare_output_dir
 
     sc = resolve_scenario(scenario)
+    if out_dir is not None:
+        prepare_output_dir(out_dir, force=force, inputs=logs)
     if _single_log(logs) and dask is None:
         result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage)
         cert = result.certificate
@@ -64,11 +71,15 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                 + (f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
                 for c in failed) + ")"
         if out_dir is not None:
-            line += f" -> {write_certificate(result, out_dir)}"
-            if not no_report:
-                from verify.report import write_reports
+            try:
+                line += f" -> {write_certificate(result, out_dir)}"
+                if not no_report:
+                    from verify.report import write_reports
 
-                write_reports(result, sc, out_dir, suite_name=logs[0].name)
+                    write_reports(result, sc, out_dir, suite_name=logs[0].name)
+            except OSError as err:
+                raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)
+                                         ) from None
         click.echo(line)
         sys.stdout.flush()
         # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting

@@ -75,7 +75,12 @@ def _from_text(text: str, *, source: str) -> Scenario:
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
         raise ScenarioError(f"{where}invalid YAML ({problem})", source=source) from None
-    return scenario_from_dict(data, source=source)
+    except RecursionError:
+        raise ScenarioError("invalid YAML (nested too deeply)", source=source) from None
+    try:
+        return scenario_from_dict(data, source=source)
+    except RecursionError:
+        raise ScenarioError("a value is nested too deeply", source=source) from None
 
 
 def builtin_scenario_text(name: str = "nexus-sml") -> str:

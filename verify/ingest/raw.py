@@ -37,6 +37,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
+from verify.ingest.readerrors import in_words
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 from verify.ingest.sqlite import QuickReader, read_sqlite_storage
@@ -149,13 +150,13 @@ _READ_ERRORS = (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw
 
 
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
-    text = str(err) or err.__class__.__name__
+    text = " ".join(str(err).split()) or err.__class__.__name__
     hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
     if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
-        return TruncatedLogError(f"truncated or unindexed log ({text})", path=str(path))
+        return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]})", path=str(path))
     if isinstance(err, sqlite3.DatabaseError | apsw.Error):
-        return TruncatedLogError(f"unreadable sqlite3 database ({text})", path=str(path))
-    return LogReadError(f"unreadable {fmt} log ({text})", path=str(path))
+        return TruncatedLogError(f"unreadable sqlite3 database: {in_words(err)}", path=str(path))
+    return LogReadError(f"unreadable {fmt} log: {in_words(err)}", path=str(path))
 
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
