@@ -125,8 +125,6 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
     msgs: list[tuple[int, str, str, bytes]] = []
     for i in range(run.t_ns.size):
         sec, nsec = divmod(int(run.stamp_ns[i]), 10**9)
-        if ros1:
-            sec = sec % 2**32
         stamp = ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
         header = ty["std_msgs/msg/Header"](**({"seq": i} if ros1 else {}), stamp=stamp, frame_id="world")
         pose = ty[POSE](header=header, pose=ty["geometry_msgs/msg/Pose"](
@@ -220,8 +218,12 @@ def run_cli(argv: list[str], timeout_s: float) -> Outcome:
     def on_alarm(signum: int, frame: FrameType | None) -> None:
         raise Hang
 
+    # CPU time (ITIMER_PROF) detects a busy loop whatever the machine's load; wall time (ITIMER_REAL, 4x longer)
+    # detects a blocked read (a FIFO, a lock)
     previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    previous_prof = signal.signal(signal.SIGPROF, on_alarm)
+    signal.setitimer(signal.ITIMER_PROF, timeout_s)
+    signal.setitimer(signal.ITIMER_REAL, 4 * timeout_s)
     start = time.perf_counter()
     code: int | None = None
     error = None
@@ -237,7 +239,9 @@ def run_cli(argv: list[str], timeout_s: float) -> Outcome:
         error = f"{exc.__class__.__name__}: {exc}"
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.setitimer(signal.ITIMER_PROF, 0)
         signal.signal(signal.SIGALRM, previous)
+        signal.signal(signal.SIGPROF, previous_prof)
     return Outcome(code, out.getvalue(), err.getvalue(), error, time.perf_counter() - start)
 
 
@@ -608,6 +612,12 @@ def _workdir(root: Path) -> Iterator[Path]:
         shutil.rmtree(d, ignore_errors=True)
 
 
+def _fresh(folder: Path) -> Path:
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    return folder
+
+
 @dataclass
 class Report:
     cases: int = 0
@@ -623,8 +633,10 @@ class Report:
 
 
 def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, verbose: bool = False,
-                 families: tuple[str, ...] | None = None) -> Report:
-    """Run ``cases`` cases drawn from ``random.Random(seed)``; returns the counts (see the module docstring)."""
+                 families: tuple[str, ...] | None = None, only: int | None = None) -> Report:
+    """Run ``cases`` cases drawn from ``random.Random(seed)``; returns the counts (see the module docstring).
+
+    ``only``: replay case number ``only`` of that campaign alone (its files are kept under ``root/case``)."""
     import warnings
 
     warnings.resetwarnings()  # pytest's or the caller's filters must not hide a warning that leaks to stderr
@@ -636,7 +648,9 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
     for i in range(cases):
         _, _, make = rng.choices(chosen, weights)[0]
         case_rng = random.Random(rng.getrandbits(64))
-        with _workdir(root) as work:
+        if only is not None and i != only:
+            continue
+        with _workdir(root) if only is None else contextlib.nullcontext(_fresh(root / "case")) as work:
             case = make(case_rng, seeds, work)
             before = _snapshot(case.inputs)
             res = run_cli(case.argv, timeout_s)
@@ -658,18 +672,20 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=3000)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--timeout", type=float, default=30.0, help="seconds per case before it counts as a hang")
+    ap.add_argument("--timeout", type=float, default=30.0,
+                    help="CPU seconds per case (4x as many wall seconds) before it counts as a hang")
     ap.add_argument("--dir", type=Path, default=None, help="work folder (default: a fresh temporary folder)")
     ap.add_argument("--families", default=None, help="comma-separated subset of: " +
                     ", ".join(f[0] for f in FAMILIES))
     ap.add_argument("-v", "--verbose", action="store_true", help="print each failing case as it happens")
+    ap.add_argument("--only", type=int, default=None, help="replay this case number alone (files kept)")
     args = ap.parse_args()
     root = args.dir or Path(tempfile.mkdtemp(prefix="fuzz_certify_"))
     root.mkdir(parents=True, exist_ok=True)
     fams = tuple(args.families.split(",")) if args.families else None
     start = time.perf_counter()
     report = run_campaign(args.cases, args.seed, root=root, timeout_s=args.timeout, verbose=args.verbose,
-                          families=fams)
+                          families=fams, only=args.only)
     for line in report.failures[:60]:
         print(line)
     for key, count in sorted(report.by_kind.items()):

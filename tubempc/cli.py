@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import traceback
+import warnings
 from typing import NoReturn
 
 import click
@@ -105,8 +106,13 @@ def main(argv: list[str] | None = None) -> NoReturn:
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
-        # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
-        code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
+        with warnings.catch_warnings():
+            # numeric edge cases of damaged data and matplotlib's degenerate axes are handled by the code; their
+            # library warnings are not the user's business (one stderr line per error is the contract)
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|verify|pandas)(\..*)?")
+            warnings.filterwarnings("ignore", category=UserWarning, module=r"(matplotlib|verify)(\..*)?")
+            # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
+            code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
     except click.exceptions.Exit as err:
         sys.exit(err.exit_code)
     except click.Abort:

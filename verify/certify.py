@@ -103,7 +103,8 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
         raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
                         f"{sc.name!r}")
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
-    return _judge(log, sc, formula_text=str(formula))
+    with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
+        return _judge(log, sc, formula_text=str(formula))
 
 
 def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:

@@ -92,6 +92,9 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                          progress=progress)
     for text in summary_lines(batch):
         click.echo(text)
+    for item in batch.items:  # every unusable input also gets its one line on stderr
+        if item.exit_code == 3 and item.error:
+            click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
         written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress)
         summary = written.get("summary.md")

@@ -187,10 +187,25 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
             m = fast.get(topic)
             if m is not None:
                 raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+        _check_counts(path, fmt, selected, out)
         return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
+    _check_counts(path, fmt, selected, out)
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:
+    """Messages read vs the counts the file declares (MCAP statistics, metadata.yaml, the ROS1 index): a damaged
+    index or chunk can make a reader stop early without an error, which would silently drop samples."""
+    declared: dict[str, int] = {}
+    for c in selected:
+        declared[c.topic] = declared.get(c.topic, 0) + int(getattr(c, "msgcount", 0) or 0)
+    for topic, want in declared.items():
+        got = len(out[topic].payloads) if topic in out else 0
+        if want > 0 and got < want:
+            raise TruncatedLogError(f"damaged {fmt} log: it declares {want} messages on {topic} but only {got} can "
+                                    f"be read", path=str(path))
 
 
 def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog | None:
@@ -221,6 +236,7 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
         m = fast.get(topic)
         if m is not None:
             raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+    _check_counts(path, "sqlite3", selected, out)
     return RawLog(str(path), "sqlite3", False, out, {c.topic: c.msgtype for c in conns}, False, tuple(notes))
 
 
