@@ -24,7 +24,7 @@ __all__ = ["BUILTIN_SCENARIOS", "builtin_scenario", "builtin_scenario_text", "du
 
 BUILTIN_SCENARIOS = ("nexus-sml",)
 #: largest scenario file read (bytes): a hand-written or generated lab description is far below it
-MAX_SCENARIO_BYTES = 1 << 20
+MAX_SCENARIO_BYTES = 256 * 1024
 #: most regions in one scenario (region checks compare pairs of regions)
 MAX_REGIONS = 2000
 _SafeLoader: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when built in: ~10x faster

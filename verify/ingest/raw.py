@@ -80,6 +80,11 @@ def detect_format(path: Path) -> str:
         meta = path / "metadata.yaml"
         if not meta.exists():
             raise LogReadError("a directory without metadata.yaml is not a ROS2 bag", path=str(path))
+        suffixes = {p.suffix for p in path.iterdir()}
+        if ".db3" in suffixes and ".mcap" not in suffixes:  # the storage files decide (metadata may be damaged)
+            return "sqlite3"
+        if ".mcap" in suffixes and ".db3" not in suffixes:
+            return "mcap"
         text = meta.read_text(encoding="utf-8", errors="replace")
         return "sqlite3" if "storage_identifier: sqlite3" in text else "mcap"
     suffix = path.suffix.lower()
