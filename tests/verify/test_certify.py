@@ -211,3 +211,13 @@ def test_cli_exit_codes_and_out_folders(traj_cls: Any, make_log: MakeLog, scenar
 def test_time0_default_is_first_pose(make_log: MakeLog, scenario: Scenario, good: Any) -> None:
     cert = certify_log(make_log("dir-sqlite3", good), scenario).certificate
     assert cert["time0_ns"] == TIME0_NS
+
+
+@pytest.mark.parametrize("spec", ["F[0,10] mission_2", "G[0,5] mission_2", "mission_1 U[0,5] mission_2",
+                                  "G[0,inf) !obs_1 & F[2,3] obs_1"])
+def test_a_failed_formula_always_states_its_margin(make_log: MakeLog, scenario: Scenario, good: Any,
+                                                   spec: str) -> None:
+    cert = certify_log(make_log("mcap", good), scenario, spec=spec).certificate
+    check = _check(cert, "spec_trajectory")
+    assert check["verdict"] == "fail"
+    assert isinstance(check["margin"], float) and check["margin"] < 0
