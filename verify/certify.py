@@ -25,10 +25,10 @@ from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
-from verify.geometry import containing_region
+from verify.geometry import containment
 from verify.ingest import LogData, read_log
 from verify.selection import Selection, select_checks
-from verify.timedrun import check_timed_run, parse_spec, timed_run_of
+from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "resolve_scenario",
@@ -133,11 +133,11 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
              "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
             if traj.verdict != "pass" else {})})
 
-    regions = containing_region(pose.x_m, pose.y_m, sc)
     names = [r.name for r in sc.regions]
-    run = timed_run_of(regions, t_rel.astype(np.float64) * 1e-9, names)
+    run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
+                                        {r.name: list(r.labels) for r in sc.regions})
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
-    tr = check_timed_run(formula_text, run, {r.name: list(r.labels) for r in sc.regions}, end=end_s)
+    tr = check_timed_run(formula_text, run, run_labels, end=end_s)
     spec_run = CheckResult(
         "spec_timed_run", tr.verdict, None,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
@@ -198,7 +198,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     t_s = t_rel * 1e-9
     trajectory = pd.DataFrame({"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad})
     nominal_df = None
-    if log.nominal is not None:
+    if log.nominal is not None and "tube" in selection:
         nominal_df = pd.DataFrame({"t_s": (log.nominal.t_ns - t0) * 1e-9, "x_m": log.nominal.x_m,
                                    "y_m": log.nominal.y_m, "theta_rad": log.nominal.theta_rad})
     inputs_df = None

@@ -22,7 +22,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon, Rectangle
 
-from tubempc.scenario import Scenario
+from tubempc.scenario import Scenario, ScenarioError
 
 __all__ = [
     "MAX_PLOT_POINTS",
@@ -139,6 +139,14 @@ def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
     return np.vstack([left, right[::-1]])
 
 
+def _tube_radius(scenario: Scenario) -> float:
+    """r_q, or NaN when the scenario gives none (the tube is then not checked and no nominal is plotted)."""
+    try:
+        return scenario.tube_radius_m
+    except ScenarioError:
+        return math.nan
+
+
 def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
                      nominal: pd.DataFrame | None) -> bytes:
     """The map: workspace box, regions by kind, trajectory, tube band, timed run, violations."""
@@ -146,20 +154,28 @@ def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, traject
     fig.subplots_adjust(left=0.08, right=0.70, bottom=0.08, top=0.94)  # fixed margins: 2x cheaper than a layout
     ax = fig.add_subplot()
     ws = scenario.workspace
-    ax.add_patch(Rectangle((ws.x[0], ws.y[0]), ws.x[1] - ws.x[0], ws.y[1] - ws.y[0], fill=False, lw=1.5,
-                           ec="black", label="workspace"))
+    if ws.polygon is not None:
+        ax.add_patch(Polygon(ws.polygon, closed=True, fill=False, lw=1.5, ec="black", label="workspace"))
+    else:
+        ax.add_patch(Rectangle((ws.x[0], ws.y[0]), ws.x[1] - ws.x[0], ws.y[1] - ws.y[0], fill=False, lw=1.5,
+                               ec="black", label="workspace"))
     seen: set[str] = set()
     for region in scenario.regions:
         kind = _region_kind(region.labels, region.unsafe)
         colour = _KIND_COLOURS[kind]
         label = {"unsafe": "unsafe region", "labelled": "labelled region", "free": "unlabelled region"}[kind]
-        ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25,
-                            label=None if kind in seen else label))
+        legend = None if kind in seen else label
+        if region.polygon is not None:
+            ax.add_patch(Polygon(region.polygon, closed=True, fc=colour, ec=colour, alpha=0.25, label=legend))
+            x0, y0, x1, y1 = region.bounds
+            anchor = (0.5 * (x0 + x1), y1 - 0.15 * (y1 - y0))
+        else:
+            ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25, label=legend))
+            anchor = (region.center[0], region.center[1] + 0.45 * region.radius)
         seen.add(kind)
         text = region.name + (f"\n{', '.join(region.labels)}" if region.labels else "")
-        ax.annotate(text, (region.center[0], region.center[1] + 0.45 * region.radius), ha="center", va="center",
-                    fontsize=8)
-    r_q = scenario.tube_radius_m
+        ax.annotate(text, anchor, ha="center", va="center", fontsize=8)
+    r_q = _tube_radius(scenario)
     if _usable(nominal, ("x_m", "y_m")) and nominal is not None:
         poly = _tube_polygon(nominal, r_q)
         if poly is not None:
@@ -230,7 +246,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     eta = scenario.robot.radius
-    r_q = scenario.tube_radius_m
+    r_q = _tube_radius(scenario)
     bounds = {"x_m": scenario.workspace.x, "y_m": scenario.workspace.y}
     for ax, col, ylabel in zip(axes, ("x_m", "y_m", "theta_rad"), ("x [m]", "y [m]", "theta [rad]"), strict=True):
         ax.plot(tr["t_s"], tr[col], color="black", lw=1.0, label="measured")
@@ -294,7 +310,7 @@ def tube_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: 
     dy = trajectory["y_m"].to_numpy(dtype=float)[inside] - np.interp(t, t_nom, nom["y_m"].to_numpy(dtype=float))
     env = _envelope(pd.DataFrame({"t_s": t, "err_m": np.hypot(dx, dy)}), ("err_m",))
     t, err_m = env["t_s"].to_numpy(), env["err_m"].to_numpy()
-    r_q = scenario.tube_radius_m
+    r_q = _tube_radius(scenario)
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
     ax = fig.add_subplot()

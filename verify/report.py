@@ -113,7 +113,8 @@ def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple
         if key in _MAIN_KEYS or key == "verdict":
             continue
         rows.append((str(key), _fmt(certificate[key])))
-    rows.append(("tube radius r_q (scenario)", f"{scenario.tube_radius_m:.6g} m"))
+    if isinstance(certificate.get("tube"), Mapping):
+        rows.append(("tube radius r_q (scenario)", f"{certificate['tube']['radius_m']:.6g} m"))
     return rows
 
 

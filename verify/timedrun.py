@@ -18,7 +18,7 @@ from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
 from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
 
-__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of"]
+__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
 
 
 def parse_spec(text: str) -> Formula:
@@ -93,3 +93,30 @@ def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.fl
     change = np.flatnonzero(np.diff(region_index) != 0) + 1
     starts = np.concatenate(([0], change))
     return [(names[int(region_index[s])], float(times_s[s])) for s in starts if region_index[s] >= 0]
+
+
+def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64], names: Sequence[str],
+                      labels: Mapping[str, Sequence[str]]) -> tuple[list[tuple[str, float]], dict[str, list[str]]]:
+    """Definition 3 when regions may overlap or nest: ``contains`` is ``(n_regions, n)`` (``geometry.containment``).
+
+    Each maximal stretch of samples contained in the same non-empty *set* of regions starts an entry; the entry is
+    named by its regions joined with ``+`` in scenario order (``room+table``) and carries the union of their
+    labels (a table inside a room: both labels hold). Returns the run and the labels of every entry name."""
+    n = contains.shape[1] if contains.ndim == 2 else 0
+    if n == 0:
+        return [], {}
+    _, code = np.unique(contains.T, axis=0, return_inverse=True)
+    code = code.reshape(-1)
+    change = np.flatnonzero(np.diff(code) != 0) + 1
+    starts = np.concatenate(([0], change))
+    run: list[tuple[str, float]] = []
+    entry_labels: dict[str, list[str]] = {}
+    for s in starts:
+        members = [names[int(k)] for k in np.flatnonzero(contains[:, s])]
+        if not members:
+            continue
+        name = "+".join(members)
+        run.append((name, float(times_s[s])))
+        if name not in entry_labels:
+            entry_labels[name] = sorted({lab for m in members for lab in labels.get(m, ())})
+    return run, entry_labels

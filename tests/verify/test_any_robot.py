@@ -226,3 +226,100 @@ def test_twist_stamped_uses_its_header_on_the_header_time_base(tmp_path: Path) -
     fast, slow = decode_twist(raw, False), decode_twist(raw, False, fast=False)
     assert fast.fast and not slow.fast
     assert np.array_equal(fast.u, slow.u) and np.array_equal(fast.stamp_ns, slow.stamp_ns)
+
+
+# ---- polygon regions and workspaces ----------------------------------------------------------------------------------
+ROOM = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.2], [0.0, 2.2]]
+TABLE_SQ = [[2.2, 1.2], [2.8, 1.2], [2.8, 1.8], [2.2, 1.8]]  # inside the room: regions nest
+
+
+def poly_lab(**extra: Any) -> Scenario:
+    data = lab().to_dict()
+    data["regions"] = [
+        {"name": "start", "center": [0.5, 0.5], "radius": 0.45, "labels": ["home"]},
+        {"name": "dock", "center": [4.4, 3.3], "radius": 0.45, "labels": ["dock"]},
+        {"name": "room", "polygon": ROOM, "labels": ["in_room"]},
+        {"name": "table", "polygon": TABLE_SQ, "labels": ["table"], "unsafe": True},
+    ]
+    data["workspace"] = {"polygon": [[0.0, 0.0], [5.0, 0.0], [5.0, 4.0], [0.0, 4.0]]}
+    data["spec"] = "G[0,inf) !table & F[0,40] dock & F[0,1] (in_room & home)"
+    data.update(extra)
+    return scenario_from_dict(data, source="lab.yaml")
+
+
+def _table_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Distance from outside points to the table square (the nearest point of an axis-aligned box)."""
+    dx = np.maximum.reduce([2.2 - x, np.zeros_like(x), x - 2.8])
+    dy = np.maximum.reduce([1.2 - y, np.zeros_like(y), y - 1.8])
+    return np.hypot(dx, dy)
+
+
+def test_polygon_room_table_and_workspace_pass(tmp_path: Path) -> None:
+    run = _run(3.4)
+    sc = poly_lab()
+    assert any("(room) and regions[3] (table) may overlap" in w for w in sc.certification_warnings())
+    cert = certify_log(_log(tmp_path, run), sc).certificate
+    assert cert["verdict"] == "pass", cert["checks"]
+    # nested regions: the start disc and the room both contain the robot at t = 0, so both labels hold
+    assert [e["region"] for e in cert["timed_run"]] == ["start+room", "room", "dock"]
+    clear = _check(cert, "obstacle_clearance")
+    want = float((_table_distance(run.x, run.y) - 0.25).min())  # the x = 3.4 leg: 0.6 m from the table's edge
+    assert clear["sample_margin_m"] == pytest.approx(want, abs=1e-12) and want == pytest.approx(0.35)
+    ws = _check(cert, "workspace")
+    assert ws["sample_margin_m"] == pytest.approx(0.5 - 0.25, abs=1e-12)  # the start, 0.5 m from two walls
+    assert cert["scenario_warnings"] == sc.certification_warnings()
+
+
+def test_polygon_obstacle_hit_has_the_right_time_and_margin(tmp_path: Path) -> None:
+    run = _run(3.0)  # 0.2 m from the table's right edge, less than the robot radius
+    cert = certify_log(_log(tmp_path, run), poly_lab()).certificate
+    clear = _check(cert, "obstacle_clearance")
+    margin = _table_distance(run.x, run.y) - 0.25
+    k = int(np.argmax(margin < 0))
+    assert clear["verdict"] == "fail" and clear["region"] == "table"
+    assert clear["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert clear["margin"] == pytest.approx(-0.05, abs=1e-12)
+    assert _check(cert, "spec_trajectory")["verdict"] == "fail"
+
+
+def test_polygon_workspace_violation(tmp_path: Path) -> None:
+    """An L-shaped workspace whose upper right part (x > 3, y > 2.8) is outside: the last leg leaves it."""
+    run = _run(3.4)
+    ell = [[0.0, 0.0], [5.0, 0.0], [5.0, 2.8], [3.0, 2.8], [3.0, 4.0], [0.0, 4.0]]
+    cert = certify_log(_log(tmp_path, run), poly_lab(workspace={"polygon": ell})).certificate
+    ws = _check(cert, "workspace")
+    k = int(np.argmax((run.x > 3.0) & (2.8 - run.y - 0.25 < 0)))
+    assert ws["verdict"] == "fail"
+    assert ws["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert ws["margin"] == pytest.approx(-(3.3 - 2.8) - 0.25, abs=1e-9)  # the dock lies 0.5 m past the wall
+
+
+def test_between_samples_a_polygon_corner_makes_the_check_inconclusive(tmp_path: Path) -> None:
+    """Two samples 1 s apart on either side of the table's corner, each clear of it: the straight path between
+    them passes 0.14 m from the corner; the robot (radius 0.25) may have touched it: inconclusive, never a pass."""
+    run = KIT.UnicycleRun(np.array([0.0, 1.0, 2.0]), np.array([2.6, 3.2, 3.2]), np.array([0.8, 1.4, 2.0]),
+                          np.zeros(3), np.zeros(3), np.zeros(3))
+    sc = poly_lab(spec="G[0,inf) !table", robot={"radius": 0.25, "max_speed": 0.9})
+    cert = certify_log(_log(tmp_path, run), sc, checks=["obstacle_clearance"]).certificate
+    clear = _check(cert, "obstacle_clearance")
+    assert clear["verdict"] == "inconclusive", clear
+    assert "between samples" in clear["reason"]
+
+
+@pytest.mark.parametrize("x_leg", [3.4, 3.0])
+def test_fast_monitor_and_general_engine_agree_on_polygons(monkeypatch: pytest.MonkeyPatch, x_leg: float) -> None:
+    """The regular-grid path (verify.regular) and the interleaved engine (verify.monitor) give the same verdict and
+    margin on a formula over polygon and disc atoms."""
+    from verify import trajectory
+
+    run = _run(x_leg)
+    sc = poly_lab(spec="G[0,inf) !table & F[0,40] dock & G[0,3] in_room")
+    t_ns = np.round(run.t_s * 1e9).astype(np.int64)
+    fast = trajectory.check_trajectory(sc.formula, t_ns, run.x, run.y, sc, max_speed_mps=0.5)
+    assert trajectory.regular_grid(t_ns) is not None
+    monkeypatch.setattr(trajectory, "regular_grid", lambda _t: None)
+    general = trajectory.check_trajectory(sc.formula, t_ns, run.x, run.y, sc, max_speed_mps=0.5)
+    assert fast.verdict == general.verdict == ("pass" if x_leg == 3.4 else "fail")
+    assert fast.margin_m == pytest.approx(general.margin_m, abs=1e-12)
+    assert fast.margin_hi_m == pytest.approx(general.margin_hi_m, abs=1e-12)
+    assert fast.time_ns == general.time_ns
