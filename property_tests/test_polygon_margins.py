@@ -45,6 +45,8 @@ def rectangles(draw: st.DrawFn) -> list[tuple[float, float]]:
     x0, y0 = draw(coord), draw(coord)
     w, h = draw(st.floats(0.2, 3.0)), draw(st.floats(0.2, 3.0))
     pts = [(x0, y0), (x0 + w, y0), (x0 + w, y0 + h), (x0, y0 + h)]
+    if draw(st.booleans()):  # a fifth vertex mid-edge: the general edge-by-edge path instead of the closed form
+        pts.insert(1, (x0 + 0.5 * w, y0))
     return pts if draw(st.booleans()) else pts[::-1]
 
 

@@ -54,11 +54,30 @@ def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> Floa
     return out
 
 
+def _axis_rectangle(vertices: tuple[tuple[float, float], ...]) -> tuple[float, float, float, float] | None:
+    """``(x0, y0, x1, y1)`` when the polygon is an axis-aligned rectangle (either vertex order), else None."""
+    if len(vertices) != 4:
+        return None
+    xs = sorted({v[0] for v in vertices})
+    ys = sorted({v[1] for v in vertices})
+    if len(xs) != 2 or len(ys) != 2:
+        return None
+    for (ax, ay), (bx, by) in zip(vertices, (*vertices[1:], vertices[0]), strict=True):
+        if ax != bx and ay != by:  # a diagonal edge: not a rectangle's ring
+            return None
+    return xs[0], ys[0], xs[1], ys[1]
+
+
 def polygon_signed_distance(x_m: FloatArray, y_m: FloatArray,
                             vertices: tuple[tuple[float, float], ...]) -> FloatArray:
     """Signed distance of each point to a simple polygon's boundary: positive inside, negative outside, 0 on it,
-    NaN for a NaN point. Exact up to rounding: the distance to each edge segment (clamped projection, ``hypot``),
-    the sign from the even-odd crossing rule; computed block by block so the temporaries stay in cache."""
+    NaN for a NaN point. Exact up to rounding: the distance to each edge segment (clamped projection), the sign
+    from the even-odd crossing rule, block by block so the temporaries stay in cache. An axis-aligned rectangle
+    (rooms, tables) takes a closed form: inside ``min(x - x0, x1 - x, y - y0, y1 - y)``, outside minus the
+    distance to the nearest point of the box."""
+    rect = _axis_rectangle(vertices)
+    if rect is not None:
+        return _rectangle_signed_distance(x_m, y_m, rect)
     n = x_m.shape[0]
     out = np.empty(n, dtype=np.float64)
     vx = np.array([v[0] for v in vertices], dtype=np.float64)
@@ -74,16 +93,37 @@ def polygon_signed_distance(x_m: FloatArray, y_m: FloatArray,
         for k in range(vx.shape[0]):
             wx, wy = px - vx[k], py - vy[k]
             t = np.clip((wx * ex[k] + wy * ey[k]) * inv_len2[k], 0.0, 1.0)
-            np.minimum(best, np.hypot(wx - t * ex[k], wy - t * ey[k]), out=best)
+            wx -= t * ex[k]
+            wy -= t * ey[k]
+            np.minimum(best, wx * wx + wy * wy, out=best)
             if ey[k] != 0.0:  # a horizontal edge never crosses the ray
                 y0, y1 = vy[k], vy_next[k]
                 straddle = (y0 > py) != (y1 > py)
                 x_cross = vx[k] + (py - y0) * (ex[k] / ey[k])
                 inside ^= straddle & (px < x_cross)
+        np.sqrt(best, out=best)
         out[s:e] = np.where(inside, best, -best)
     nan = np.isnan(x_m) | np.isnan(y_m)
     if nan.any():
         out[nan] = np.nan
+    return out
+
+
+def _rectangle_signed_distance(x_m: FloatArray, y_m: FloatArray,
+                               rect: tuple[float, float, float, float]) -> FloatArray:
+    x0, y0, x1, y1 = rect
+    n = x_m.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    for s in range(0, n, _BLOCK):
+        e = min(n, s + _BLOCK)
+        px, py = x_m[s:e], y_m[s:e]
+        dx = np.maximum(x0 - px, px - x1)  # > 0 outside the slab, -(distance to the nearer side) inside
+        dy = np.maximum(y0 - py, py - y1)
+        inside = np.minimum(-dx, -dy)
+        ox = np.maximum(dx, 0.0)
+        oy = np.maximum(dy, 0.0)
+        outside = np.sqrt(ox * ox + oy * oy)
+        out[s:e] = np.where((dx <= 0.0) & (dy <= 0.0), inside, -outside)
     return out
 
 
