@@ -29,6 +29,7 @@ from verify.geometry import containment
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.selection import Selection, select_checks
+from verify.signals import signal_bounds, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory
 
@@ -107,11 +108,11 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
     formula = parse_spec(spec if spec is not None else sc.spec)
-    known = {lab for r in sc.regions for lab in r.labels}
+    known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
     unknown = sorted(atoms(formula) - known)
     if unknown:
-        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
-                        f"{sc.name!r}")
+        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region and name no "
+                        f"signal of scenario {sc.name!r}")
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
     return _judge(log, sc, formula_text=str(formula), selection=selection)
 
@@ -126,7 +127,10 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     t_rel = pose.t_ns - t0
     v_max = sc.max_speed_mps
 
-    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max)
+    used = atoms(formula)
+    streams = {k: v for k, v in log.signals.items() if k in used}
+    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
+                            signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
         "spec_trajectory", traj.verdict, traj.margin_m if traj.verdict != "inconclusive" else None,
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
@@ -141,7 +145,9 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
                                         {r.name: list(r.labels) for r in sc.regions})
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
-    tr = check_timed_run(formula_text, run, run_labels, end=end_s)
+    entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
+    tr = check_timed_run(formula_text, run, run_labels, end=end_s,
+                         atom_values={k: values_at(v, entry_ns) for k, v in streams.items()})
     spec_run = CheckResult(
         "spec_timed_run", tr.verdict, None,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
@@ -200,6 +206,8 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         "scenario_warnings": sc.certification_warnings(),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
+        **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
+                        for k, v in log.signals.items()}} if log.signals else {}),
         "data_quality": log.data_quality,
         "generator": log.metadata,
     }

@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
-from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
+from verify.monitor import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
 __all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
 
@@ -51,14 +51,18 @@ def _to_ns(t: float) -> int:
 
 
 def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
-                    end: float | None = None) -> TimedRunVerdict:
+                    end: float | None = None,
+                    atom_values: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None = None,
+                    ) -> TimedRunVerdict:
     """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
 
     ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
     (a region missing from ``labels`` has none); ``end``: when observation stopped (default: the last time).
-    Times are compared in integer nanoseconds (``round(t * 1e9)``).
+    Times are compared in integer nanoseconds (``round(t * 1e9)``). ``atom_values``: robustness bounds
+    ``(lo, hi)`` per run entry for atoms that are not region labels (signal atoms, sampled at the entry times).
     """
     f = parse_spec(formula)
+    external = atom_values
     if not run:
         return TimedRunVerdict("inconclusive", str(f), str(f), None, "the timed run is empty")
     times = np.array([_to_ns(float(t)) for _, t in run], dtype=np.int64)
@@ -68,11 +72,15 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
     if end_ns < int(times[-1]):
         raise ValueError(f"end={end} is before the last run time {run[-1][1]}")
     pos = Positions.points(times, end_ns)  # equal times are allowed: distinct positions at the same instant
-    atom_values = {}
+    inputs: dict[str, Truth] = {}
     for name in atoms(f):
+        if external is not None and name in external:
+            lo, hi = external[name]
+            inputs[name] = Truth(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+            continue
         holds = np.array([name in labels.get(region, ()) for region, _ in run], dtype=bool)
-        atom_values[name] = truth_from_bool(holds)
-    values = evaluate(f, pos, atom_values)
+        inputs[name] = truth_from_bool(holds)
+    values = evaluate(f, pos, inputs)
     root = values[f]
     verdict = verdict_of(float(root.lo[0]), float(root.hi[0]))
     if verdict == "pass":

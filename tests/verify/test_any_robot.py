@@ -323,3 +323,87 @@ def test_fast_monitor_and_general_engine_agree_on_polygons(monkeypatch: pytest.M
     assert fast.margin_m == pytest.approx(general.margin_m, abs=1e-12)
     assert fast.margin_hi_m == pytest.approx(general.margin_hi_m, abs=1e-12)
     assert fast.time_ns == general.time_ns
+
+
+# ---- signal atoms ----------------------------------------------------------------------------------------------------
+SLOW = {"topic": "/odom", "field": "twist.twist.linear.x", "op": "<=", "value": 0.5, "unit": "m/s"}
+
+
+def _battery_log(tmp_path: Path, run: Any, times: list[float], pct: list[float],
+                 cells: list[list[float]] | None = None) -> Path:
+    msgs = KIT.odometry_messages(run, "/odom", ros1=False) + KIT.battery_messages(times, pct, "/battery_state",
+                                                                                 ros1=False, cells=cells)
+    return KIT.write_messages(tmp_path / "bat.mcap", msgs)
+
+
+def test_signal_atom_on_a_nested_field_passes_and_fails(tmp_path: Path) -> None:
+    run = _run(3.4)
+    log = _log(tmp_path, run)
+    ok = certify_log(log, lab(signals={"slow": SLOW}, spec="G[0,inf) slow & F[0,40] dock")).certificate
+    assert ok["verdict"] == "pass", ok["checks"]
+    s = ok["signals"]["slow"]
+    assert s["worst_margin"] == pytest.approx(0.1) and s["relative_worst_margin"] == pytest.approx(0.2)
+    assert s["unit"] == "m/s" and s["time_base"] == "header" and s["unknown_stretches"] == []
+    strict = dict(SLOW, value=0.3)
+    bad = certify_log(log, lab(signals={"slow": strict}, spec="G[0,inf) slow")).certificate
+    spec = _check(bad, "spec_trajectory")
+    k = int(np.argmax(run.v > 0.3))  # the first sample driving faster than 0.3 m/s
+    assert spec["verdict"] == "fail"
+    assert spec["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert spec["guaranteed_margin_m"] == pytest.approx(0.3 - 0.4, abs=1e-9)  # in the field's unit (m/s)
+    assert _check(bad, "spec_timed_run")["verdict"] in ("pass", "fail")  # judged at the run's entries only
+
+
+def test_signal_atom_with_a_gap_is_unknown_there(tmp_path: Path) -> None:
+    """A battery at 1 Hz that stops reporting from 5 s to 11 s: G battery_ok cannot pass; a later value below the
+    threshold is still a fail (Kleene: false & unknown = false), at that message's time."""
+    run = _run(3.4)
+    times = [float(t) for t in range(22) if not 5 < t < 11]
+    sig = {"battery_ok": {"topic": "/battery_state", "field": "percentage", "op": ">=", "value": 0.2,
+                          "rate_hz": 1.0}}
+    log = _battery_log(tmp_path, run, times, [0.9] * len(times))
+    cert = certify_log(log, lab(signals=sig, spec="G[0,inf) battery_ok")).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert cert["verdict"] == "inconclusive" and spec["verdict"] == "inconclusive", spec
+    assert cert["signals"]["battery_ok"]["unknown_stretches"][0] == {"from_s": 6.5, "to_s": 11.0}
+    low = [0.9 if t < 15 else 0.1 for t in times]
+    (tmp_path / "low").mkdir()
+    cert = certify_log(_battery_log(tmp_path / "low", run, times, low), lab(signals=sig, spec="G[0,inf) battery_ok")
+                       ).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "fail" and spec["first_violation_time"] == pytest.approx(15.0, abs=1e-9)
+    assert cert["signals"]["battery_ok"]["worst_margin"] == pytest.approx(0.1 - 0.2, abs=1e-6)  # float32 field
+
+
+def test_signal_atom_on_an_array_element(tmp_path: Path) -> None:
+    run = _run(3.4)
+    times = [float(t) for t in range(22)]
+    cells = [[3.9, 3.8 if t < 12 else 3.4, 3.9] for t in times]
+    sig = {"cell_ok": {"topic": "/battery_state", "field": "cell_voltage[1]", "op": ">", "value": 3.5, "unit": "V"}}
+    cert = certify_log(_battery_log(tmp_path, run, times, [0.9] * len(times), cells),
+                       lab(signals=sig, spec="G[0,inf) cell_ok")).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "fail" and spec["first_violation_time"] == pytest.approx(12.0, abs=1e-9)
+    assert spec["guaranteed_margin_m"] == pytest.approx(3.4 - 3.5, abs=1e-6)
+
+
+@pytest.mark.parametrize(("signal", "fragment"), [
+    ({"topic": "/battery", "field": "percentage", "op": ">=", "value": 0.2},
+     "signal s: topic /battery (field percentage) is absent from the log"),
+    ({"topic": "/odom", "field": "twist.twist.linear.w", "op": "<=", "value": 0.5},
+     "signal s: topic /odom (nav_msgs/msg/Odometry) has no field twist.twist.linear.w: twist.twist.linear has no "
+     "'w' (its fields: x, y, z)"),
+    ({"topic": "/odom", "field": "pose.covariance[40]", "op": "<=", "value": 0.5},
+     "has no field pose.covariance[40]: pose.covariance has 36 element(s)"),
+    ({"topic": "/odom", "field": "child_frame_id", "op": "<=", "value": 0.5},
+     "field child_frame_id is a str, not a number"),
+])
+def test_missing_signal_topic_or_field_is_exit_3_naming_both(tmp_path: Path, signal: dict[str, Any],
+                                                             fragment: str) -> None:
+    log = _log(tmp_path, _run(3.4))
+    yaml_path = tmp_path / "lab.yaml"
+    yaml_path.write_text(json.dumps(lab(signals={"s": signal}, spec="G[0,inf) s").to_dict()))
+    out = _cli("certify", log, "--scenario", yaml_path)
+    assert out.returncode == 3, out
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0] and str(log) in lines[0], lines

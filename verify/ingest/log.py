@@ -21,6 +21,7 @@ from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
+from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples
@@ -64,6 +65,7 @@ class LogData:
     time_base_note: str | None = None
     samples: dict[str, dict[str, int]] = field(default_factory=dict)  # per stream: read, judged, merged, ...
     stream_problems: dict[str, str] = field(default_factory=dict)  # stream -> why nothing judged on it can pass
+    signals: dict[str, SignalStream] = field(default_factory=dict)  # signal atoms (verify.ingest.fields)
 
 
 
@@ -140,6 +142,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
               job: DigestJob) -> LogData:
     t = scenario.topics
     wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
+    wanted |= {sig.topic for sig in scenario.signals.values()}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -225,6 +228,10 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     else:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
+    signals, signal_quality = read_signals(raw, scenario, base.name, str(p))
+    if signal_quality:
+        quality["signals"] = signal_quality
+
     statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
     quality["solver"] = {"count": len(statuses), "failed": len(failed), "backup": sum(1 for s in statuses
@@ -241,4 +248,4 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
                    nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
                    pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,
-                   samples=samples, stream_problems=problems)
+                   samples=samples, stream_problems=problems, signals=signals)
