@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -101,10 +101,12 @@ def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, st
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
                 time_base: str = "auto", salvage: bool = False, time0_ns: int | None = None,
-                digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None) -> CertifyResult:
+                digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None,
+                clock_offsets: Mapping[str, float] | None = None) -> CertifyResult:
     """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
     ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256".
-    ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names)."""
+    ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
+    ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
     formula = parse_spec(spec if spec is not None else sc.spec)
@@ -113,7 +115,8 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     if unknown:
         raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region and name no "
                         f"signal of scenario {sc.name!r}")
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
+                   clock_offsets=clock_offsets)
     return _judge(log, sc, formula_text=str(formula), selection=selection)
 
 
@@ -204,6 +207,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         "checks_source": selection.source,
         "not_checked": [{"name": n, "reason": r} for n, r in selection.not_checked],
         "scenario_warnings": sc.certification_warnings(),
+        "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)

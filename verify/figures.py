@@ -278,9 +278,12 @@ def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     units = ("m/s", "m/s", "rad/s")
+    lim = scenario.inputs
+    # columns: linear.x, linear.y, angular.z; a unicycle bounds (v, w) and allows linear.y up to a tolerance
+    bounds = lim.max_abs if lim.model == "holonomic" else (lim.max_abs[0], lim.lateral_tolerance, lim.max_abs[1])
     for i, ax in enumerate(axes):
         col = f"u{i + 1}"
-        bound = scenario.inputs.max_abs[i]
+        bound = bounds[i]
         ax.step(data["t_s"], data[col], where="post", color="black", lw=1.0, label=col)
         ax.axhline(bound, color="grey", ls="-.", lw=0.8, label=f"|{col}| <= {bound:g}")
         ax.axhline(-bound, color="grey", ls="-.", lw=0.8)

@@ -118,6 +118,22 @@ def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple
     return rows
 
 
+def _top_lines(certificate: Mapping[str, Any]) -> list[str]:
+    """Which checks made the verdict, which were not run and why, and findings a reader must see first (clock
+    offsets between topics, lenient scenario geometry)."""
+    lines: list[str] = []
+    chosen = certificate.get("checks_selected")
+    if isinstance(chosen, list):
+        lines.append(f"Verdict over the checks: {', '.join(map(str, chosen)) or 'none'}.")
+    for item in certificate.get("not_checked", []) or []:
+        if isinstance(item, Mapping):
+            lines.append(f"Not checked: {item.get('name')} ({item.get('reason')}).")
+    for key in ("clock_findings", "scenario_warnings"):
+        for text in certificate.get(key, []) or []:
+            lines.append(f"Finding: {text}")
+    return lines
+
+
 def _verdict(certificate: Mapping[str, Any]) -> str:
     return str(certificate.get("verdict", "inconclusive"))
 
@@ -152,8 +168,9 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     """The report as Markdown; figures are referenced as ``figure_dir/<stem>.png``."""
     cert = result.certificate
     lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
-             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", "", "| field | value |",
-             "|---|---|"]
+             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", ""]
+    lines += [f"- {_md(t)}" for t in _top_lines(cert)] + ([""] if _top_lines(cert) else [])
+    lines += ["| field | value |", "|---|---|"]
     lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _meta_rows(cert, scenario)]
     lines += ["", "## Checks", "", "| check | verdict | margin | first violation [s] | details |",
               "|---|---|---|---|---|"]
@@ -213,6 +230,8 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
              f"<title>Certificate {_e(verdict)}: {_e(scenario.name)}</title>", f"<style>{_CSS}</style></head><body>",
              f"<h1>Certificate {_badge(verdict)}</h1>",
              f"<p>Exit code {int(result.exit_code)} (0 pass, 1 violation, 2 inconclusive).</p>",
+             *([("<ul>" + "".join(f"<li>{_e(t)}</li>" for t in _top_lines(cert)) + "</ul>")]
+               if _top_lines(cert) else []),
              '<table class="meta">']
     parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _meta_rows(cert, scenario)]
     parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'

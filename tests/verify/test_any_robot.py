@@ -407,3 +407,70 @@ def test_missing_signal_topic_or_field_is_exit_3_naming_both(tmp_path: Path, sig
     assert out.returncode == 3, out
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0] and str(log) in lines[0], lines
+
+
+# ---- clocks ----------------------------------------------------------------------------------------------------------
+def _spiky_log(tmp_path: Path, *, pose_ahead_ns: int, cmd_header_offset_ns: int = 0, stamped: bool = False) -> Path:
+    """Pose (Odometry) headers ``pose_ahead_ns`` ahead of the recorder; a command spike (w = 1.5) at 10.0 s."""
+    run = _run(3.4)
+    spike = run.w.copy()
+    spike[500] = 1.5  # t = 10.0 s at 50 Hz
+    run = KIT.UnicycleRun(run.t_s, run.x, run.y, run.theta, run.v, spike)
+    msgs = KIT.odometry_messages(run, "/odom", ros1=False, header_offset_ns=pose_ahead_ns) + KIT.command_messages(
+        run, "/cmd_vel", ros1=False, stamped=stamped, header_offset_ns=cmd_header_offset_ns)
+    return KIT.write_messages(tmp_path / "clock.mcap", msgs)
+
+
+def test_pose_clock_ahead_is_a_finding_and_a_correction_fixes_the_time(tmp_path: Path) -> None:
+    log = _spiky_log(tmp_path, pose_ahead_ns=2_000_000_000)
+    sc = lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    cert = certify_log(log, sc).certificate
+    box = _check(cert, "input_box")
+    assert box["first_violation_time"] == pytest.approx(8.0, abs=1e-9)  # misplaced: the clocks disagree by 2 s
+    assert len(cert["clock_findings"]) == 1
+    finding = cert["clock_findings"][0]
+    assert finding.startswith("/cmd_vel: its times (log time base) run 2.000 s behind the pose topic /odom")
+    assert "--clock-offset /cmd_vel=2.0" in finding
+    assert cert["data_quality"]["clocks"]["streams"]["/cmd_vel"]["suggested_correction_s"] == 2.0
+    fixed = certify_log(log, sc, clock_offsets={"/cmd_vel": 2.0}).certificate
+    assert _check(fixed, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    assert fixed["clock_findings"] == []
+    in_scenario = certify_log(log, lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"},
+                                       clock_offsets={"/cmd_vel": 2.0})).certificate
+    assert _check(in_scenario, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    # the header-vs-log offset reads header - log: the pose headers are 2 s ahead of the recorder
+    assert cert["data_quality"]["pose"]["header_vs_log_offset_s"]["median"] == pytest.approx(2.0)
+
+
+def test_stamped_commands_from_another_computer(tmp_path: Path) -> None:
+    """The commands' header clock runs 0.5 s behind the pose's: found, and corrected from the command line."""
+    log = _spiky_log(tmp_path, pose_ahead_ns=0, cmd_header_offset_ns=-500_000_000, stamped=True)
+    yaml_path = tmp_path / "lab.yaml"
+    yaml_path.write_text(json.dumps(lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"}).to_dict()))
+    out = _cli("certify", log, "--scenario", yaml_path, "--out", tmp_path / "r")
+    assert out.returncode == 1
+    cert = json.loads((tmp_path / "r" / "certificate.json").read_text())
+    assert _check(cert, "input_box")["first_violation_time"] == pytest.approx(9.5, abs=1e-9)
+    assert "/cmd_vel: its times (header time base) run 0.500 s behind" in cert["clock_findings"][0]
+    assert "Finding: /cmd_vel: its times" in (tmp_path / "r" / "report.md").read_text()
+    out = _cli("certify", log, "--scenario", yaml_path, "--clock-offset", "/cmd_vel=0.5", "--out", tmp_path / "r2")
+    cert = json.loads((tmp_path / "r2" / "certificate.json").read_text())
+    assert _check(cert, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    assert cert["clock_findings"] == []
+    bad = _cli("certify", log, "--scenario", yaml_path, "--clock-offset", "cmd_vel:0.5")
+    assert bad.returncode == 3
+    assert bad.stderr.strip() == ("tubempc: error: --clock-offset 'cmd_vel:0.5': expected TOPIC=SECONDS, "
+                                  "e.g. /cmd_vel=2.0")
+
+
+def test_reports_draw_polygon_scenarios_without_a_tube(tmp_path: Path) -> None:
+    from verify.report import write_reports
+
+    sc = poly_lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    res = certify_log(_cmd_log(tmp_path, _run(3.4), ".mcap", stamped=False), sc)
+    written = write_reports(res, sc, tmp_path / "r")
+    assert {"figures/workspace.png", "figures/inputs.png", "report.md"} <= set(written)
+    md = (tmp_path / "r" / "report.md").read_text()
+    assert "Verdict over the checks: spec, obstacle_clearance, workspace, input_box." in md
+    assert "Not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))." in md
+    assert "tube radius" not in md

@@ -148,6 +148,7 @@ def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
         header = cols.stamp_ns is not None and base_name == "header"
         t = cols.stamp_ns if header and cols.stamp_ns is not None else cols.log_ns
         t = t + (offsets_ns or {}).get(spec.topic, 0)
+        offset_vs_log = round(float(np.median((t - cols.log_ns).astype(np.float64))) * 1e-9, 9)
         order = np.argsort(t, kind="stable")
         t, v = t[order], cols.value[order]
         # one value per instant; duplicates of a stamp that disagree make the atom unknown there (NaN)
@@ -164,7 +165,8 @@ def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
             period = int(np.median(np.diff(t))) if t.shape[0] >= 2 else 0
         streams[name] = SignalStream(name, spec, t.astype(np.int64), v, period, "header" if header else "log")
         quality[name] = {"topic": spec.topic, "type": topic.msgtype, "messages": int(cols.value.shape[0]),
-                         "time_base": "header" if header else "log", "duplicate_stamps": duplicates,
+                         "time_base": "header" if header else "log", "offset_vs_log_s": offset_vs_log,
+                         "duplicate_stamps": duplicates,
                          "conflicting_duplicates": conflicts, "nan_values": int(np.isnan(v).sum()),
                          "period_source": "signals.rate_hz" if spec.rate_hz is not None else "median spacing"}
     return streams, quality

@@ -10,6 +10,7 @@ are unknown (NaN) to the formula; the counts are in ``samples``. Unusable input 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
+from verify.ingest.clocks import clock_report, median_offset_s
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
 from verify.ingest.fields import SignalStream, read_signals
@@ -119,9 +121,11 @@ def _stream(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, theta_rad: FloatAr
 
 
 def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", salvage: bool = False,
-             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
+             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST,
+             clock_offsets: Mapping[str, float] | None = None) -> LogData:
     """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
-    a thread beside the reading."""
+    a thread beside the reading. ``clock_offsets`` (topic -> seconds, added to that topic's times) extends and
+    overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
@@ -132,14 +136,18 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
     except ValueError as err:
         raise UnusableInputError(str(err)) from err
     try:
-        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job)
+        offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
+        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
+                         offsets_s=offsets)
     except BaseException:
         job.cancel()
         raise
 
 
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob) -> LogData:
+              job: DigestJob, offsets_s: dict[str, float]) -> LogData:
+    offsets_ns = {topic: round(sec * 1e9) for topic, sec in offsets_s.items()}
+    clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
     wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
     wanted |= {sig.topic for sig in scenario.signals.values()}
@@ -162,7 +170,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
     base = choose_time_base(cols.stamp_ns, cols.log_ns, time_base)
-    stamps = base.t_ns
+    stamps = base.t_ns + offsets_ns.get(pose_topic, 0)
+    clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
     pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
     t0 = int(pose.t_ns[0]) if time0_ns is None else int(time0_ns)
@@ -196,7 +205,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     if t.nominal is not None and t.nominal in raw.topics and raw.topics[t.nominal].payloads:
         ncols = decode_pose(raw.topics[t.nominal], raw.ros1)
         nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
-        nst = nbase.t_ns
+        nst = nbase.t_ns + offsets_ns.get(t.nominal, 0)
+        clock_streams[t.nominal] = (nbase.name, median_offset_s(nst, ncols.log_ns))
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
         nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
         quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
@@ -213,7 +223,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
         # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
         header_cmd = tw.stamp_ns is not None and base.name != "log"
-        cst = tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns
+        cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + offsets_ns.get(t.cmd_vel, 0)
+        clock_streams[t.cmd_vel] = ("header" if header_cmd else "log", median_offset_s(cst, tw.log_ns))
         corder = clean_order(cst)
         cjs = judged_samples(cst, tw.u)
         cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
@@ -228,9 +239,14 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     else:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
-    signals, signal_quality = read_signals(raw, scenario, base.name, str(p))
+    signals, signal_quality = read_signals(raw, scenario, base.name, str(p), offsets_ns)
     if signal_quality:
         quality["signals"] = signal_quality
+        for sq in signal_quality.values():
+            clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
+    clocks = clock_report(pose_topic, clock_streams, offsets_s)
+    quality["clocks"] = clocks
+    quality["notes"].extend(clocks["findings"])
 
     statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
