@@ -33,8 +33,8 @@ from verify.signals import signal_bounds, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "resolve_scenario",
-           "write_certificate"]
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
+           "resolve_scenario", "verdict_line", "write_certificate"]
 
 CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
@@ -242,6 +242,37 @@ def _jsonable(obj: Any) -> Any:
     if isinstance(obj, float):
         return _num(obj)
     return obj
+
+
+def verdict_line(log: str | Path, certificate: dict[str, Any]) -> str:
+    """``run.mcap: fail (spec_trajectory: fail at t=54.80 s; tube: inconclusive)`` for a terminal."""
+    bad = [c for c in certificate.get("checks", []) or [] if isinstance(c, dict) and c.get("verdict") != "pass"]
+    parts = []
+    for c in bad:
+        t = c.get("first_violation_time")
+        when = f" at t={t:.2f} s" if isinstance(t, int | float) else ""
+        parts.append(f"{c.get('name')}: {c.get('verdict')}{when}")
+    line = f"{log}: {certificate.get('verdict')}" + (f" ({'; '.join(parts)})" if parts else "")
+    selected = certificate.get("checks_selected")
+    if selected is not None:
+        line += f" [checks: {', '.join(selected)}"
+        skipped = [c.get("name") for c in certificate.get("not_checked", []) or [] if isinstance(c, dict)]
+        if skipped:
+            line += f"; not checked: {', '.join(str(n) for n in skipped)}"
+        line += "]"
+    return line
+
+
+def check_lines(certificate: dict[str, Any]) -> list[str]:
+    """One line per check with its margin and first violation (``certify -v``)."""
+    lines = []
+    for c in certificate.get("checks", []) or []:
+        margin, t = c.get("margin"), c.get("first_violation_time")
+        unit = c.get("margin_unit") or ""
+        m = f"margin {margin:.4g} {unit}".rstrip() if isinstance(margin, int | float) else "margin -"
+        lines.append(f"  {c.get('name')}: {c.get('verdict')}, {m}"
+                     + (f", first violation at t={t:.2f} s" if isinstance(t, int | float) else ""))
+    return lines
 
 
 class HasCertificate(Protocol):
