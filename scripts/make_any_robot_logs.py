@@ -172,7 +172,7 @@ EXAMPLE_WAYPOINTS = ((0.5, 0.5), (2.5, 0.5), (2.5, 2.5), (4.4, 3.3), (4.4, 3.3),
 
 
 def example_run() -> UnicycleRun:
-    return unicycle_run(EXAMPLE_WAYPOINTS, v_mps=0.4, w_radps=0.8, rate_hz=20.0, pauses={3: 5.0})
+    return unicycle_run(EXAMPLE_WAYPOINTS, v_mps=0.4, w_radps=0.8, rate_hz=10.0, pauses={3: 5.0})
 
 
 def main() -> None:

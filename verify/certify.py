@@ -28,6 +28,7 @@ from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containment
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
+from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
 from verify.signals import signal_bounds, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
@@ -120,6 +121,14 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     return _judge(log, sc, formula_text=str(formula), selection=selection)
 
 
+def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
+    """The formula's margin is the margin of the atom that decides it: metres, or a signal field's unit."""
+    if not streams:
+        return "m"
+    units = ", ".join(f"{k}: {v.spec.unit or 'its field unit'}" for k, v in sorted(streams.items()))
+    return f"m for region atoms; {units}"
+
+
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
            selection: Selection | None = None) -> CertifyResult:
     if selection is None:
@@ -140,6 +149,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",
          "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
+         "margin_unit": _spec_unit(streams),
          **({"subformula": traj.subformula, "reason": traj.reason,
              "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
             if traj.verdict != "pass" else {})})
