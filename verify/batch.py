@@ -188,6 +188,7 @@ class _Job:
     time_base: str
     salvage: bool
     checks: tuple[str, ...] | None = None
+    digest: str = "blake3"
     clock_offsets: tuple[tuple[str, float], ...] = ()
 
 
@@ -202,7 +203,7 @@ def _certify_one(job: _Job) -> BatchItem:
     start = time.perf_counter()
     try:
         result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
-                                     salvage=job.salvage, checks=job.checks,
+                                     salvage=job.salvage, checks=job.checks, digest=job.digest,
                                      clock_offsets=dict(job.clock_offsets) or None)
     except VerifyError as err:
         return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
@@ -325,10 +326,9 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
-                 workers: int | None = None,
-                 dask: str | None = None, progress: bool | None = None,
-                 checks: Sequence[str] | None = None, clock_offsets: dict[str, float] | None = None
-                 ) -> BatchResult:
+                 workers: int | None = None, dask: str | None = None, progress: bool | None = None,
+                 checks: Sequence[str] | None = None, digest: str = "blake3",
+                 clock_offsets: dict[str, float] | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
     Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
@@ -348,7 +348,7 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
         select_checks(scenario, checks)  # unknown or unsupported checks concern every log: raise before the jobs
     chosen = tuple(checks) if checks is not None else None
     offsets = tuple(sorted((clock_offsets or {}).items()))
-    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, offsets) for p in logs]
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest, offsets) for p in logs]
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)
