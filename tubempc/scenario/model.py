@@ -134,15 +134,15 @@ class Region(_Frozen):
     def center(self) -> tuple[float, float]:
         """Centre of a disc region (the planner's regions are discs: ``Scenario.planning_problems``)."""
         if self.disc_center is None:
-            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
-                                field=f"regions.{self.name}")
+            raise ScenarioError("is a polygon: this part of tubempc (the planner, the controller, the online monitor) "
+                                "takes disc regions only", field=f"regions.{self.name}")
         return self.disc_center
 
     @property
     def radius(self) -> float:
         if self.disc_radius is None:
-            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
-                                field=f"regions.{self.name}")
+            raise ScenarioError("is a polygon: this part of tubempc (the planner, the controller, the online monitor) "
+                                "takes disc regions only", field=f"regions.{self.name}")
         return self.disc_radius
 
     @property
