@@ -75,10 +75,20 @@ def scenario_show(name: str) -> None:
 @scenario.command("validate")
 @click.argument("path")
 def scenario_validate(path: str) -> None:
-    """Validate a scenario file; print a summary or one line naming the problem (exit 3)."""
+    """Validate a scenario file; print a summary or one line naming the problem (exit 3).
+
+    Then one line per geometry warning of the (lenient) certifier, and what keeps the (strict) planner from using
+    the scenario, if anything: both name the field."""
     s = load_scenario(path)
     say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
                f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
+    for warning in s.certification_warnings():
+        say(f"{path}: warning: {warning}")
+    problems = s.planning_problems()
+    if problems:
+        field, what = problems[0]
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        say(f"{path}: certification only: the planner cannot use it: {field}: {what}{more}")
 
 
 @cli.command("spec")
