@@ -3,8 +3,14 @@
 ``--dwell silent`` (default): waits add no position, the run lists the arrivals a log will show and the targets carry
 the planned departure times; ``--dwell observed``: each dwell is a position; ``--no-wait``: no waiting at all.
 
-Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input;
-4 the controller (Algorithm 1) is not available.
+``--objective time`` (default): the plan is time-optimal (its last obligation met as early as any run on the tick
+grid allows) and re-timed for margin only where that keeps the optimum; ``--objective margin``: re-timed for the
+largest margin even if later.
+
+Exit codes: 0 a plan was found; 1 no accepting run (proved by the exact search; the message names a conjunct set
+only when that set alone is proved unsatisfiable); 2 undecided: the search reached ``--max-states`` (raise it);
+3 unusable input (also: the abstraction has no usable transition, every region pair failed; the message names
+the failed design quantity); 4 the controller (Algorithm 1) is not available.
 """
 
 from __future__ import annotations
@@ -26,6 +32,11 @@ __all__ = ["plan"]
 @click.option("--dwell", type=click.Choice(["silent", "observed"]), default="silent", show_default=True,
               help="silent: a wait in a region adds no position (the move after it arrives later; what a log "
                    "shows); observed: each dwell is a position of the planned run.")
+@click.option("--objective", type=click.Choice(["time", "margin"]), default="time", show_default=True,
+              help="time: keep the time-optimal run's cost when re-timing for margin; margin: largest margin even "
+                   "if the last obligation is then met later.")
+@click.option("--max-states", type=click.IntRange(min=1), default=None,
+              help="Product states a search may create before it gives up undecided (exit 2); default 2000000.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the plan as JSON to this file.")
 @click.option("--no-cache", is_flag=True, help="Rebuild the abstraction even when it is cached.")
@@ -33,12 +44,14 @@ __all__ = ["plan"]
 @click.option("--dask", "dask_address", default=None, help="Dask scheduler address for the abstraction.")
 @click.option("--dot", "dot_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the explored product graph as Graphviz DOT.")
-def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str, json_out: str | None,
-         no_cache: bool, workers: int | None, dask_address: str | None, dot_out: str | None) -> None:
+def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str, objective: str,
+         max_states: int | None, json_out: str | None, no_cache: bool, workers: int | None, dask_address: str | None,
+         dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
+    from tubempc.errors import DesignError
     from tubempc.mitl import parse
-    from tubempc.planning.plan import plan_from_wts
-    from tubempc.planning.search import export_dot, find_run
+    from tubempc.planning.plan import plan_from_wts, require_transitions
+    from tubempc.planning.search import DEFAULT_MAX_STATES, export_dot, find_run
     from tubempc.planning.wts import build_wts
     from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
 
@@ -46,7 +59,13 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str
         scenario_name)
     formula = parse(spec_text) if spec_text is not None else scenario.formula
     wts = build_wts(scenario, use_cache=not no_cache, workers=workers, dask=dask_address)
-    result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
+    try:
+        require_transitions(wts)
+    except DesignError as err:
+        raise DesignError(f"{scenario_name}: {err}") from err
+    limit = max_states if max_states is not None else DEFAULT_MAX_STATES
+    result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region,
+                           max_states=limit, objective=objective)
     click.echo(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
                f"transitions, weights from {wts.graph.get('oracle')}); formula {formula}")
     click.echo(f"{'region':<8} {'time [s]':>10}  {'kind':<6} labels")
@@ -63,10 +82,11 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str
         depart = "-" if tg.depart_after_s is None else f"{tg.depart_after_s:.3f}"
         click.echo(f"  {tg.region:<8} {tg.arrival_s:>10.3f} {depart:>10}")
     margin = "inf (no timing constraint)" if math.isinf(result.margin_s) else f"{result.margin_s:.3f} s"
-    click.echo(f"margin to interval endpoints: {margin}; search {result.search_s * 1000:.1f} ms, "
-               f"{result.product_states} product states")
+    click.echo(f"margin to interval endpoints: {margin} (objective {result.objective}); search "
+               f"{result.search_s * 1000:.1f} ms, {result.product_states} product states ({result.method})")
     if json_out is not None:
         Path(json_out).write_text(json.dumps(result.to_json(), indent=2) + "\n")
     if dot_out is not None:
-        found = find_run(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
+        found = find_run(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region,
+                         max_states=limit)
         Path(dot_out).write_text(export_dot(found.explored()))

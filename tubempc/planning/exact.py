@@ -34,24 +34,14 @@ import math
 
 import networkx as nx
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import SearchLimitError
 from tubempc.planning.automaton import AND, EV, OR, UNT, State, TimedAutomaton
 from tubempc.planning.product import DWELL, MOVE, STAY, WAIT, Found, Product, Step, accepting_cycle, assemble
 
-__all__ = ["EXACT_MODES", "SearchLimitError", "exact_search", "root_existential"]
+__all__ = ["EXACT_MODES", "exact_search", "root_existential"]
 
 EXACT_MODES = ("silent", "observed", "none")
 _INF = math.inf
-
-
-class SearchLimitError(TubeMPCError, RuntimeError):
-    """The product grew past ``max_states`` before the search could decide (neither a run nor a proof of none).
-
-    ``limit`` is the limit that was reached."""
-
-    def __init__(self, message: str, *, limit: int) -> None:
-        self.limit = limit
-        super().__init__(message)
 
 
 def root_existential(aut: TimedAutomaton) -> frozenset[int]:
