@@ -39,7 +39,7 @@ __all__ = ["plan"]
               help="time: keep the time-optimal run's cost when re-timing for margin; margin: largest margin even "
                    "if the last obligation is then met later.")
 @click.option("--max-states", type=click.IntRange(min=1), default=None,
-              help="Product states a search may create before it gives up undecided (exit 2); default 2000000.")
+              help="Product states a search may create before it gives up undecided (exit 2); default 500000.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the plan as JSON to this file.")
 @click.option("--no-cache", is_flag=True, help="Rebuild the abstraction even when it is cached.")

@@ -38,15 +38,20 @@ from tubempc.errors import SearchLimitError
 from tubempc.planning.automaton import AND, EV, OR, UNT, State, TimedAutomaton
 from tubempc.planning.product import DWELL, MOVE, STAY, WAIT, Found, Product, Step, accepting_cycle, assemble
 
-__all__ = ["EXACT_MODES", "exact_search", "root_existential"]
+__all__ = ["EXACT_MODES", "exact_search", "root_anchored", "root_existential"]
 
 EXACT_MODES = ("silent", "observed", "none")
 _INF = math.inf
 
 
 def root_existential(aut: TimedAutomaton) -> frozenset[int]:
-    """``F``/``U`` nodes anchored only at the first position: reached from the root through ``&``/``|`` nodes and
-    no child of any temporal node (so a copy, once met or failed, never comes back)."""
+    """``F``/``U`` nodes anchored only at the first position (``root_anchored``)."""
+    return frozenset(i for i in root_anchored(aut) if aut.nodes[i].kind in (EV, UNT))
+
+
+def root_anchored(aut: TimedAutomaton) -> frozenset[int]:
+    """Temporal nodes anchored only at the first position: reached from the root through ``&``/``|`` nodes and no
+    child of any temporal node (so a copy, once met or failed, never comes back, and its age only grows)."""
     nested: set[int] = set()
     temporal = {i for i, n in enumerate(aut.nodes) if n.kind >= EV}
     stack = [c for i in temporal for c in aut.nodes[i].children]
@@ -65,7 +70,7 @@ def root_existential(aut: TimedAutomaton) -> frozenset[int]:
         top.add(c)
         if aut.nodes[c].kind in (AND, OR):
             stack.extend(aut.nodes[c].children)
-    return frozenset(i for i in top - nested if aut.nodes[i].kind in (EV, UNT))
+    return frozenset(i for i in top - nested if aut.nodes[i].kind >= EV)
 
 
 def _distances(aut: TimedAutomaton, nodes: frozenset[int], cls: list[int],
@@ -112,7 +117,9 @@ class _Exact:
         self.prod.classes = cls
         self.expanded_edges: list[bool] = []
         self.roots = root_existential(aut)
-        self.dist = _distances(aut, self.roots, cls, adj)
+        self.once = root_anchored(aut)
+        self.caps = [n.cap for n in aut.nodes]
+        self.dist = _distances(aut, frozenset(i for i, n in enumerate(aut.nodes) if n.kind in (EV, UNT)), cls, adj)
         self.reach = [n.lo if n.lo_closed else n.lo + 1 for n in aut.nodes]
         self.closure: set[int] = set()
         self.component: dict[int, int] = {}
@@ -126,6 +133,8 @@ class _Exact:
         for nid, age in obl:
             if nid in self.roots:
                 h = max(h, self.reach[nid] - age, self.dist[nid][region])
+            elif nid in self.dist and self.dist[nid][region] == _INF:
+                return _INF  # a pending F/U copy that no reachable region can meet: a dead state
         return h
 
     def state(self, region: int, obl: State, pos: bool) -> int:
@@ -165,6 +174,9 @@ class _Exact:
 
     def on_accepting_cycle(self, sid: int) -> bool:
         """Whether ``sid`` lies on a cycle (with at least one position) that meets every Büchi set."""
+        caps = self.caps
+        if any(nid in self.once and age < caps[nid] for nid, age in self.prod.obl[sid]):
+            return False  # a copy anchored only at the first position, still ageing: the state cannot recur
         if sid not in self.closure:
             stack = [sid]
             added = False

@@ -45,11 +45,12 @@ from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
            "find_run"]
 
-DEFAULT_MAX_STATES = 2_000_000
+DEFAULT_MAX_STATES = 500_000  # about 40 s and a few hundred MB of product; raise with --max-states
 SILENT, OBSERVED = "silent", "observed"
 DWELL_MODES = (SILENT, OBSERVED)
 FAST = "first attempt, proved optimal by the exact search"
 EXACT = "exact search"
+_DIAGNOSIS_STATES = 100_000  # per conjunct set checked while naming the obligation (undecided: named nothing)
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
 
@@ -92,14 +93,17 @@ def _intervals(formula: Formula) -> list[Interval]:
 
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
              max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT,
-             first_attempt: bool = True) -> SearchResult:
+             first_attempt: bool = True, optimal: bool = True) -> SearchResult:
     """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring).
 
     ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` (a wait adds no
     position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run).
     ``first_attempt=False`` skips the fast event-driven stage (the exact search alone decides; same answer, usually
-    slower). Raises ``NoAcceptingRunError`` only when the exact search proves that no run exists, and
-    ``SearchLimitError`` when a search reaches ``max_states`` product states first."""
+    slower); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
+    exists (a satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a
+    run, that run is returned with ``method`` saying that its optimality is not proved. Raises
+    ``NoAcceptingRunError`` only when the exact search proves that no run exists, and ``SearchLimitError`` when a
+    search reaches ``max_states`` product states first."""
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()
@@ -141,13 +145,26 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
             if not holds(formula, fast[0], labels):
                 fast = None  # never trust the first attempt's answer unchecked
         bound = math.inf if fast is None else float(_cost(fast[0]) / tick)
-        adj = _adjacency(wts, names, idx, tick)
-        exact_start = time.perf_counter()
-        exact, exact_states = exact_search(aut, names, cls, adj, idx[init], mode=SILENT if silent else OBSERVED,
-                                           bound=bound, max_states=max_states)
-        states += exact_states
-        exact_s = time.perf_counter() - exact_start
-        method = FAST if exact is None and fast is not None else EXACT
+        exact: Found | None = None
+        if fast is None or optimal:
+            adj = _adjacency(wts, names, idx, tick)
+            exact_start = time.perf_counter()
+            try:
+                exact, exact_states = exact_search(aut, names, cls, adj, idx[init],
+                                                   mode=SILENT if silent else OBSERVED, bound=bound,
+                                                   max_states=max_states)
+            except SearchLimitError:
+                if fast is None:
+                    raise  # undecided: neither a run nor a proof that none exists
+                # a valid run is known, only its optimality is undecided: return it and say so
+                method = f"first attempt; optimality not proved (the exact search reached {max_states} states)"
+                exact_states = max_states
+            else:
+                method = FAST if exact is None and fast is not None else EXACT
+            states += exact_states
+            exact_s = time.perf_counter() - exact_start
+        else:
+            method = "first attempt (optimality not checked)"
         result = exact if exact is not None else fast
     if result is None:
         if diagnose:
@@ -358,9 +375,12 @@ def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, dwell: str, 
     conjuncts = list(formula.args) if isinstance(formula, And) else [formula]
     mode = f"with {dwell} waiting" if wait else "without waiting (--no-wait)"
 
+    budget = min(max_states, _DIAGNOSIS_STATES)
+
     def unsatisfiable(f: Formula) -> bool:
         try:
-            find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=max_states, diagnose=False)
+            find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=budget, diagnose=False,
+                     optimal=False)
         except NoAcceptingRunError:
             return True
         except SearchLimitError:
