@@ -70,6 +70,7 @@ def test_builtin_plan_is_time_optimal_by_default(synthetic_wts: nx.DiGraph) -> N
     # keeps it there (the margin is then 0: the objective "margin" trades it for 10 s, below)
     assert p.run[-1] == ("R1", 80.0) and p.period_s == 0
     assert p.margin_s == pytest.approx(0.0, abs=1e-9)
+    assert ("R3", 40.0) in p.run  # the other window's witness is still centred, at no cost in time
     margin = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, objective="margin")
     assert margin.run[-1][1] > 80.0
 

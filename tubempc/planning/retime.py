@@ -245,9 +245,15 @@ def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: M
     try:
         p1 = cp.Problem(cp.Maximize(m), [*base_cons, a @ x + b >= m])
         p1.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
-        if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None or float(m.value) <= 1e-6:
+        if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None:
             return None
-        best = float(m.value) * (1 - 1e-6) - 1e-9
+        if float(m.value) <= 1e-6:
+            if not keep_cost:
+                return None
+            # the optimum sits on a window end (margin 0): still centre the other witnesses at that cost
+            best = 0.0
+        else:
+            best = float(m.value) * (1 - 1e-6) - 1e-9
         cons = [*base_cons, a @ x + b >= best]
         if centred:
             # each two-sided window's own slack s_k (<= both sides, <= half width), summed: witnesses move to centres
