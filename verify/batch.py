@@ -320,7 +320,8 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 
 
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
-                 time_base: Literal["header", "log"] = "header", salvage: bool = False, workers: int | None = None,
+                 time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
+                 workers: int | None = None,
                  dask: str | None = None, progress: bool | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
@@ -331,8 +332,8 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     """
     if spec is not None:
         parse(spec)
-    if time_base not in ("header", "log"):
-        raise ValueError(f"time_base={time_base!r} must be 'header' or 'log'")
+    if time_base not in ("auto", "header", "log"):
+        raise ValueError(f"time_base={time_base!r} must be 'auto', 'header' or 'log'")
     raw = list(paths)
     logs, problems = discover_logs(raw)
     ordered = [str(p) for p in logs] + [p for p, _ in problems]

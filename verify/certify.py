@@ -25,13 +25,14 @@ from verify.checks import CheckResult, check_clearance, check_input_box, check_t
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containing_region
 from verify.ingest import LogData, read_log
+from verify.ingest.digest import DEFAULT_DIGEST
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of
 from verify.trajectory import check_trajectory
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
            "resolve_scenario", "verdict_line", "write_certificate"]
 
-CERTIFICATE_VERSION = 1
+CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
@@ -77,10 +78,13 @@ def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
             **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin")}}
 
 
-def _overall(checks: list[dict[str, Any]], partial: bool) -> tuple[str, str | None]:
+def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
+             ) -> tuple[str, str | None]:
     verdicts = [c["verdict"] for c in checks]
     if "fail" in verdicts:
         return "fail", None
+    if problems:
+        return "inconclusive", "; ".join(f"{k}: {v}" for k, v in sorted(problems.items()))
     if "inconclusive" in verdicts:
         names = [c["name"] for c in checks if c["verdict"] == "inconclusive"]
         return "inconclusive", f"check(s) not decided: {', '.join(names)}"
@@ -90,8 +94,10 @@ def _overall(checks: list[dict[str, Any]], partial: bool) -> tuple[str, str | No
 
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
-                time_base: str = "header", salvage: bool = False, time0_ns: int | None = None) -> CertifyResult:
-    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files."""
+                time_base: str = "auto", salvage: bool = False, time0_ns: int | None = None,
+                digest: str = DEFAULT_DIGEST) -> CertifyResult:
+    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
+    ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256"."""
     sc = resolve_scenario(scenario)
     formula = parse_spec(spec if spec is not None else sc.spec)
     known = {lab for r in sc.regions for lab in r.labels}
@@ -99,7 +105,7 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     if unknown:
         raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
                         f"{sc.name!r}")
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
     return _judge(log, sc, formula_text=str(formula))
 
 
@@ -137,12 +143,14 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         nominal = (log.nominal.t_ns, log.nominal.x_m, log.nominal.y_m)
     period_ns = round(1e9 / sc.mocap.rate_hz)
     tol_m = 3.0 * sc.mocap.noise_std
-    tube = check_tube(pose.t_ns, pose.x_m, pose.y_m, nominal, radius_m=sc.tube_radius_m, tolerance_m=tol_m,
+    every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
+    tube = check_tube(every.t_ns, every.x_m, every.y_m, nominal, radius_m=sc.tube_radius_m, tolerance_m=tol_m,
                       match_ns=period_ns // 2)
     checks = [spec_traj, spec_run, tube, check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs.max_abs),
-              check_workspace(pose.t_ns, pose.x_m, pose.y_m, sc), check_clearance(pose.t_ns, pose.x_m, pose.y_m, sc)]
+              check_workspace(every.t_ns, every.x_m, every.y_m, sc),
+              check_clearance(every.t_ns, every.x_m, every.y_m, sc)]
     entries = [_check_entry(c, t0) for c in checks]
-    verdict, why = _overall(entries, log.partial)
+    verdict, why = _overall(entries, log.partial, log.stream_problems)
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,
@@ -152,11 +160,17 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         "scenario_sha256": sc.sha256(),
         "log": log.path,
         "log_format": log.format,
-        "log_sha256": log.log_sha256,
+        "log_digest": log.log_digest,
+        "log_digest_algorithm": log.digest_algorithm,
+        **({"log_sha256": log.log_digest} if log.digest_algorithm == "sha256" else {}),
         "partial": log.partial,
         "time_base": log.time_base,
+        "time_base_requested": log.time_base_requested,
+        **({"time_base_note": log.time_base_note} if log.time_base_note else {}),
         "time0_ns": t0,
         "duration_s": round(end_s, 9),
+        "judged_span_s": [round(float(t_rel[0]) * 1e-9, 9) if t_rel.size else 0.0, round(end_s, 9)],
+        "samples": log.samples,
         "pose_source": log.pose_source,
         "speed_bound_mps": v_max,
         "robot_radius_m": sc.robot.radius,

@@ -47,8 +47,9 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here (one sub-folder per log when several are given).")
-@click.option("--time-base", type=click.Choice(["header", "log"]), default="header", show_default=True,
-              help="Header stamps or log (receive) time.")
+@click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="auto", show_default=True,
+              help="auto: header stamps unless they cannot order the samples (then log time, noted in the "
+                   "certificate); header: header stamps (no pass if they cannot order the samples); log: receive time.")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
@@ -95,7 +96,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     from verify.batch import certify_many, summary_lines, write_batch
 
-    base = cast(Literal["header", "log"], time_base)
+    base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
                          progress=progress)
     if as_json:

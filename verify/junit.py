@@ -127,6 +127,6 @@ def certificate_suite(certificate: Mapping[str, Any], *, suite_name: str,
         else:
             cases.append(JUnitCase(name, suite_name, "failure", "inconclusive",
                                    f"{summary} (the check could not be decided: not a pass)", details or summary))
-    props = tuple((key, str(certificate[key])) for key in ("verdict", "formula", "scenario_sha256", "log_sha256",
-                                                             "partial") if key in certificate)
+    keys = ("verdict", "formula", "scenario_sha256", "log_digest", "log_digest_algorithm", "log_sha256", "partial")
+    props = tuple((key, str(certificate[key])) for key in keys if key in certificate)
     return JUnitSuite(suite_name, tuple(cases), props)
