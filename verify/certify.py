@@ -72,10 +72,16 @@ def _rel_s(t_ns: int | None, time0_ns: int) -> float | None:
     return None if t_ns is None else round((t_ns - time0_ns) * 1e-9, 9)
 
 
+#: unit of each check's margin (a check may state its own as ``details["margin_unit"]``)
+MARGIN_UNITS = {"spec_trajectory": "m", "spec_timed_run": "s", "tube": "m", "input_box": "m/s or rad/s",
+                "workspace": "m", "obstacle_clearance": "m"}
+
+
 def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
-    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin),
+    unit = c.details.get("margin_unit", MARGIN_UNITS.get(c.name))
+    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin), "margin_unit": unit,
             "first_violation_time": _rel_s(c.first_violation_ns, time0_ns),
-            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin")}}
+            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin", "margin_unit")}}
 
 
 def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
@@ -118,7 +124,9 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
 
     traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max)
     spec_traj = CheckResult(
-        "spec_trajectory", traj.verdict, traj.margin_m if traj.verdict != "inconclusive" else None,
+        # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
+        "spec_trajectory", traj.verdict,
+        traj.margin_m if traj.verdict == "pass" else traj.margin_hi_m if traj.verdict == "fail" else None,
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",
@@ -133,7 +141,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
     tr = check_timed_run(formula_text, run, {r.name: list(r.labels) for r in sc.regions}, end=end_s)
     spec_run = CheckResult(
-        "spec_timed_run", tr.verdict, None,
+        "spec_timed_run", tr.verdict, tr.margin_s,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})

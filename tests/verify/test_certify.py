@@ -264,3 +264,28 @@ def test_cli_json_quiet_verbose_and_time_precision(make_log: MakeLog, good: Any)
     assert re.search(r"spec_trajectory: fail at t=\d+\.\d\d s", fail.stdout), fail.stdout  # 2 decimals, not 9
     assert "obstacle_clearance: pass, margin" in fail.stderr  # -v lists every check
     assert run("certify", "-q", str(ok), "--scenario", "nexus-sml").stdout == ""
+
+
+@pytest.mark.parametrize("log", ["late_mission.mcap", "obstacle_touch.bag", "tube_breach.mcap"])
+def test_every_failed_check_states_time_margin_and_unit(log: str, scenario: Scenario) -> None:
+    cert = certify_log(Path(__file__).resolve().parents[2] / "logs" / log, scenario).certificate
+    failed = [c for c in cert["checks"] if c["verdict"] == "fail"]
+    assert failed
+    for check in failed:
+        assert isinstance(check["first_violation_time"], float), check
+        assert isinstance(check["margin"], float) and check["margin"] <= 0, check
+        assert check["margin_unit"] in ("m", "s", "m/s or rad/s"), check
+    for check in cert["checks"]:
+        assert "margin_unit" in check
+
+
+def test_missed_window_margin_is_how_late_in_seconds() -> None:
+    from verify.timedrun import check_timed_run
+
+    labels = {"R1": ["mission_1"], "R3": ["mission_2"], "R8": ["obs_3"]}
+    late = check_timed_run("F[30,50] mission_2", [("R1", 0.0), ("R3", 56.0)], labels, end=60.0)
+    assert (late.verdict, late.time_s, late.margin_s) == ("fail", 50.0, pytest.approx(-6.0))
+    never = check_timed_run("F[30,50] mission_2", [("R1", 0.0)], labels, end=60.0)
+    assert never.margin_s == pytest.approx(-10.0)  # not reached by the log's end: at least 10 s late
+    touch = check_timed_run("G[0,inf) !obs_3", [("R1", 0.0), ("R8", 6.5), ("R1", 9.0)], labels, end=20.0)
+    assert (touch.time_s, touch.margin_s) == (6.5, pytest.approx(-2.5))  # inside the obstacle for 2.5 s
