@@ -78,6 +78,21 @@ def scenario_validate(path: str) -> None:
                f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
 
 
+@cli.group("schema")
+def schema() -> None:
+    """Print the JSON Schema of an output other programs parse."""
+
+
+@schema.command("certificate")
+def schema_certificate() -> None:
+    """The JSON Schema of certificate.json and of `certify --json` (also docs/certificate.schema.json)."""
+    import json
+
+    from verify.certificate import certificate_schema
+
+    click.echo(json.dumps(certificate_schema(), indent=2))
+
+
 @cli.command("spec")
 @click.argument("text")
 def spec(text: str) -> None:

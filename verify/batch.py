@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate
 from verify.errors import UnusableInputError, VerifyError
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
 from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
@@ -394,7 +395,8 @@ def _write_item(job: _WriteJob) -> JUnitSuite:
         if job.reports:
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
                           junit_inconclusive=job.junit_inconclusive)
-        suite = certificate_suite(item.result.certificate, suite_name=item.name, inconclusive=job.junit_inconclusive)
+        suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
+                                  inconclusive=job.junit_inconclusive)
         return dataclasses.replace(suite, time_s=item.elapsed_s)
     (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
     case = JUnitCase("read log", item.name, "error", item.verdict, item.error or "")

@@ -21,6 +21,7 @@ import pandas as pd
 
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
+from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containing_region
@@ -32,7 +33,6 @@ from verify.trajectory import check_trajectory
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
            "resolve_scenario", "verdict_line", "write_certificate"]
 
-CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
@@ -50,6 +50,11 @@ class CertifyResult:
     @property
     def verdict(self) -> str:
         return str(self.certificate["verdict"])
+
+    @property
+    def model(self) -> Certificate:
+        """The certificate as the typed model (``verify.certificate``)."""
+        return Certificate.model_validate(self.certificate)
 
 
 def resolve_scenario(scenario: Scenario | str | Path) -> Scenario:
@@ -203,7 +208,8 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         inputs_df = pd.DataFrame({"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
                                   "u3": log.cmd_u[:, 2]})
     rob = pd.DataFrame({"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}) if t_rel.size else None
-    return CertifyResult(_jsonable(cert), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
+    typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
+    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
 
 
 def _jsonable(obj: Any) -> Any:
@@ -247,7 +253,9 @@ class HasCertificate(Protocol):
 
 
 def write_certificate(result: HasCertificate, out_dir: str | Path) -> Path:
-    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path."""
+    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path. The certificate is
+    validated against the model first (``verify.certificate``): nothing that breaks the schema is written."""
+    Certificate.model_validate(result.certificate)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "certificate.json"

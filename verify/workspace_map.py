@@ -19,7 +19,7 @@ a label with no free place is hidden (the report's tables still list it) and cou
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -35,6 +35,7 @@ from matplotlib.text import Annotation, Text
 from matplotlib.transforms import Bbox
 
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate, CheckEntry, Verdict
 
 __all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "place_texts", "region_caption", "text_box",
            "violations_of", "workspace_figure", "workspace_map"]
@@ -81,27 +82,24 @@ def region_caption(name: str, labels: Sequence[str]) -> str:
     return f"{name}: {', '.join(extra)}" if extra else name
 
 
-def _describe(check: Mapping[str, Any]) -> str:
-    sub = check.get("subformula")
-    if isinstance(sub, str) and sub:
-        return f"{sub} violated"
-    region = check.get("region")
+def _describe(check: CheckEntry) -> str:
+    if check.subformula:
+        return f"{check.subformula} violated"
+    region = check.details.get("region")
     if isinstance(region, str) and region:
-        return f"{check.get('name', '?')}: {region}"
-    return str(check.get("name", "?"))
+        return f"{check.name}: {region}"
+    return check.name
 
 
-def violations_of(certificate: Mapping[str, Any]) -> list[Violation]:
+def violations_of(certificate: Certificate) -> list[Violation]:
     """First violations of the failed checks, grouped by time (to the hundredth of a second)."""
     groups: dict[float, tuple[list[str], list[str]]] = {}
-    for check in certificate.get("checks", []) or []:
-        if not isinstance(check, Mapping) or check.get("verdict") != "fail":
+    for check in certificate.checks:
+        t = check.first_violation_time
+        if check.verdict is not Verdict.FAIL or t is None or not math.isfinite(t):
             continue
-        t = check.get("first_violation_time")
-        if not isinstance(t, int | float) or not math.isfinite(float(t)):
-            continue
-        names, whats = groups.setdefault(round(float(t), 2), ([], []))
-        names.append(str(check.get("name", "?")))
+        names, whats = groups.setdefault(round(t, 2), ([], []))
+        names.append(check.name)
         what = _describe(check)
         if what not in whats:
             whats.append(what)
@@ -316,7 +314,7 @@ def _letter(i: int) -> str:
     return chr(ord("A") + i)
 
 
-def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                   nominal: pd.DataFrame | None) -> MapFigure:
     """The map (see the module docstring) and the number of labels that found no free place."""
     ws = scenario.workspace
@@ -374,9 +372,8 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
             ax.plot(*last, "s", ms=6, mfc="black", mec="black", zorder=6, label="end")
             labels.append(_Label(ax.annotate(f"end, t = {t[-1]:.2f} s", last, xytext=(0, 0), textcoords="offset points",
                                              fontsize=8), _ring(5.0 * pt_per_px)))
-        for i, entry in enumerate(certificate.get("timed_run", []) or []):
-            te = entry.get("time") if isinstance(entry, Mapping) else None
-            pos = _position_at(trajectory, float(te)) if isinstance(te, int | float) else None
+        for i, entry in enumerate(certificate.timed_run):
+            pos = _position_at(trajectory, entry.time)
             if pos is None:
                 continue
             markers.append(pos)
@@ -457,7 +454,7 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
                              ec=_FAIL_COLOUR, lw=1.0, ls="--", zorder=8))
 
 
-def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def workspace_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                      nominal: pd.DataFrame | None) -> bytes:
     """The map as PNG bytes."""
     import io

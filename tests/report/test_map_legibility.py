@@ -15,6 +15,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from tubempc.scenario import Scenario, builtin_scenario, load_scenario
+from verify.certificate import Certificate
 from verify.figures import render_figures
 from verify.obligations import obligations_of
 from verify.report import write_reports
@@ -31,7 +32,8 @@ def _patrol(points: list[tuple[float, float]], speed_mps: float, rate_hz: float 
                          "y_m": np.interp(t * speed_mps, arc, xy[:, 1]), "theta_rad": 0.05 * t})
 
 
-def _crowded_certificate(scenario: Scenario, trajectory: pd.DataFrame, n_violations: int) -> dict[str, Any]:
+def _crowded_certificate(base: dict[str, Any], scenario: Scenario, trajectory: pd.DataFrame,
+                         n_violations: int) -> Certificate:
     """Several failed checks with violations close together in time (their labels compete for the same space),
     and a long timed run (numbered markers everywhere)."""
     t_end = float(trajectory["t_s"].iloc[-1])
@@ -40,8 +42,8 @@ def _crowded_certificate(scenario: Scenario, trajectory: pd.DataFrame, n_violati
         checks.append({"name": f"check_{k}", "verdict": "fail", "margin": -0.1, "margin_unit": "m",
                        "first_violation_time": t_end * (0.3 + 0.04 * k), "subformula": f"F[{k},{k + 5}] mission_x"})
     run = [{"region": r.name, "time": t_end * i / (2 * len(scenario.regions))} for i, r in enumerate(scenario.regions)]
-    return {"verdict": "fail", "formula": scenario.spec, "checks": checks, "timed_run": run,
-            "duration_s": t_end}
+    return Certificate.model_validate({**base, "verdict": "fail", "formula": scenario.spec,
+                                       "checks": checks, "timed_run": run, "duration_s": t_end})
 
 
 def _assert_no_overlap(fig: Any) -> None:
@@ -55,14 +57,14 @@ def _assert_no_overlap(fig: Any) -> None:
 
 
 @pytest.mark.parametrize("scale", ["lab-5m", "field-150m"])
-def test_map_annotations_never_overlap(scale: str) -> None:
+def test_map_annotations_never_overlap(scale: str, make_result: Callable[..., Any]) -> None:
     if scale == "lab-5m":
         scenario = builtin_scenario()
         trajectory = _patrol([(-1.99, -1.78), (-0.6, -0.5), (0.16, 0.40), (1.3, -0.4), (2.02, -1.63)], 0.15)
     else:
         scenario = load_scenario(OUTDOOR)
         trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
-    cert = _crowded_certificate(scenario, trajectory, n_violations=4)
+    cert = _crowded_certificate(make_result().certificate, scenario, trajectory, n_violations=4)
     rendered = workspace_map(cert, scenario, trajectory, None)
     _assert_no_overlap(rendered.figure)
     shown = [t.get_text() for t in map_texts(rendered.figure) if t.axes is rendered.figure.axes[0]]
@@ -77,11 +79,12 @@ def test_map_annotations_never_overlap(scale: str) -> None:
         assert len(rendered.figure.axes) >= 3  # map, colour bar, and zoomed panels around the violations
 
 
-def test_labels_without_placement_would_overlap() -> None:
+def test_labels_without_placement_would_overlap(make_result: Callable[..., Any]) -> None:
     """The crowded field map is a real test of the placement: the same texts all at offset 0 do overlap."""
     scenario = load_scenario(OUTDOOR)
     trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
-    fig = workspace_map(_crowded_certificate(scenario, trajectory, 4), scenario, trajectory, None).figure
+    cert = _crowded_certificate(make_result().certificate, scenario, trajectory, 4)
+    fig = workspace_map(cert, scenario, trajectory, None).figure
     for text in map_texts(fig):
         text.set_position((0.0, 0.0))
     with pytest.raises(AssertionError, match="overlaps"):
@@ -126,8 +129,9 @@ def test_theta_is_unwrapped_and_times_have_sensible_precision(tmp_path: Path,
     result = make_result(verdict="fail")
     theta = np.mod(np.linspace(0, 12 * np.pi, len(result.trajectory)) + np.pi, 2 * np.pi) - np.pi  # a sawtooth
     traj = result.trajectory.assign(theta_rad=theta)
-    figs = {f.stem: f for f in render_figures(result.certificate, builtin_scenario(), trajectory=traj, nominal=None,
-                                              inputs=None, robustness=None)}
+    cert = Certificate.model_validate(result.certificate)
+    figs = {f.stem: f for f in render_figures(cert, builtin_scenario(), trajectory=traj, nominal=None, inputs=None,
+                                              robustness=None)}
     assert "states" in figs
     from verify.figures import _unwrapped
 
