@@ -93,6 +93,16 @@ def schema_certificate() -> None:
     click.echo(json.dumps(certificate_schema(), indent=2))
 
 
+@schema.command("certify-json")
+def schema_certify_json() -> None:
+    """The JSON Schema of `certify --json`: a certificate, or a list of certificates and unusable logs."""
+    import json
+
+    from verify.certificate import certify_json_schema
+
+    click.echo(json.dumps(certify_json_schema(), indent=2))
+
+
 @cli.command("spec")
 @click.argument("text")
 def spec(text: str) -> None:

@@ -17,12 +17,13 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "Certificate", "CheckEntry", "TimedRunEntry",
-           "TubeInfo", "Verdict", "certificate_schema"]
+__all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
+           "TimedRunEntry", "TubeInfo", "UnusableLog", "Verdict", "certificate_schema", "certify_json_schema"]
 
 #: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
 CERTIFICATE_VERSION = 3
 CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v3.json"
+CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v3.json"
 
 
 class Verdict(StrEnum):
@@ -125,6 +126,30 @@ class Certificate(BaseModel):
                 if check.get(key) is None:
                     check.pop(key, None)
         return out
+
+
+class UnusableLog(BaseModel):
+    """A log that could not be certified, as ``certify --json`` lists it among several logs' certificates."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    log: str
+    verdict: Literal["unusable", "error"] = Field(description="unusable input (exit 3) or an internal error (70)")
+    exit_code: Literal[3, 70]
+    error: str | None = Field(description="the one-line reason")
+
+
+def certify_json_schema() -> dict[str, Any]:
+    """The JSON Schema of ``tubempc certify --json``: one certificate, or for several logs a list of certificates
+    and unusable-log entries."""
+    cert = Certificate.model_json_schema(mode="serialization", ref_template="#/$defs/{model}")
+    unusable = UnusableLog.model_json_schema(mode="serialization")
+    defs = {**cert.pop("$defs", {}), "Certificate": cert, "UnusableLog": unusable}
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": CERTIFY_JSON_SCHEMA_ID,
+            "title": "tubempc certify --json", "$defs": defs,
+            "oneOf": [{"$ref": "#/$defs/Certificate"},
+                      {"type": "array", "items": {"anyOf": [{"$ref": "#/$defs/Certificate"},
+                                                            {"$ref": "#/$defs/UnusableLog"}]}}]}
 
 
 def certificate_schema() -> dict[str, Any]:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import blake3
+import jsonschema
 import numpy as np
 import pytest
 
@@ -26,6 +27,7 @@ from verify import (
     certify_log,
     write_certificate,
 )
+from verify.certificate import certify_json_schema
 from verify.ingest.digest import digest_path
 
 MakeLog = Callable[..., Path]
@@ -258,6 +260,8 @@ def test_cli_json_quiet_verbose_and_time_precision(make_log: MakeLog, good: Any)
     many = run("-q", "certify", str(ok), str(ok.parent / "missing.mcap"), "--scenario", "nexus-sml", "--json")
     entries = json.loads(many.stdout)
     assert [e["verdict"] for e in entries] == ["pass", "unusable"] and many.stderr == ""
+    jsonschema.validate(entries, certify_json_schema())
+    jsonschema.validate(json.loads(one.stdout), certify_json_schema())
     assert entries[1]["exit_code"] == 3 and "missing.mcap" in entries[1]["error"]
     fail = run("certify", str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1", "-v")
     assert fail.returncode == 1
