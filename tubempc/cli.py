@@ -22,6 +22,7 @@ from tubempc.mitl import parse
 from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
 from verify.command import certify
 from verify.errors import VerifyError
+from verify.online.command import watch
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
            "cli", "main"]
@@ -111,6 +112,7 @@ def spec(text: str) -> None:
 
 
 cli.add_command(certify)
+cli.add_command(watch)
 cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)

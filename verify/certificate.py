@@ -18,7 +18,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 __all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
-           "TimedRunEntry", "TubeInfo", "UnusableLog", "Verdict", "certificate_schema", "certify_json_schema"]
+           "NotChecked", "TimedRunEntry", "TubeInfo", "UnusableLog", "Verdict", "certificate_schema",
+           "certify_json_schema"]
 
 #: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
 CERTIFICATE_VERSION = 3
@@ -79,6 +80,15 @@ class TubeInfo(BaseModel):
     noise_tolerance_rule: str
 
 
+class NotChecked(BaseModel):
+    """A check that was not run, and why (not selected, or its data is not in the scenario)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    reason: str
+
+
 class Certificate(BaseModel):
     """The certificate of one log (``certificate.json``, ``tubempc certify --json``)."""
 
@@ -107,7 +117,12 @@ class Certificate(BaseModel):
     pose_source: Any = Field(description="topic and type the poses were read from")
     speed_bound_mps: float
     robot_radius_m: float
-    tube: TubeInfo
+    tube: TubeInfo | None = Field(default=None, description="the tube the tube check used (when it ran)")
+    input_model: str = Field(description="holonomic or unicycle: how input_box reads the commands")
+    checks_selected: list[str] = Field(description="the checks that ran")
+    checks_source: str = Field(description="where the selection came from: --checks, the scenario, or default")
+    not_checked: list[NotChecked] = Field(description="checks that did not run, each with the reason")
+    scenario_warnings: list[str] = Field(description="geometry the certifier accepts but a user may not mean")
     checks: list[CheckEntry]
     timed_run: list[TimedRunEntry]
     data_quality: dict[str, Any]
@@ -119,7 +134,7 @@ class Certificate(BaseModel):
     def to_json_dict(self) -> dict[str, Any]:
         """The JSON-ready dict (optional fields that are null are left out)."""
         out = self.model_dump(mode="json", exclude={
-            k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "generator")
+            k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "tube", "generator")
             if getattr(self, k) is None})
         for check in out["checks"]:
             for key in ("subformula", "reason"):

@@ -84,6 +84,11 @@ def make_certificate(*, verdict: str = "fail", evil: bool = False) -> dict[str, 
         "speed_bound_mps": 0.283,
         "robot_radius_m": 0.27,
         "tube": {"radius_m": 0.01, "noise_tolerance_m": 0.0, "noise_tolerance_rule": "3 * scenario.mocap.noise_std"},
+        "input_model": "holonomic",
+        "checks_selected": ["spec", "tube", "input_box", "workspace", "obstacle_clearance"],
+        "checks_source": "default",
+        "not_checked": [{"name": "signals", "reason": "the scenario names no signal"}],
+        "scenario_warnings": [],
     }
 
 

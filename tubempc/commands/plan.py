@@ -3,8 +3,9 @@
 ``--dwell silent`` (default): waits add no position, the run lists the arrivals a log will show and the targets carry
 the planned departure times; ``--dwell observed``: each dwell is a position; ``--no-wait``: no waiting at all.
 
-Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input;
-4 the controller (Algorithm 1) is not available.
+Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input (a scenario
+the planner cannot abstract: a missing controller field, a unicycle input model, polygon shapes, overlapping regions;
+or every transition failing the controller's design check); 4 the controller (Algorithm 1) is not available.
 """
 
 from __future__ import annotations
@@ -44,17 +45,24 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str
     from tubempc.mitl import parse
     from tubempc.planning.plan import plan_from_wts
     from tubempc.planning.search import export_dot, find_run
-    from tubempc.planning.wts import build_wts
+    from tubempc.planning.wts import FAILED, build_wts
     from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
 
     scenario = builtin_scenario(scenario_name) if scenario_name in BUILTIN_SCENARIOS else load_scenario(
         scenario_name)
+    scenario.require_planning()  # exit 3 naming the field: missing controller data, unicycle, polygons, overlaps
     formula = parse(spec_text) if spec_text is not None else scenario.formula
     try:  # an impossible design is unusable input (exit 3), not "no accepting run" over a WTS without edges
         design_tube(scenario, model_for(scenario))
     except DesignError as err:
         raise DesignError(f"{scenario_name}: the tube MPC cannot be designed for this scenario: {err}") from err
     wts = build_wts(scenario, use_cache=not no_cache, workers=workers, dask=dask_address)
+    failed = wts.graph.get(FAILED) or {}
+    if wts.number_of_edges() == 0 and failed:
+        (src, dst), why = next(iter(sorted(failed.items())))
+        raise DesignError(f"scenario {scenario.name}: every transition between regions failed the controller's "
+                          f"design check ({len(failed)} of {len(failed)}), so there is nothing to plan on; "
+                          f"e.g. {src} -> {dst}: {why}")
     result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
     say(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
                f"transitions, weights from {wts.graph.get('oracle')}); formula {formula}")

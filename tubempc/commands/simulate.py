@@ -41,6 +41,7 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     from tubempc.scenario import load_scenario
 
     scenario = load_scenario(scenario_path)
+    scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
     result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
                              t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
     path = write_log(result, scenario, out_path)
