@@ -34,7 +34,7 @@ from matplotlib.patches import Circle, FancyArrowPatch, Polygon, Rectangle
 from matplotlib.text import Annotation, Text
 from matplotlib.transforms import Bbox
 
-from tubempc.scenario import Scenario
+from tubempc.scenario import Region, Scenario
 from verify.certificate import Certificate, CheckEntry, Verdict
 
 __all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "place_texts", "region_caption", "text_box",
@@ -254,16 +254,30 @@ def _draw_regions(ax: Axes, scenario: Scenario, *, with_legend: bool) -> None:
         kind = _region_kind(region.labels, region.unsafe)
         colour = _KIND_COLOURS[kind]
         name = {"unsafe": "unsafe region", "labelled": "labelled region", "free": "unlabelled region"}[kind]
-        ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25,
-                            label=name if with_legend and kind not in seen else None))
+        legend = name if with_legend and kind not in seen else None
+        if region.polygon is not None:
+            ax.add_patch(Polygon(np.asarray(region.polygon, dtype=float), closed=True, fc=colour, ec=colour,
+                                 alpha=0.25, label=legend))
+        else:
+            ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25, label=legend))
         seen.add(kind)
+
+
+def _anchor(region: Region) -> tuple[tuple[float, float], float]:
+    """Where a region's label goes around: a disc's centre and radius; a polygon's bounding-box centre and half
+    its larger side."""
+    if region.polygon is None:
+        return region.center, region.radius
+    x0, y0, x1, y1 = region.bounds
+    return ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0) / 2
 
 
 def _draw_small_region_markers(ax: Axes, scenario: Scenario, px_per_m: float) -> None:
     for region in scenario.regions:
-        if region.radius * px_per_m < _MIN_REGION_PX:
+        center, size_m = _anchor(region)
+        if size_m * px_per_m < _MIN_REGION_PX:
             colour = _KIND_COLOURS[_region_kind(region.labels, region.unsafe)]
-            ax.plot(*region.center, "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
+            ax.plot(*center, "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
 
 
 def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: int) -> LineCollection:
@@ -342,7 +356,12 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.07, map_in / fig_h_in, 0.64, map_h_in / fig_h_in))
     cax = fig.add_axes((0.07, cbar_in / fig_h_in, 0.64, 0.16 / fig_h_in))
-    ax.add_patch(Rectangle((ws.x[0], ws.y[0]), width_m, height_m, fill=False, lw=1.5, ec="black", label="workspace"))
+    if ws.polygon is not None:
+        ax.add_patch(Polygon(np.asarray(ws.polygon, dtype=float), closed=True, fill=False, lw=1.5, ec="black",
+                             label="workspace"))
+    else:
+        ax.add_patch(Rectangle((ws.x[0], ws.y[0]), width_m, height_m, fill=False, lw=1.5, ec="black",
+                               label="workspace"))
     _draw_regions(ax, scenario, with_legend=True)
     _draw_nominal(ax, nominal, scenario.tube_radius_m, with_legend=True)
     ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
@@ -398,8 +417,9 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     else:
         cax.set_visible(False)
     for region in scenario.regions:
-        r_pt = max(region.radius * px_per_m, _MIN_REGION_PX) * pt_per_px
-        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), region.center,
+        center, size_m = _anchor(region)
+        r_pt = max(size_m * px_per_m, _MIN_REGION_PX) * pt_per_px
+        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), center,
                                          xytext=(0, 0), textcoords="offset points", fontsize=8), _ring(r_pt)))
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
@@ -440,8 +460,9 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
         if len(part) > 1:
             _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0)
     for region in scenario.regions:
-        if abs(region.center[0] - pos[0]) < half_m and abs(region.center[1] - pos[1]) < half_m:
-            ax.text(region.center[0], region.center[1], region.name, ha="center", va="center", fontsize=7,
+        (cx, cy), _ = _anchor(region)
+        if abs(cx - pos[0]) < half_m and abs(cy - pos[1]) < half_m:
+            ax.text(cx, cy, region.name, ha="center", va="center", fontsize=7,
                     clip_on=True)
     ax.add_patch(Circle(pos, scenario.robot.radius, fill=False, ec=_FAIL_COLOUR, lw=1.2, zorder=6))
     ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=9, mec="white", mew=0.8, zorder=7)

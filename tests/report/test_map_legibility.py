@@ -139,3 +139,24 @@ def test_theta_is_unwrapped_and_times_have_sensible_precision(tmp_path: Path,
     assert np.max(np.abs(np.diff(unwrapped))) < 1.0 and unwrapped[-1] > 30.0
     md = write_reports(result, builtin_scenario(), tmp_path)["report.md"].read_text()
     assert "| 12.50 s |" in md and "| R3 | 19.20 s |" in md
+
+
+def test_polygon_workspace_and_regions_are_drawn_and_named(make_result: Callable[..., Any]) -> None:
+    """Any robot's scenario: a polygon workspace and polygon regions are drawn as polygons, named beside them."""
+    from tubempc.scenario import scenario_from_dict
+
+    data = load_scenario(OUTDOOR).to_dict()
+    data["workspace"] = {"polygon": [[0, 0], [150, 0], [150, 100], [60, 100], [0, 60]]}
+    data["regions"][1] = {"name": "survey_a", "polygon": [[45, 65], [68, 66], [64, 85], [47, 82]],
+                          "labels": ["survey_a"]}
+    scenario = scenario_from_dict(data, source="<polygons>")
+    trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90)], 1.2)
+    rendered = workspace_map(_crowded_certificate(make_result().certificate, scenario, trajectory, 2), scenario,
+                             trajectory, None)
+    _assert_no_overlap(rendered.figure)
+    shown = [t.get_text() for t in map_texts(rendered.figure)]
+    assert "survey_a" in shown
+    from matplotlib.patches import Polygon
+
+    polygons = [p for p in rendered.figure.axes[0].patches if isinstance(p, Polygon)]
+    assert len(polygons) >= 2  # the workspace outline and the survey field
