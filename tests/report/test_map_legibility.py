@@ -19,7 +19,7 @@ from verify.certificate import Certificate
 from verify.figures import render_figures
 from verify.obligations import obligations_of
 from verify.report import write_reports
-from verify.workspace_map import map_texts, text_box, workspace_map
+from verify.workspace_map import map_texts, text_box, workspace_figure, workspace_map
 
 OUTDOOR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "outdoor-150m.yaml"
 
@@ -57,7 +57,7 @@ def _assert_no_overlap(fig: Any) -> None:
 
 
 @pytest.mark.parametrize("scale", ["lab-5m", "field-150m"])
-def test_map_annotations_never_overlap(scale: str, make_result: Callable[..., Any]) -> None:
+def test_map_annotations_never_overlap(scale: str, make_result: Callable[..., Any], tmp_path: Path) -> None:
     if scale == "lab-5m":
         scenario = builtin_scenario()
         trajectory = _patrol([(-1.99, -1.78), (-0.6, -0.5), (0.16, 0.40), (1.3, -0.4), (2.02, -1.63)], 0.15)
@@ -65,7 +65,12 @@ def test_map_annotations_never_overlap(scale: str, make_result: Callable[..., An
         scenario = load_scenario(OUTDOOR)
         trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
     cert = _crowded_certificate(make_result().certificate, scenario, trajectory, n_violations=4)
+    result = make_result()
+    written = write_reports(type(result)(cert.to_json_dict(), 1, trajectory), scenario, tmp_path)
+    assert {"report.html", "figures/workspace.png", "figures/obligations.png"} <= set(written)
     rendered = workspace_map(cert, scenario, trajectory, None)
+    # the figure checked below is the report's map, byte for byte
+    assert workspace_figure(cert, scenario, trajectory, None) == written["figures/workspace.png"].read_bytes()
     _assert_no_overlap(rendered.figure)
     shown = [t.get_text() for t in map_texts(rendered.figure) if t.axes is rendered.figure.axes[0]]
     # every violation names what failed beside its marker, even where labels crowd
