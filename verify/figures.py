@@ -232,8 +232,9 @@ def obligations_figure(obligations: Sequence[Obligation], duration_s: float | No
             lo, hi = ob.window_s
             if lo < last:
                 ax.axvspan(lo, min(hi, last), color="#1f77b4", alpha=0.12, lw=0, label=_window_label(ob.window_s))
-            note = ("" if hi <= last else f"{_window_label(ob.window_s)} opens after the log ends" if lo >= last
-                    else "the window continues past the log end")
+            # an unbounded window ranges to the end of the log (finite-log semantics): nothing to say about it
+            note = ("" if hi <= last or math.isinf(hi) else f"{_window_label(ob.window_s)} opens after the log ends"
+                    if lo >= last else "the window continues past the log end: undecided there")
             if note:
                 ax.annotate(note, (0.995, 0.96), xycoords="axes fraction", ha="right", va="top", fontsize=7,
                             color="#1f77b4", bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none"})
@@ -255,7 +256,7 @@ def obligations_figure(obligations: Sequence[Obligation], duration_s: float | No
                      loc="left", weight="bold")
         ax.set_ylabel("margin [m]")
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", fontsize=7)
+        ax.legend(loc="best", fontsize=7)
         if end is not None:
             ax.set_xlim(min(0.0, float(t[0])) if t.size else 0.0, end)
     axes[-1].set_xlabel("t [s]")
