@@ -3,8 +3,9 @@
     python3 benchmarks/bench_report.py [--samples 11001 360000 1000000]
 
 ``certify_log`` on the demo log gives the certificate; its trajectory is tiled to each length (100 Hz) and the
-reports are written for that long trajectory. Prints, per length, the wall time of the per-obligation signals (``verify.obligations``), of ``write_reports``, and the
-ratio of the report time to the time ``certify_log`` takes on the demo log in the same process (the baseline).
+reports are written for that long trajectory. Prints, per length, the wall time of the per-obligation signals
+(``verify.obligations``) and of ``write_reports``, and the ratio of the report time to the time ``certify_log``
+takes on the demo log in the same process (the baseline).
 """
 
 from __future__ import annotations
