@@ -138,6 +138,12 @@ def _meta_rows(cert: Certificate, scenario: Scenario) -> list[tuple[str, str]]:
     return rows
 
 
+def _not_run_notes(cert: Certificate) -> list[str]:
+    """Checks that did not run and scenario warnings: said under the checks table, where a reader looks."""
+    notes = [f"not checked: {n.name} ({n.reason})" for n in cert.not_checked]
+    return notes + [f"scenario warning: {w}" for w in cert.scenario_warnings]
+
+
 def _is_quiet(value: Any) -> bool:
     """A data-quality value that reports nothing (0, empty, false, none): listed after the findings."""
     return value in (0, 0.0, False, None, "", "{}", "[]") or (isinstance(value, list | dict) and not value)
@@ -204,6 +210,7 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     for check in cert.checks:
         lines.append(f"| {_md(check.name)} | {_md(check.verdict.value)} | {_md(fmt_margin(check))} | "
                      f"{_md(fmt_time(check.first_violation_time))} | {_md(_check_details(check))} |")
+    lines += [""] + [f"- {_md(note)}" for note in _not_run_notes(cert)]
     lines += ["", "## Map and obligations", "", *figs("map"), "### Timed run", ""]
     run = cert.timed_run
     if run:
@@ -276,7 +283,11 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
         parts.append(f"<tr><td>{_e(check.name)}</td><td>{_badge(check.verdict.value)}</td>"
                      f"<td>{_e(fmt_margin(check))}</td><td>{_e(fmt_time(check.first_violation_time))}</td>"
                      f"<td>{_e(_check_details(check))}</td></tr>")
-    parts += ["</table>", "<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
+    parts.append("</table>")
+    notes = _not_run_notes(cert)
+    if notes:
+        parts.append('<ul class="not-run">' + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ul>")
+    parts += ["<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
     run = cert.timed_run
     if run:
         parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at</th></tr>')

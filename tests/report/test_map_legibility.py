@@ -124,6 +124,8 @@ def test_page_order_and_readable_formula(tmp_path: Path, make_result: Callable[.
     assert order == sorted(order)
     assert page.index('id="fig-workspace"') < page.index('id="fig-obligations"') < page.index('id="fig-states"')
     assert "<details><summary><h2>Data quality</h2>" in page
+    # a check that did not run is said right under the checks table, not only in the collapsed details
+    assert page.index("not checked: signals (the scenario names no signal)") < page.index("<h2>Map and obligations")
     assert page.index("dropouts.count") < page.index("zeros.a")  # the finding that reports something comes first
     md = written["report.md"].read_text()
     assert "!obs_1 & F[30,50]" in md.replace("\\[", "[").replace("\\]", "]") and "&amp;" not in md
