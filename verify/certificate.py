@@ -123,8 +123,10 @@ class Certificate(BaseModel):
     checks_source: str = Field(description="where the selection came from: --checks, the scenario, or default")
     not_checked: list[NotChecked] = Field(description="checks that did not run, each with the reason")
     scenario_warnings: list[str] = Field(description="geometry the certifier accepts but a user may not mean")
+    clock_findings: list[Any] | None = Field(default=None, description="what the clock checks found between topics")
     checks: list[CheckEntry]
     timed_run: list[TimedRunEntry]
+    signals: dict[str, Any] | None = Field(default=None, description="per signal atom: topic, field, samples, range")
     data_quality: dict[str, Any]
     generator: dict[str, Any] | None = Field(default=None, description="the log's own metadata (simulated runs)")
 
@@ -134,7 +136,8 @@ class Certificate(BaseModel):
     def to_json_dict(self) -> dict[str, Any]:
         """The JSON-ready dict (optional fields that are null are left out)."""
         out = self.model_dump(mode="json", exclude={
-            k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "tube", "generator")
+            k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "tube",
+                        "clock_findings", "signals", "generator")
             if getattr(self, k) is None})
         for check in out["checks"]:
             for key in ("subformula", "reason"):
