@@ -23,6 +23,7 @@ import pandas as pd
 
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
+from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containment
@@ -37,7 +38,6 @@ from verify.trajectory import TrajectoryVerdict, check_trajectory
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
            "resolve_scenario", "verdict_line", "write_certificate"]
 
-CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
@@ -55,6 +55,11 @@ class CertifyResult:
     @property
     def verdict(self) -> str:
         return str(self.certificate["verdict"])
+
+    @property
+    def model(self) -> Certificate:
+        """The certificate as the typed model (``verify.certificate``)."""
+        return Certificate.model_validate(self.certificate)
 
 
 def resolve_scenario(scenario: Scenario | str | Path) -> Scenario:
@@ -77,10 +82,16 @@ def _rel_s(t_ns: int | None, time0_ns: int) -> float | None:
     return None if t_ns is None else round((t_ns - time0_ns) * 1e-9, 9)
 
 
+#: unit of each check's margin (a check may state its own as ``details["margin_unit"]``)
+MARGIN_UNITS = {"spec_trajectory": "m", "spec_timed_run": "s", "tube": "m", "input_box": "m/s or rad/s",
+                "workspace": "m", "obstacle_clearance": "m"}
+
+
 def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
-    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin),
+    unit = c.details.get("margin_unit", MARGIN_UNITS.get(c.name))
+    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin), "margin_unit": unit,
             "first_violation_time": _rel_s(c.first_violation_ns, time0_ns),
-            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin")}}
+            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin", "margin_unit")}}
 
 
 def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
@@ -123,15 +134,16 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
 
 
 def _spec_margin(traj: TrajectoryVerdict) -> float | None:
-    """The margin of the formula: the guaranteed one; for a fail whose guaranteed margin is unbounded (a window
-    with no sample), the optimistic one, or the worst finite value of the robustness signal, so that a failed check
+    """The formula's margin: on a pass the guaranteed robustness; on a fail the optimistic one (violated by at least
+    that much), else the guaranteed one, else the worst finite value of the robustness signal, so that a failed check
     always states by how much (None only when no margin exists: a formula failing on constants)."""
     if traj.verdict == "inconclusive":
         return None
-    if math.isfinite(traj.margin_m) or traj.verdict == "pass":
+    if traj.verdict == "pass":
         return traj.margin_m
-    if math.isfinite(traj.margin_hi_m):
-        return traj.margin_hi_m
+    for value in (traj.margin_hi_m, traj.margin_m):
+        if math.isfinite(value):
+            return value
     finite = traj.signal_rho_m[np.isfinite(traj.signal_rho_m)]
     return float(finite.min()) if finite.size and float(finite.min()) < 0 else None
 
@@ -159,6 +171,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
                             signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
+        # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
         "spec_trajectory", traj.verdict, _spec_margin(traj),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
@@ -177,7 +190,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,
                          atom_values={k: values_at(v, entry_ns) for k, v in streams.items()})
     spec_run = CheckResult(
-        "spec_timed_run", tr.verdict, None,
+        "spec_timed_run", tr.verdict, tr.margin_s,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
@@ -254,7 +267,8 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         inputs_df = pd.DataFrame({"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
                                   "u3": log.cmd_u[:, 2]})
     rob = pd.DataFrame({"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}) if t_rel.size else None
-    return CertifyResult(_jsonable(cert), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
+    typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
+    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
 
 
 def _jsonable(obj: Any) -> Any:
@@ -306,7 +320,9 @@ class HasCertificate(Protocol):
 
 
 def write_certificate(result: HasCertificate, out_dir: str | Path) -> Path:
-    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path."""
+    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path. The certificate is
+    validated against the model first (``verify.certificate``): nothing that breaks the schema is written."""
+    Certificate.model_validate(result.certificate)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "certificate.json"

@@ -472,7 +472,7 @@ def test_reports_draw_polygon_scenarios_without_a_tube(tmp_path: Path) -> None:
     assert {"figures/workspace.png", "figures/inputs.png", "report.md"} <= set(written)
     md = (tmp_path / "r" / "report.md").read_text()
     assert "Verdict over the checks: spec, obstacle_clearance, workspace, input_box." in md
-    assert "Not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))." in md
+    assert "not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))" in md
     assert "tube radius" not in md
 
 

@@ -58,7 +58,9 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
 
     res = watch_log(log, monitor, follow=follow, idle_timeout_s=idle_timeout, poll_s=poll_s, time_base=time_base,
                     on_decision=show)
-    for note in res.notes:
+    ctx = click.get_current_context(silent=True)
+    quiet = ctx is not None and int(ctx.meta.get("verbosity", 0)) < 0  # -q: the decisions and the exit code only
+    for note in [] if quiet else res.notes:
         click.echo(f"note: {note}")
     line = f"{log}: {res.result.verdict} ({res.stop_reason}; {monitor.counts['pose']} pose samples)"
     if out_dir is not None:
@@ -71,6 +73,7 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
             from verify.report import write_reports
 
             write_reports(result, sc, out_dir, suite_name=log.name)
-    click.echo(line)
+    if not quiet:
+        click.echo(line)
     sys.stdout.flush()
     sys.exit(res.result.exit_code)

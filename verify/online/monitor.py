@@ -587,7 +587,8 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", "inconclusive", None, None, {"reason": "no pose samples"})
         else:
             v = traj.verdict
-            spec_traj = CheckResult("spec_trajectory", v, traj.lo if v != "inconclusive" else None,
+            # the certificate's rule: pass -> guaranteed margin, fail -> optimistic one (violated by at least that)
+            spec_traj = CheckResult("spec_trajectory", v, traj.lo if v == "pass" else traj.hi if v == "fail" else None,
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
