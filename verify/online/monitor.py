@@ -32,6 +32,7 @@ from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
 from verify.geometry import gap_bounds, step_bound_m, workspace_margin
 from verify.ingest import LogData
+from verify.ingest.timebase import AGREE_TOL
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.timedrun import parse_spec
 from verify.trajectory import trajectory_positions
@@ -263,18 +264,27 @@ class OnlineMonitor:
         self._pose_t: list[int] = []
         self._pose_x: list[float] = []
         self._pose_y: list[float] = []
+        self._pose_yaw: list[float] = []
+        self._conflict: set[int] = set()  # pending pose times whose duplicates disagree (unknown to the formula)
+        self._extra: list[tuple[int, float, float]] = []  # the disagreeing duplicates (judged by per-sample checks)
+        self._late: list[tuple[int, float, float]] = []  # ... of a sample the formula had judged already
+        self._formula_late_conflicts = 0
         self._nom_t: list[int] = []
         self._nom_x: list[float] = []
         self._nom_y: list[float] = []
         self._cmd_t: list[int] = []
         self._cmd_u: list[tuple[float, float, float]] = []
+        self._last_values: dict[str, tuple[float, ...]] = {}  # the first sample at each stream's last time
+        self.merged = {"pose": 0, "nominal": 0, "cmd": 0}
+        self.conflicting = {"pose": 0, "nominal": 0, "cmd": 0}
         self._last_pose = self._last_nom = self._last_cmd = -(2**63)
         self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
         self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
         self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
         # judged state
         self.t0_ns: int | None = None
-        self._prev: tuple[int, float, float] | None = None
+        self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
+        self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
         self._prev_region = -2  # "before the first sample"
         self._ws = _MarginRun("workspace")
         self._clear = _MarginRun("obstacle_clearance")
@@ -297,46 +307,78 @@ class OnlineMonitor:
         return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
                 len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
 
-    def _reject(self, stream: str, t_ns: int, last: int) -> None:
-        """A sample at or before the stream's last one: counted (equal stamps as duplicates), never judged."""
+    def _reject(self, stream: str, t_ns: int, last: int, values: tuple[float, ...]) -> bool:
+        """A sample at or before the stream's last time. Before: counted out of order, never judged. At the same
+        time (as ``verify.ingest.timebase.judged_samples``): merged when its values agree with the first sample
+        there, else a conflict (True: the caller keeps it for the per-sample checks)."""
         if self._closed:
             raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
-        (self.duplicates if t_ns == last else self.out_of_order)[stream] += 1
+        if t_ns != last:
+            self.out_of_order[stream] += 1
+            return False
+        self.duplicates[stream] += 1
+        first = self._last_values[stream]
+        if all(abs(a - b) <= AGREE_TOL or (math.isnan(a) and math.isnan(b))
+               for a, b in zip(first, values, strict=True)):
+            self.merged[stream] += 1
+            return False
+        self.conflicting[stream] += 1
+        return True
 
     def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
-        """A pose sample (absolute ns; ``yaw_rad`` is accepted for the caller's convenience, no check uses it)."""
+        """A pose sample (absolute ns). A sample is judged once the next one (or ``close``) arrives, so that a
+        sample repeating its time can still be merged with it or make it unknown."""
         if t_ns > self._last_pose and not self._closed:
             self._last_pose = t_ns
+            self._last_values["pose"] = (x_m, y_m, yaw_rad)
             self._pose_t.append(t_ns)
             self._pose_x.append(x_m)
             self._pose_y.append(y_m)
-            if len(self._pose_t) >= self.max_pending:
+            if len(self._pose_t) > self.max_pending:
                 self._process()
-        else:
-            self._reject("pose", t_ns, self._last_pose)
+        elif self._reject("pose", t_ns, self._last_pose, (x_m, y_m, yaw_rad)):
+            if self._pose_t and self._pose_t[-1] == t_ns:  # not judged yet: unknown to the formula
+                self._conflict.add(t_ns)
+                self._extra.append((t_ns, x_m, y_m))
+            else:  # the formula has judged the first sample at this time already: it cannot pass any more
+                self._late.append((t_ns, x_m, y_m))
+                self._formula_late_conflicts += 1
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A sample of the MPC's nominal state (absolute ns)."""
         if t_ns > self._last_nom and not self._closed:
             self._last_nom = t_ns
+            self._last_values["nominal"] = (x_m, y_m, yaw_rad)
             self._nom_t.append(t_ns)
             self._nom_x.append(x_m)
             self._nom_y.append(y_m)
             if len(self._nom_t) >= self.max_pending:
                 self._process()
-        else:
-            self._reject("nominal", t_ns, self._last_nom)
+        elif self._reject("nominal", t_ns, self._last_nom, (x_m, y_m, yaw_rad)):
+            self._unknown_nominal(t_ns)
+
+    def _unknown_nominal(self, t_ns: int) -> None:
+        """Nominal samples that disagree at one time: the nominal state there is unknown."""
+        if self._nom_t and self._nom_t[-1] == t_ns:
+            self._nom_x[-1] = self._nom_y[-1] = math.nan
+            return
+        nt, nx, ny = self._nominal
+        if nt.size and int(nt[-1]) == t_ns:
+            nx, ny = nx.copy(), ny.copy()
+            nx[-1] = ny[-1] = math.nan
+            self._nominal = (nt, nx, ny)
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
-        """An applied input (absolute ns; body frame as logged: vx, vy, wz)."""
-        if t_ns > self._last_cmd and not self._closed:
-            self._last_cmd = t_ns
+        """An applied input (absolute ns; body frame as logged: vx, vy, wz). Every command is judged, also one
+        that repeats a time with other values."""
+        if (t_ns > self._last_cmd and not self._closed) or self._reject("cmd", t_ns, self._last_cmd, (u1, u2, u3)):
+            if t_ns > self._last_cmd:
+                self._last_cmd = t_ns
+                self._last_values["cmd"] = (u1, u2, u3)
             self._cmd_t.append(t_ns)
             self._cmd_u.append((u1, u2, u3))
             if len(self._cmd_t) >= self.max_pending:
                 self._process()
-        else:
-            self._reject("cmd", t_ns, self._last_cmd)
 
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
@@ -346,19 +388,44 @@ class OnlineMonitor:
         out, self._unreturned = self._unreturned, []
         return out
 
-    def _process(self) -> None:
+    @staticmethod
+    def _with_extras(t: IntArray, x: FloatArray, y: FloatArray, extra: list[tuple[int, float, float]]
+                     ) -> tuple[IntArray, FloatArray, FloatArray]:
+        """Every sample for the per-sample checks: each disagreeing duplicate right after the samples at its time
+        (a duplicate of a sample judged in an earlier batch goes first)."""
+        et = np.array([e[0] for e in extra], dtype=np.int64)
+        at = np.searchsorted(t, et, side="right")
+        return (np.insert(t, at, et), np.insert(x, at, [e[1] for e in extra]), np.insert(y, at, [e[2] for e in extra]))
+
+    def _process(self, closing: bool = False) -> None:
         if self._nom_t:
             self._judged["nominal"] += len(self._nom_t)
             self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
                                np.array(self._nom_y, dtype=np.float64))
             self._nom_t, self._nom_x, self._nom_y = [], [], []
+        late, self._late = self._late, []
         if self._pose_t:
-            self._judged["pose"] += len(self._pose_t)
-            t = np.array(self._pose_t, dtype=np.int64)
-            x = np.array(self._pose_x, dtype=np.float64)
-            y = np.array(self._pose_y, dtype=np.float64)
-            self._pose_t, self._pose_x, self._pose_y = [], [], []
-            self._feed_pose(t, x, y)
+            k = len(self._pose_t)
+            self._judged["pose"] += k
+            t = np.array(self._pose_t[:k], dtype=np.int64)
+            x = np.array(self._pose_x[:k], dtype=np.float64)
+            y = np.array(self._pose_y[:k], dtype=np.float64)
+            del self._pose_t[:k], self._pose_x[:k], self._pose_y[:k]
+            every = None
+            if self._conflict:
+                done = t[-1]
+                extra = [e for e in self._extra if e[0] <= done]
+                self._extra = [e for e in self._extra if e[0] > done]
+                every = self._with_extras(t, x, y, extra)
+                bad = np.isin(t, np.array(sorted(self._conflict), dtype=np.int64))
+                self._conflict = {c for c in self._conflict if c > done}
+                x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
+            if late:
+                every = self._with_extras(*(every if every is not None else (t, x, y)), late)
+            self._feed_pose(t, x, y, every)
+        elif late:
+            self._feed_every(np.array([e[0] for e in late], dtype=np.int64), np.array([e[1] for e in late]),
+                             np.array([e[2] for e in late]))
         if self._cmd_t:
             self._judged["cmd"] += len(self._cmd_t)
             t = np.array(self._cmd_t, dtype=np.int64)
@@ -368,7 +435,10 @@ class OnlineMonitor:
         self._resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
 
-    def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray) -> None:
+    def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
+                   every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:
+        """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
+        samples for the per-sample checks (None: the same samples)."""
         sc = self.scenario
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
@@ -384,7 +454,7 @@ class OnlineMonitor:
         step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
         # trajectory semantics: sample points and the gaps between them
         pos, point_at, gap_at = trajectory_positions(t_rel)
-        first = int(point_at[k0])
+        first = int(point_at[0]) + 1 if k0 else 0  # the positions after the previous sample (its gap included)
         tr = self._traj
         start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
         known = np.where(is_point, start, stop + 1)
@@ -431,16 +501,36 @@ class OnlineMonitor:
                 run.atoms[name].push(v1, v1.copy(), t_e)
         run.track.tick(conv)
         run.evaluation.step()
-        # checks: workspace, obstacle clearance, tube (pending until a nominal sample at or after them)
-        ws_hit = self._ws.feed(t_abs, workspace_margin(x, y, sc), step, k0)
-        del ws_hit
+        # per-sample checks on every sample: workspace, obstacle clearance, tube
+        if every is None and self._prev_every == prev:
+            self._feed_every(t_abs, x, y, (step, region_m, k0))
+        else:
+            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
+
+    def _feed_every(self, et: IntArray, ex: FloatArray, ey: FloatArray,
+                    reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
+        """Workspace, obstacle clearance and (pending until a nominal sample at or after them) tube on every
+        sample; ``reuse``: step bounds, region margins and offset already computed with the previous sample."""
+        sc = self.scenario
+        if reuse is not None:
+            e_step, e_margin, k1 = reuse
+        else:
+            k1 = 0 if self._prev_every is None else 1
+            if self._prev_every is not None:
+                pt, px, py = self._prev_every
+                et, ex, ey = np.concatenate(([pt], et)), np.concatenate(([px], ex)), np.concatenate(([py], ey))
+            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, sc.max_speed_mps)
+            e_margin = self._offset[:, None] - np.hypot(ex[None, :] - self._cx[:, None], ey[None, :] -
+                                                        self._cy[:, None])
+        self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
+        self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
         if self._unsafe:
-            margins = region_m[self._unsafe]
-            hit = self._clear.feed(t_abs, -np.max(margins, axis=0), step, k0)
+            margins = e_margin[self._unsafe]
+            hit = self._clear.feed(et, -np.max(margins, axis=0), e_step, k1)
             if hit is not None:
                 self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
-        self._tube_pending.append((t_abs[k0:], x[k0:], y[k0:]))
-        self._tube_last_t = int(t_abs[-1])
+        self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
+        self._tube_last_t = int(et[-1])
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
@@ -548,7 +638,7 @@ class OnlineMonitor:
         for a log with the same samples (``partial``: the log was salvaged, never a pass)."""
         if self._result is not None:
             return self._result
-        self._process()
+        self._process(closing=True)
         self._closed = True
         for sem in (self._traj, self._run):
             sem.evaluation.step(closing=True)
@@ -594,6 +684,11 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", rv, None,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    {} if self._run.track.count else {"reason": "the timed run is empty"})
+        if self._formula_late_conflicts:  # a judged sample turned out unknown: the formula cannot pass
+            why = (f"{self._formula_late_conflicts} pose sample(s) judged before a sample at the same time with "
+                   f"other values arrived")
+            spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
+                                   if c.verdict == "pass" else c for c in (spec_traj, spec_run))
         tube = self._tube.result({"radius_m": self.scenario.tube_radius_m, "noise_tolerance_m": self._tol_m})
         if self._nominal_seen == 0:
             tube = CheckResult("tube", "inconclusive", None, None,
