@@ -139,7 +139,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
               job: DigestJob) -> LogData:
     t = scenario.topics
-    wanted = {t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC}
+    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -190,7 +190,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
             problems["pose"] = base.note
 
     nominal = None
-    if t.nominal in raw.topics and raw.topics[t.nominal].payloads:
+    if t.nominal is not None and t.nominal in raw.topics and raw.topics[t.nominal].payloads:
         ncols = decode_pose(raw.topics[t.nominal], raw.ros1)
         nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
         nst = nbase.t_ns
@@ -203,21 +203,26 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
             quality["notes"].append(f"{t.nominal}: {nbase.note}")
             problems["nominal"] = nbase.note
     else:
-        quality["nominal"] = {"count": 0, "missing": True}
+        quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
     cmd_t = cmd_u = None
-    if t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
+    if t.cmd_vel is not None and t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
         tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
-        corder = clean_order(tw.log_ns)
-        cjs = judged_samples(tw.log_ns, tw.u)
-        cmd_t, cmd_u = tw.log_ns[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
-        cq = stream_findings(tw.log_ns, None, corder, expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
+        cst = tw.stamp_ns if (tw.stamp_ns is not None and base.name == "header") else tw.log_ns
+        corder = clean_order(cst)
+        cjs = judged_samples(cst, tw.u)
+        cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
+        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
+                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         cq.update(cjs.counts())
+        cq["type"] = raw.topics[t.cmd_vel].msgtype
+        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
         quality["cmd_vel"] = cq
         samples["cmd_vel"] = cjs.counts()
     else:
-        quality["cmd_vel"] = {"count": 0, "missing": True}
+        quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
     statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]

@@ -538,7 +538,7 @@ class OnlineMonitor:
         self._nominal_seen += t.shape[0]
 
     def _feed_cmd(self, t: IntArray, u: FloatArray) -> None:
-        res = check_input_box(t, u, self.scenario.inputs.max_abs)
+        res = check_input_box(t, u, self.scenario.inputs)
         self._input.feed(res, t.shape[0])
 
     def _resolve_tube(self, closing: bool) -> None:
