@@ -133,3 +133,17 @@ def test_out_of_order_sample_never_passes() -> None:
     mon.push_pose(int(log.pose.t_ns[5]), 0.0, 0.0)
     res = mon.close()
     assert res.verdict == "inconclusive" and "out of time order" in (res.verdict_reason or "")
+
+
+def test_only_the_selected_checks_are_judged() -> None:
+    """As certify --checks: the other checks are neither reported nor part of the verdict (obstacle_touch fails
+    only on the obstacle: without that check and the formula, the run passes)."""
+    sc = builtin_scenario()
+    log = read_log(LOGS / "obstacle_touch.bag", sc)
+    want = certify_log(LOGS / "obstacle_touch.bag", sc, checks=["workspace", "tube"]).certificate
+    mon = OnlineMonitor(sc, checks=["workspace", "tube"])
+    feed_log_data(mon, log, update_every=10)
+    res = mon.close()
+    assert [c.name for c in res.checks] == [c["name"] for c in want["checks"]] == ["tube", "workspace"]
+    assert res.verdict == want["verdict"] == "pass"
+    assert not res.state.obligations

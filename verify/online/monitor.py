@@ -18,6 +18,7 @@ of the sample that decided it, whatever the batching.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ from verify.geometry import gap_bounds, step_bound_m, workspace_margin
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
+from verify.selection import select_checks
 from verify.timedrun import parse_spec
 from verify.trajectory import trajectory_positions
 
@@ -233,11 +235,15 @@ class OnlineMonitor:
     """Incremental certifier of one run. ``push_pose`` / ``push_nominal`` / ``push_cmd`` in time order (per stream),
     ``update`` for the new decisions, ``state`` for everything so far, ``close`` for the final verdicts."""
 
-    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100) -> None:
+    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100,
+                 checks: Sequence[str] | None = None) -> None:
         if max_pending < 1:
             raise ValueError(f"max_pending={max_pending!r} must be >= 1")
         sc = resolve_scenario(scenario)
         self.scenario = sc
+        self.selection = select_checks(sc, checks)  # as certify: --checks, else the scenario's, else what it names
+        self._selected = {n for c in self.selection.selected
+                          for n in (("spec_trajectory", "spec_timed_run") if c == "spec" else (c,))}
         self.formula = parse_spec(spec if spec is not None else sc.spec)
         known = {lab for r in sc.regions for lab in r.labels}
         unknown = sorted(atoms(self.formula) - known)
@@ -259,6 +265,7 @@ class OnlineMonitor:
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
         self._tol_m = 3.0 * sc.mocap.noise_std
+        self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
         self._pose_t: list[int] = []
@@ -529,7 +536,8 @@ class OnlineMonitor:
             hit = self._clear.feed(et, -np.max(margins, axis=0), e_step, k1)
             if hit is not None:
                 self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
-        self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
+        if "tube" in self._selected:
+            self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
         self._tube_last_t = int(et[-1])
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
@@ -555,7 +563,7 @@ class OnlineMonitor:
         nt, nx, ny = self._nominal
         k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
         if k:
-            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self.scenario.tube_radius_m,
+            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self._tube_radius_m,
                              tolerance_m=self._tol_m, match_ns=self._period_ns // 2)
             self._tube.feed(res, k)
         self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
@@ -585,6 +593,10 @@ class OnlineMonitor:
             return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
                                _rel_s(c.first_violation_ns, t0)) for c in self._final]
+        return [c for c in self._running_states() if c.name in self._selected]
+
+    def _running_states(self) -> list[CheckState]:
+        t0 = self.t0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
         runs: list[_MergedRun | _MarginRun] = [self._tube, self._input, self._ws, self._clear]
@@ -613,7 +625,8 @@ class OnlineMonitor:
     def _state(self, closed: bool) -> MonitorState:
         checks = self._check_states()
         obligations = [self._head_state(name, h, margin=True)
-                       for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)]
+                       for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)
+                       if "spec" in self.selection]
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
@@ -649,7 +662,9 @@ class OnlineMonitor:
         self._unreturned = []
         verdicts = [c.verdict for c in checks]
         why: str | None = None
-        if "fail" in verdicts:
+        if not checks:
+            verdict, why = "inconclusive", "no check was run: nothing is certified"
+        elif "fail" in verdicts:
             verdict = "fail"
         elif "inconclusive" in verdicts:
             verdict = "inconclusive"
@@ -689,14 +704,15 @@ class OnlineMonitor:
                    f"other values arrived")
             spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
                                    if c.verdict == "pass" else c for c in (spec_traj, spec_run))
-        tube = self._tube.result({"radius_m": self.scenario.tube_radius_m, "noise_tolerance_m": self._tol_m})
+        tube = self._tube.result({"radius_m": self._tube_radius_m, "noise_tolerance_m": self._tol_m})
         if self._nominal_seen == 0:
             tube = CheckResult("tube", "inconclusive", None, None,
                                {"reason": "no nominal state logged: tube containment cannot be checked"})
         clear = self._clear.result() if self._unsafe else CheckResult(
             "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
-        return [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
-                self._ws.result(), clear]
+        every = [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
+                 self._ws.result(), clear]
+        return [c for c in every if c.name in self._selected]
 
 
 def feed_log_data(monitor: OnlineMonitor, log: LogData, *, update_every: int = 0) -> list[Decision]:
