@@ -205,3 +205,17 @@ def test_watch_copy_of_input_is_not_modified(tmp_path: Path) -> None:
     res = watch_log(src, OnlineMonitor(builtin_scenario()))
     assert src.read_bytes() == before
     assert res.partial and res.result.verdict == "inconclusive"
+
+
+def test_watch_a_sqlite3_bag_folder(tmp_path: Path) -> None:
+    """sqlite3 storage is read row by row (the rows added since the last read); a closed bag equals certify."""
+    src = LOGS / "late_mission.mcap"
+    folder = tmp_path / "bag"
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader2(src) as r, Writer2(folder, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store) for c in r.connections}
+        for c, t, data in r.messages():
+            w.write(conns[c.id], t, data)
+    res = watch_log(folder, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=0.5, poll_s=0.05)
+    assert res.finished
+    _assert_same_as_certify(folder, res, salvage=False)
