@@ -147,3 +147,19 @@ def test_only_the_selected_checks_are_judged() -> None:
     assert [c.name for c in res.checks] == [c["name"] for c in want["checks"]] == ["tube", "workspace"]
     assert res.verdict == want["verdict"] == "pass"
     assert not res.state.obligations
+
+
+def test_a_nested_window_decides_at_its_deciding_sample() -> None:
+    """``G[0,10] G[0,5] mission_1``: the robot leaves R1 at 3.91 s; the inner window at time 0 is false from that
+    sample on, so the formula fails then -- not when the inner window closes (5 s) -- and close() agrees."""
+    sc = builtin_scenario()
+    mon = OnlineMonitor(sc, spec="G[0,10] G[0,5] mission_1")
+    seen: dict[str, float] = {}
+    for i in range(1200):
+        mon.push_pose(10**18 + i * 10_000_000, -1.99 + (0.0 if i < 300 else 0.002 * (i - 300)), -1.78)
+        for d in mon.update():
+            seen.setdefault(d.name, i / 100)
+            assert d.time_s <= i / 100 + 1e-9
+    assert seen["spec_trajectory"] == pytest.approx(3.91)
+    assert seen["G[0,10] G[0,5] mission_1"] == pytest.approx(3.91)
+    assert mon.close().checks[0].verdict == "fail"
