@@ -163,3 +163,22 @@ def test_a_nested_window_decides_at_its_deciding_sample() -> None:
     assert seen["spec_trajectory"] == pytest.approx(3.91)
     assert seen["G[0,10] G[0,5] mission_1"] == pytest.approx(3.91)
     assert mon.close().checks[0].verdict == "fail"
+
+
+def test_the_general_geometry_path_gives_the_same_verdicts() -> None:
+    """Scenarios with other than disc regions go through verify.geometry's own functions per batch; on discs that
+    path and the one-pass broadcast give the same checks, margins and decisions."""
+    sc = builtin_scenario()
+    log = read_log(LOGS / "obstacle_touch.bag", sc)
+    results = []
+    for discs in (True, False):
+        mon = OnlineMonitor(sc)
+        mon._discs = discs
+        decisions = feed_log_data(mon, log, update_every=25)
+        results.append((mon.close(), [(d.name, d.verdict, d.time_s) for d in decisions]))
+    (fast, fast_d), (general, general_d) = results
+    assert fast_d == general_d
+    assert [(c.name, c.verdict, c.first_violation_ns) for c in fast.checks] == \
+        [(c.name, c.verdict, c.first_violation_ns) for c in general.checks]
+    for a, b in zip(fast.checks, general.checks, strict=True):
+        assert _same_margin(a.margin, b.margin if b.margin is None or math.isfinite(b.margin) else None)

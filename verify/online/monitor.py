@@ -31,7 +31,14 @@ from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
-from verify.geometry import gap_bounds, step_bound_m, workspace_margin
+from verify.geometry import (
+    containing_region,
+    gap_bounds,
+    label_margins,
+    region_margins,
+    step_bound_m,
+    workspace_margin,
+)
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
@@ -256,11 +263,14 @@ class OnlineMonitor:
         self._run = _Semantics(self.formula)
         self._obligation_names = [str(h.formula) for h in self._traj.obligations]
         eta = sc.robot.radius
-        self._cx = np.array([r.center[0] for r in sc.regions], dtype=np.float64)
-        self._cy = np.array([r.center[1] for r in sc.regions], dtype=np.float64)
-        self._radius = np.array([r.radius for r in sc.regions], dtype=np.float64)
-        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in sc.regions])
+        discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
+        self._cx = np.array([r.center[0] for r in discs], dtype=np.float64)
+        self._cy = np.array([r.center[1] for r in discs], dtype=np.float64)
+        self._radius = np.array([r.radius for r in discs], dtype=np.float64)
+        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in discs])
         self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels] for name in self._names]
+        # discs only: every region's margin in one broadcast pass; otherwise verify.geometry's functions per batch
+        self._discs = all(getattr(r, "polygon", None) is None for r in sc.regions)
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
@@ -465,12 +475,7 @@ class OnlineMonitor:
         tr = self._traj
         start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
         known = np.where(is_point, start, stop + 1)
-        # every region's margin in one pass (the arithmetic of verify.geometry, bit for bit)
-        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        region_m = self._offset[:, None] - dist
-        atom_m = np.empty((len(self._names), x.shape[0]))
-        for k, rows in enumerate(self._atom_rows):
-            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        region_m, atom_m = self._margins(x, y)
         nan = np.isnan(atom_m)
         p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
                                                                                                       atom_m)
@@ -490,10 +495,7 @@ class OnlineMonitor:
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
         # timed-run semantics (paper, Definition 3): an entry where the containing region changes
-        inside = dist[:, k0:] + sc.robot.radius <= self._radius[:, None]  # geometry.containing_region
-        region = np.full(inside.shape[1], -1, dtype=np.int64)
-        for k in range(inside.shape[0]):
-            region[inside[k]] = k
+        region = self._containing(x[k0:], y[k0:])
         before = np.concatenate(([self._prev_region], region[:-1]))
         self._prev_region = int(region[-1])
         entry = np.flatnonzero((region != before) & (region >= 0))
@@ -527,8 +529,7 @@ class OnlineMonitor:
                 pt, px, py = self._prev_every
                 et, ex, ey = np.concatenate(([pt], et)), np.concatenate(([px], ex)), np.concatenate(([py], ey))
             e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, sc.max_speed_mps)
-            e_margin = self._offset[:, None] - np.hypot(ex[None, :] - self._cx[:, None], ey[None, :] -
-                                                        self._cy[:, None])
+            e_margin = self._margins(ex, ey)[0]
         self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
         self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
         if self._unsafe:
@@ -539,6 +540,30 @@ class OnlineMonitor:
         if "tube" in self._selected:
             self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
         self._tube_last_t = int(et[-1])
+
+    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Every region's margin (rows in scenario order) and every atom's (rows in name order), as
+        ``verify.geometry.region_margins`` / ``label_margins`` give them (bit for bit)."""
+        if not self._discs:
+            atom = label_margins(x, y, self.scenario, frozenset(self._names))
+            atom_m = np.array([atom[n] for n in self._names]).reshape(-1, x.shape[0])
+            return region_margins(x, y, self.scenario), atom_m
+        region_m = self._offset[:, None] - np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        atom_m = np.empty((len(self._names), x.shape[0]))
+        for k, rows in enumerate(self._atom_rows):
+            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        return region_m, atom_m
+
+    def _containing(self, x: FloatArray, y: FloatArray) -> IntArray:
+        """``verify.geometry.containing_region``."""
+        if not self._discs:
+            return containing_region(x, y, self.scenario)
+        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        inside = dist + self.scenario.robot.radius <= self._radius[:, None]
+        region = np.full(x.shape[0], -1, dtype=np.int64)
+        for k in range(inside.shape[0]):
+            region[inside[k]] = k
+        return region
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
