@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -33,7 +32,6 @@ from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
 from verify.geometry import (
     containing_region,
-    gap_bounds,
     label_margins,
     region_margins,
     step_bound_m,
@@ -41,6 +39,7 @@ from verify.geometry import (
 )
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
+from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
 from verify.timedrun import parse_spec
@@ -117,111 +116,6 @@ class OnlineResult:
 
 def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
     return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
-
-
-def _finite_min(a: FloatArray) -> float | None:
-    finite = a[np.isfinite(a)]
-    return float(finite.min()) if finite.size else None
-
-
-def _min(a: float | None, b: float | None) -> float | None:
-    return b if a is None else (a if b is None else min(a, b))
-
-
-# ---- per-sample checks -----------------------------------------------------------------------------------------------
-@dataclass(slots=True)
-class _MarginRun:
-    """``verify.checks.margin_check`` accumulated over batches (workspace, obstacle clearance)."""
-
-    name: str
-    samples: int = 0
-    fail_ns: int | None = None
-    fail_detail: dict[str, Any] = field(default_factory=dict)
-    sample_min: float | None = None
-    nan: int = 0
-    worst_gap: float = math.inf
-    worst_gap_at: tuple[int, int] | None = None
-
-    def feed(self, t_ns: IntArray, margin: FloatArray, step_m: FloatArray, new_from: int) -> int | None:
-        """``t_ns``/``margin``: the previous sample (if ``new_from`` = 1) and the new ones; returns the index of a
-        first violation found in this batch."""
-        new = margin[new_from:]
-        self.samples += new.shape[0]
-        self.sample_min = _min(self.sample_min, _finite_min(new))
-        self.nan += int(np.isnan(new).sum())
-        hit = None
-        if self.fail_ns is None:
-            bad = np.flatnonzero(new < 0)
-            if bad.size:
-                hit = int(bad[0]) + new_from
-                self.fail_ns = int(t_ns[hit])
-        if margin.shape[0] >= 2:
-            lo = gap_bounds(margin, step_m).lo
-            k = int(np.argmin(lo))
-            if lo[k] < self.worst_gap:
-                self.worst_gap, self.worst_gap_at = float(lo[k]), (int(t_ns[k]), int(t_ns[k + 1]))
-        return hit
-
-    def result(self) -> CheckResult:
-        if self.samples == 0:
-            return CheckResult(self.name, "inconclusive", None, None, {"reason": "no samples"})
-        if self.fail_ns is not None:
-            return CheckResult(self.name, "fail", self.sample_min, self.fail_ns, dict(self.fail_detail))
-        if self.nan or self.worst_gap < 0:
-            why = []
-            if self.nan:
-                why.append(f"{self.nan} NaN sample(s)")
-            if self.worst_gap < 0 and self.worst_gap_at is not None:
-                a, b = self.worst_gap_at
-                why.append(f"the robot may have crossed the limit between samples at {a} ns and {b} ns "
-                           f"(bound {self.worst_gap:.4f} m)")
-            return CheckResult(self.name, "inconclusive", self.sample_min, None,
-                               {"reason": "; ".join(why), "guaranteed_margin_m": None})
-        guaranteed = min(self.sample_min if self.sample_min is not None else -math.inf, self.worst_gap)
-        return CheckResult(self.name, "pass", guaranteed, None, {"sample_margin_m": self.sample_min})
-
-
-@dataclass(slots=True)
-class _MergedRun:
-    """Batch results of an offline check (tube, input box) merged: first failure, smallest margin, any undecided."""
-
-    name: str
-    samples: int = 0
-    fail: CheckResult | None = None
-    margin: float | None = None
-    undecided: list[str] = field(default_factory=list)
-    counts: dict[str, int] = field(default_factory=dict)
-    max_dev: float | None = None
-    missing_reason: str = "no samples"
-
-    def feed(self, res: CheckResult, n: int) -> bool:
-        self.samples += n
-        self.margin = _min(self.margin, res.margin)
-        for key in ("matched_samples", "unmatched_samples"):
-            if key in res.details:
-                self.counts[key] = self.counts.get(key, 0) + int(res.details[key])
-        dev = res.details.get("max_deviation_m")
-        if dev is not None and math.isfinite(dev):
-            self.max_dev = dev if self.max_dev is None else max(self.max_dev, dev)
-        if res.verdict == "fail" and self.fail is None:
-            self.fail = res
-            return True
-        if res.verdict == "inconclusive":
-            self.undecided.append(str(res.details.get("reason", "undecided samples")))
-        return False
-
-    def result(self, details: dict[str, Any]) -> CheckResult:
-        d = {**details, **self.counts}
-        if self.max_dev is not None:
-            d["max_deviation_m"] = self.max_dev
-        if self.fail is not None:
-            extra = {k: v for k, v in self.fail.details.items() if k == "component"}
-            return CheckResult(self.name, "fail", self.margin, self.fail.first_violation_ns, {**d, **extra})
-        if self.samples == 0:
-            return CheckResult(self.name, "inconclusive", None, None, {**d, "reason": self.missing_reason})
-        if self.undecided:
-            return CheckResult(self.name, "inconclusive", self.margin, None, {**d, "reason": "; ".join(self.undecided)})
-        return CheckResult(self.name, "pass", self.margin, None, d)
 
 
 class _Semantics:
@@ -303,10 +197,10 @@ class OnlineMonitor:
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
         self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
         self._prev_region = -2  # "before the first sample"
-        self._ws = _MarginRun("workspace")
-        self._clear = _MarginRun("obstacle_clearance")
-        self._tube = _MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
-        self._input = _MergedRun("input_box", missing_reason="no cmd_vel logged")
+        self._ws = MarginRun("workspace")
+        self._clear = MarginRun("obstacle_clearance")
+        self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
+        self._input = MergedRun("input_box", missing_reason="no cmd_vel logged")
         self._tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []
         self._nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
         self._nominal_seen = 0
@@ -624,9 +518,9 @@ class OnlineMonitor:
         t0 = self.t0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
-        runs: list[_MergedRun | _MarginRun] = [self._tube, self._input, self._ws, self._clear]
+        runs: list[MergedRun | MarginRun] = [self._tube, self._input, self._ws, self._clear]
         for run in runs:
-            if isinstance(run, _MarginRun):
+            if isinstance(run, MarginRun):
                 failed, when, m = run.fail_ns is not None, run.fail_ns, run.sample_min
             else:
                 failed = run.fail is not None
