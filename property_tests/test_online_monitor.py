@@ -175,3 +175,20 @@ def test_a_clean_run_passes_online() -> None:
     res = mon.close()
     assert res.verdict == "pass", res.checks
     assert _offline(run, "G[0,inf) mission_1 & G[0,inf) !obs_1")["verdict"] == "pass"
+
+
+def test_samples_one_nanosecond_apart_leave_no_gap() -> None:
+    """Two samples 1 ns apart have no instant between them (no gap position), as in the offline positions."""
+    rng = np.random.default_rng(7)
+    t = T0 + np.cumsum(rng.choice([1, 2, 3, 10_000_000], 400))
+    x = -1.99 + np.cumsum(rng.normal(0.0, 0.002, 400))
+    run = {"t": t, "x": x, "y": np.full(400, -1.78), "nominal": (t, x, np.full(400, -1.78)), "cmd": None,
+           "dup": []}
+    for spec in FORMULAS:
+        cert = _offline(run, spec)
+        for every in (1, 13, 0):
+            mon, _ = _online(run, spec, every)
+            res = mon.close()
+            for got, want in zip(res.checks, cert["checks"], strict=True):  # type: ignore[arg-type]
+                assert got.verdict == want["verdict"], (spec, got.name)
+                assert _same(got.margin, want["margin"]), (spec, got.name, got.margin, want["margin"])

@@ -43,7 +43,6 @@ from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
 from verify.timedrun import parse_spec
-from verify.trajectory import trajectory_positions
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
@@ -364,11 +363,7 @@ class OnlineMonitor:
         t_rel = t_abs - t0
         step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
         # trajectory semantics: sample points and the gaps between them
-        pos, point_at, gap_at = trajectory_positions(t_rel)
-        first = int(point_at[0]) + 1 if k0 else 0  # the positions after the previous sample (its gap included)
         tr = self._traj
-        start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
-        known = np.where(is_point, start, stop + 1)
         region_m, atom_m = self._margins(x, y)
         nan = np.isnan(atom_m)
         p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
@@ -378,13 +373,30 @@ class OnlineMonitor:
         g_lo, g_hi = mid - half, mid + half
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
-        lo = np.empty((len(self._names), pos.size))
+        # the positions of verify.trajectory.trajectory_positions after the previous sample: each new sample's
+        # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
+        m = t_rel.shape[0] - 1
+        start = np.empty(2 * m + 1 - k0, dtype=np.int64)
+        stop = np.empty_like(start)
+        is_point = np.zeros(start.shape[0], dtype=bool)
+        lo = np.empty((len(self._names), start.shape[0]))
         hi = np.empty_like(lo)
-        lo[:, point_at], hi[:, point_at] = p_lo, p_hi
-        ok = gap_at >= 0
-        lo[:, gap_at[ok]], hi[:, gap_at[ok]] = g_lo[:, ok], g_hi[:, ok]
+        o = 1 - k0  # the first sample of the run is a point with no gap before it
+        if o:
+            start[0] = stop[0] = t_rel[0]
+            is_point[0] = True
+            lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
+        start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
+        start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
+        is_point[o + 1 :: 2] = True
+        lo[:, o::2], hi[:, o::2] = g_lo, g_hi
+        lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
+        keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
+        if not keep.all():
+            start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
+        known = np.where(is_point, start, stop + 1)
         for k, name in enumerate(self._names):
-            tr.atoms[name].push(lo[k, first:], hi[k, first:], known)
+            tr.atoms[name].push(lo[k], hi[k], known)
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
