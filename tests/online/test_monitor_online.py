@@ -162,6 +162,8 @@ def test_a_nested_window_decides_at_its_deciding_sample() -> None:
             assert d.time_s <= i / 100 + 1e-9
     assert seen["spec_trajectory"] == pytest.approx(3.91)
     assert seen["G[0,10] G[0,5] mission_1"] == pytest.approx(3.91)
+    ob = mon.state().obligations[0]
+    assert ob.first_violation_s == pytest.approx(3.91)  # the sample that shows it, not the window's position 0
     assert mon.close().checks[0].verdict == "fail"
 
 

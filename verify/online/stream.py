@@ -421,7 +421,7 @@ class WindowHead(Head):
         if certain.size:
             k = int(certain[int(np.argmin(kn[certain]))])
             self.early_lo = float(lo_a[certain].max())
-            self._decide(int(kn[k]), int(start[k]))
+            self._decide(int(kn[k]), int(kn[k]))  # shown by the sample that made the argument certain
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
