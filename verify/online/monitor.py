@@ -49,7 +49,6 @@ __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "Onli
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-CHECK_NAMES = ("spec_trajectory", "spec_timed_run", "tube", "input_box", "workspace", "obstacle_clearance")
 
 
 class MonitorClosedError(VerifyError, RuntimeError):

@@ -11,6 +11,8 @@ The semantics is the offline one, computed by its own code: the windows of a bat
 ``_eventually`` (incomplete windows) on what is left. A node keeps only the positions its parent still needs:
 
 * a bounded window ``[lo, hi]`` is final once ``stop + hi`` is observed, so a node retains ``hi`` x rate positions;
+  before that its *provisional* bounds (and the time its verdict became certain) let the operators above it decide
+  early -- a nested ``G`` is false at the first sample that shows its argument false;
 * the top-level temporal operators are evaluated at the first position only (running extrema, nothing retained);
 * an unbounded window *below* another temporal operator, and any ``Until`` / ``Next`` (evaluated at ``close`` by the
   offline engine), keep their positions until ``close`` (memory grows with the log for those formulas only).
