@@ -39,8 +39,11 @@ def _certified_path(path: Path, finished: bool) -> Path:
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here at the end, as certify does.")
 @click.option("--no-report", is_flag=True, help="With --out: write only certificate.json.")
+@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
+              help="Checks to run, as certify's --checks (default: the scenario's checks:, else every check whose "
+                   "data the scenario names).")
 def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout: float,  # noqa: PLR0917
-          poll_s: float, time_base: str, out_dir: Path | None, no_report: bool) -> None:
+          poll_s: float, time_base: str, out_dir: Path | None, no_report: bool, checks_text: str | None) -> None:
     """Certify a log while it is being recorded: one line per decision, as soon as it is decided.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
@@ -48,9 +51,11 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
     from verify.certify import resolve_scenario
     from verify.online.monitor import OnlineMonitor
     from verify.online.watch import watch_log
+    from verify.selection import parse_check_list
 
     sc = resolve_scenario(scenario)
-    monitor = OnlineMonitor(sc, spec=spec)
+    checks = parse_check_list(checks_text) if checks_text is not None else None
+    monitor = OnlineMonitor(sc, spec=spec, checks=checks)
 
     def show(d: object) -> None:
         click.echo(d.line())  # type: ignore[attr-defined]
@@ -67,7 +72,7 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
         from verify.certify import certify_log, write_certificate
 
         result = certify_log(_certified_path(log, res.finished), sc, spec=spec, time_base=time_base,
-                             salvage=not res.finished)
+                             salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
         if not no_report:
             from verify.report import write_reports
