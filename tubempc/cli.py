@@ -13,6 +13,7 @@ from typing import NoReturn
 import click
 
 from tubempc.commands.demo import demo
+from tubempc.commands.falsify import falsify
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
 from tubempc.commands.simulate import simulate
@@ -79,6 +80,7 @@ cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
+cli.add_command(falsify)
 
 
 def _exit_code(err: BaseException) -> int:
