@@ -25,13 +25,14 @@ from verify.checks import CheckResult, check_clearance, check_input_box, check_t
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containing_region
 from verify.ingest import LogData, read_log
+from verify.ingest.digest import DEFAULT_DIGEST
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of
 from verify.trajectory import check_trajectory
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
            "resolve_scenario", "write_certificate"]
 
-CERTIFICATE_VERSION = 1
+CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 #: added to the tube's tolerance: logged positions are absolute float64 (metres from the workspace origin), so a
 #: deviation computed from two of them carries ~1e-15 m of rounding; a run that rides the tube's boundary exactly (the
 #: lemma's worst case) must not fail on it
@@ -104,11 +105,13 @@ def _formula_text(sc: Scenario, spec: str | None) -> str:
 
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
-                time_base: str = "header", salvage: bool = False, time0_ns: int | None = None) -> CertifyResult:
-    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files."""
+                time_base: str = "header", salvage: bool = False, time0_ns: int | None = None,
+                digest: str = DEFAULT_DIGEST) -> CertifyResult:
+    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
+    ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256"."""
     sc = resolve_scenario(scenario)
     formula_text = _formula_text(sc, spec)
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
     return _judge(log, sc, formula_text=formula_text)
 
 
@@ -168,7 +171,9 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         "scenario_sha256": sc.sha256(),
         "log": log.path,
         "log_format": log.format,
-        "log_sha256": log.log_sha256,
+        "log_digest": log.log_digest,
+        "log_digest_algorithm": log.digest_algorithm,
+        **({"log_sha256": log.log_digest} if log.digest_algorithm == "sha256" else {}),
         "partial": log.partial,
         "time_base": log.time_base,
         "time0_ns": t0,

@@ -268,7 +268,7 @@ def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify") -> ET.E
     suite = ET.Element("testsuite", {"name": _x(suite_name), "tests": str(len(checks)), "failures": str(failures),
                                      "errors": "0", "skipped": str(skipped), "time": "0"})
     props = ET.SubElement(suite, "properties")
-    for key in ("verdict", "formula", "scenario_sha256", "log_sha256", "partial"):
+    for key in ("verdict", "formula", "scenario_sha256", "log_digest", "log_digest_algorithm", "log_sha256", "partial"):
         if key in cert:
             ET.SubElement(props, "property", {"name": key, "value": _x(cert[key])})
     for check in checks:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import pickle
 import subprocess
@@ -10,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import blake3
 import numpy as np
 import pytest
 
@@ -19,9 +21,11 @@ from verify import (
     MissingTopicError,
     SpecError,
     TruncatedLogError,
+    UnusableInputError,
     certify_log,
     write_certificate,
 )
+from verify.ingest.digest import digest_path
 
 MakeLog = Callable[..., Path]
 TIME0_NS = 1_767_225_600 * 10**9  # the log contract's time 0 of simulated runs (conftest writes it)
@@ -50,7 +54,33 @@ def test_every_format_and_pose_type_passes(make_log: MakeLog, scenario: Scenario
     assert cert["data_quality"]["pose"]["fast_decode"] is (pose_type != "TF")
     assert list(res.trajectory.columns) == ["t_s", "x_m", "y_m", "theta_rad"]
     assert res.trajectory["x_m"].to_numpy() == pytest.approx(good.x, abs=1e-12)
-    assert cert["log_sha256"] and cert["scenario_sha256"] == sc.sha256()
+    assert cert["log_digest_algorithm"] == "blake3" and "log_sha256" not in cert
+    assert cert["log_digest"] == digest_path(log, "blake3").hex and cert["scenario_sha256"] == sc.sha256()
+
+
+@pytest.mark.parametrize("fmt", ["bag", "dir-mcap"])
+def test_log_digest_is_the_files_hash(make_log: MakeLog, scenario: Scenario, good: Any, fmt: str) -> None:
+    """The certificate's digest is the hash of the log's bytes, named: BLAKE3 by default (``b3sum``'s value for a
+    file), SHA-256 on request (``sha256sum``'s, also kept as ``log_sha256``); a bag directory hashes every file's
+    name and bytes."""
+    log = Path(make_log(fmt, good))
+    files = sorted(f for f in log.rglob("*") if f.is_file()) if log.is_dir() else [log]
+    b3, sha = blake3.blake3(), hashlib.sha256()
+    for f in files:
+        if log.is_dir():
+            b3.update(str(f.relative_to(log)).encode() + b"\0")
+            sha.update(str(f.relative_to(log)).encode() + b"\0")
+        b3.update(f.read_bytes())
+        sha.update(f.read_bytes())
+    cert = certify_log(log, scenario).certificate
+    assert (cert["log_digest_algorithm"], cert["log_digest"]) == ("blake3", b3.hexdigest())
+    cert256 = certify_log(log, scenario, digest="sha256").certificate
+    assert (cert256["log_digest_algorithm"], cert256["log_digest"]) == ("sha256", sha.hexdigest())
+    assert cert256["log_sha256"] == sha.hexdigest()
+    assert {k: v for k, v in cert256.items() if not k.startswith("log_")} == \
+        {k: v for k, v in cert.items() if not k.startswith("log_")}
+    with pytest.raises(UnusableInputError, match="digest"):
+        certify_log(log, scenario, digest="md5")
 
 
 def test_result_pickles_and_certificate_is_json(make_log: MakeLog, scenario: Scenario, good: Any,

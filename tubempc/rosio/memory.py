@@ -38,6 +38,7 @@ def _yaw_via_quaternion(theta: np.ndarray) -> np.ndarray:
 
 
 def _digest(*arrays: np.ndarray) -> str:
+    """SHA-256 of the streams' bytes (there is no file to hash)."""
     h = hashlib.sha256()
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
@@ -62,6 +63,6 @@ def in_memory_log(result: ClosedLoopResult, scenario: Scenario, *, name: str = "
     }
     meta = metadata_document(result, scenario, metadata)
     time0 = int(t_ns[0]) if t_ns.size else 0
-    return LogData(name, IN_MEMORY_FORMAT, _digest(t_ns, result.x_measured, result.x_hat, result.u_body), "header",
-                   time0, pose, {"topic": scenario.topics.pose, "type": "geometry_msgs/msg/PoseStamped"}, nominal,
-                   t_ns.copy(), result.u_body.copy(), statuses, meta, quality, False)
+    return LogData(name, IN_MEMORY_FORMAT, _digest(t_ns, result.x_measured, result.x_hat, result.u_body), "sha256",
+                   "header", time0, pose, {"topic": scenario.topics.pose, "type": "geometry_msgs/msg/PoseStamped"},
+                   nominal, t_ns.copy(), result.u_body.copy(), statuses, meta, quality, False)

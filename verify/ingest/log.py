@@ -7,7 +7,6 @@ frozen ``LogData`` whose streams are sorted by time, de-duplicated, with times i
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy.typing as npt
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
+from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
 from verify.ingest.quality import clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 
@@ -43,7 +43,8 @@ class PoseStream:
 class LogData:
     path: str
     format: str
-    log_sha256: str
+    log_digest: str  # hex digest of the log's bytes (verify.ingest.digest)
+    digest_algorithm: str  # "blake3" or "sha256"
     time_base: str
     time0_ns: int
     pose: PoseStream
@@ -73,15 +74,10 @@ def _json_objects(raw: RawLog, topic: str) -> list[dict[str, Any]]:
 
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file, or of a bag directory (every file's relative name and bytes, in name order)."""
-    h = hashlib.sha256()
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-    for f in files:
-        if path.is_dir():
-            h.update(str(f.relative_to(path)).encode() + b"\0")
-        with f.open("rb") as fh:
-            while chunk := fh.read(1 << 20):
-                h.update(chunk)
-    return h.hexdigest()
+    got = digest_path(path, "sha256")
+    if got is None:  # only a cancelled digest has no value
+        raise RuntimeError(f"sha256 of {path} was not computed")
+    return got.hex
 
 
 def _pose_topic(raw: RawLog, scenario: Scenario, path: str) -> str:
@@ -96,10 +92,27 @@ def _pose_topic(raw: RawLog, scenario: Scenario, path: str) -> str:
 
 
 def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header", salvage: bool = False,
-             time0_ns: int | None = None) -> LogData:
+             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
+    """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
+    a thread beside the reading."""
     if time_base not in ("header", "log"):
         raise UnusableInputError(f"time_base={time_base!r} must be 'header' or 'log'")
     p = Path(path)
+    if not p.exists():
+        raise LogReadError("no such file or directory", path=str(p))
+    try:
+        job = start_digest(p, digest)
+    except ValueError as err:
+        raise UnusableInputError(str(err)) from err
+    try:
+        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job)
+    except BaseException:
+        job.cancel()
+        raise
+
+
+def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
+              job: DigestJob) -> LogData:
     t = scenario.topics
     wanted = {t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC}
     raw = read_raw(p, wanted, salvage=salvage)
@@ -171,6 +184,10 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
     metadata = documents[0] if documents else None
     if raw.partial:
         quality["partial"] = True
-    return LogData(str(p), raw.format, file_sha256(p), time_base, t0, pose,
+    try:
+        log_digest = job.result()
+    except OSError as err:
+        raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
+    return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, time_base, t0, pose,
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
                    nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial)
