@@ -121,7 +121,8 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
     data = outcome.to_json()
     ref = data["reference"]
     click.echo(f"unperturbed run: margin {ref['margin']:.9g} ({ref['check']}), {ref['duration_s']:.1f} s")
-    click.echo(f"search: {data['simulations']} simulations ({data['search_space']['dim']} parameters), "
+    shrink = f" + {data['shrink_simulations']} shrinking" if data["shrink_simulations"] else ""
+    click.echo(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
                f"{data['timing']['elapsed_s']:.1f} s; median {data['timing']['simulation_s_median']:.3f} s per "
                f"simulation + {data['timing']['judge_s_median']:.3f} s to judge it")
     worst = data["worst"]
@@ -129,10 +130,10 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
         first = data["first_violation_sim"]
         found = f"VIOLATION first found at simulation {first}" if first else "no violation found"
         click.echo(f"{found}; worst margin {worst['margin']:.9g} ({worst['check']}) at simulation {worst['sim']}")
-        if data["minimal"] is not None and data["minimal"] is not worst:
+        if data["minimal"] is not None and data["minimal"]["sim"] != worst["sim"]:
             mini = data["minimal"]
-            click.echo(f"shrunk counterexample ({data['shrink_simulations']} shrink simulations): margin "
-                       f"{mini['margin']:.9g} ({mini['check']})\n  replay: {mini['replay']}")
+            click.echo(f"shrunk counterexample: margin {mini['margin']:.9g} ({mini['check']})\n"
+                       f"  replay: {mini['replay']}")
         click.echo(f"worst case: certificate verdict {data['files']['worst']['certificate_verdict']} (from the "
                    f"written log: margin {data['files']['worst']['margin_from_log']:.9g})\n  replay: {worst['replay']}")
     click.echo(f"verdict: {data['verdict']}; {out / 'falsify.json'}")
