@@ -67,8 +67,10 @@ def _quat(theta: float) -> tuple[float, float, float, float]:
 def write_log(path: Path, fmt: str, traj: Traj, scenario: Scenario, *, pose_type: str = "PoseStamped",
               header_offset_ns: int = 0, time0_ns: int = TIME0_NS, metadata: bool = True,
               frame_id: str = "world", tf_child: str = "nexus", omit_definition: bool = False,
-              extra_pose: list[tuple[float, float, float, float]] | None = None) -> Path:
-    """Write ``traj`` as a log; ``header_offset_ns`` is added to every header stamp (log time = sample time)."""
+              extra_pose: list[tuple[float, float, float, float]] | None = None,
+              pose_stamps_ns: dict[int, int] | None = None) -> Path:
+    """Write ``traj`` as a log; ``header_offset_ns`` is added to every header stamp (log time = sample time);
+    ``pose_stamps_ns``: pose sample index -> its header stamp (absolute ns), replacing the sample's own."""
     ros1 = fmt == "bag"
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in store.types:
@@ -77,17 +79,17 @@ def write_log(path: Path, fmt: str, traj: Traj, scenario: Scenario, *, pose_type
     ser = store.serialize_ros1 if ros1 else store.serialize_cdr
     topics = scenario.topics
 
-    def header(t_ns: int) -> Any:
-        stamp = t_ns + header_offset_ns
+    def header(t_ns: int, stamp_ns: int | None = None) -> Any:
+        stamp = t_ns + header_offset_ns if stamp_ns is None else stamp_ns
         return T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
                                        stamp=T["builtin_interfaces/msg/Time"](sec=stamp // 10**9,
                                                                               nanosec=stamp % 10**9),
                                        frame_id=frame_id)
 
-    def pose_msg(t_ns: int, x: float, y: float, th: float) -> Any:
+    def pose_msg(t_ns: int, x: float, y: float, th: float, stamp_ns: int | None = None) -> Any:
         p = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
                                         orientation=T["geometry_msgs/msg/Quaternion"](*_quat(th)))
-        return T["geometry_msgs/msg/PoseStamped"](header=header(t_ns), pose=p)
+        return T["geometry_msgs/msg/PoseStamped"](header=header(t_ns, stamp_ns), pose=p)
 
     msgs: list[tuple[str, str, int, Any]] = []
     t_ns = (np.round(traj.t_s * 1e9)).astype(np.int64) + time0_ns
@@ -100,7 +102,7 @@ def write_log(path: Path, fmt: str, traj: Traj, scenario: Scenario, *, pose_type
             late[len(samples)] = int(t_ns[-1]) + 1_000_000 * (k + 1)
             samples.append((time0_ns + round(t * 1e9), x, y, th))
     for k, (t_stamp, x, y, th) in enumerate(samples):
-        ps = pose_msg(t_stamp, x, y, th)
+        ps = pose_msg(t_stamp, x, y, th, (pose_stamps_ns or {}).get(k))
         t = late.get(k, t_stamp)
         if pose_type == "PoseStamped":
             msgs.append((pose_topic, "geometry_msgs/msg/PoseStamped", t, ps))

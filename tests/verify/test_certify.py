@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import pickle
+import re
 import subprocess
 import sys
 from collections.abc import Callable
@@ -156,7 +157,10 @@ def test_data_quality_faults_are_reported(traj_cls: Any, make_log: MakeLog, scen
     assert dq["bad_quaternions"] == 1
     assert dq["jumps"]["count"] >= 1
     assert dq["dropouts"]["count"] == 1 and dq["dropouts"]["longest_gap_s"] == pytest.approx(1.2)
-    assert dq["duplicate_stamps"] == 1 and dq["out_of_order_stamps"] == 1
+    # the late message's stamp (5 s) lies 95 s from its neighbours in reading order: an outlier, re-timed from its
+    # log time, counted, and still judged (no sample is dropped)
+    assert dq["retimed_stamps"] == 1 and dq["out_of_order_stamps"] == 0
+    assert dq["read"] == dq["judged"] == len(traj.t_s) + 1
     assert dq["header_vs_log_offset_s"]["median"] == pytest.approx(0.002)
     assert cert["verdict"] != "pass"
 
@@ -238,3 +242,25 @@ def test_cli_exit_codes_and_out_folders(traj_cls: Any, make_log: MakeLog, scenar
 def test_time0_default_is_first_pose(make_log: MakeLog, scenario: Scenario, good: Any) -> None:
     cert = certify_log(make_log("dir-sqlite3", good), scenario).certificate
     assert cert["time0_ns"] == TIME0_NS
+
+
+def test_cli_json_quiet_verbose_and_time_precision(make_log: MakeLog, good: Any) -> None:
+    ok = make_log("mcap", good)
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "tubempc", *args], capture_output=True, text=True, check=False,
+                              timeout=120)
+
+    one = run("certify", str(ok), "--scenario", "nexus-sml", "--json")
+    assert one.returncode == 0
+    assert json.loads(one.stdout)["verdict"] == "pass"  # stdout is the certificate alone
+    assert one.stderr.startswith(f"{ok}: pass")  # the summary went to stderr
+    many = run("-q", "certify", str(ok), str(ok.parent / "missing.mcap"), "--scenario", "nexus-sml", "--json")
+    entries = json.loads(many.stdout)
+    assert [e["verdict"] for e in entries] == ["pass", "unusable"] and many.stderr == ""
+    assert entries[1]["exit_code"] == 3 and "missing.mcap" in entries[1]["error"]
+    fail = run("certify", str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1", "-v")
+    assert fail.returncode == 1
+    assert re.search(r"spec_trajectory: fail at t=\d+\.\d\d s", fail.stdout), fail.stdout  # 2 decimals, not 9
+    assert "obstacle_clearance: pass, margin" in fail.stderr  # -v lists every check
+    assert run("certify", "-q", str(ok), "--scenario", "nexus-sml").stdout == ""

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from tubempc.commands.output import say
+
 __all__ = ["demo"]
 
 
@@ -28,9 +30,9 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool) -> N
     folder = out_dir if out_dir is not None else Path("reports") / time.strftime("demo-%Y%m%d-%H%M%S")
     started = time.perf_counter()
     result = run_demo(folder, seed=seed, disturbance=disturbance, use_cache=not no_cache,
-                      log=click.echo)
-    click.echo(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
+                      log=say)
+    say(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
     for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:
-            click.echo(f"  {key:12s} {result.files[key]}")
+            say(f"  {key:12s} {result.files[key]}")
     sys.exit(result.exit_code)

@@ -63,6 +63,10 @@ def in_memory_log(result: ClosedLoopResult, scenario: Scenario, *, name: str = "
     }
     meta = metadata_document(result, scenario, metadata)
     time0 = int(t_ns[0]) if t_ns.size else 0
+    n = int(t_ns.size)
+    counts = {"read": n, "judged": n, "merged_duplicates": 0, "conflicting_duplicates": 0}
     return LogData(name, IN_MEMORY_FORMAT, _digest(t_ns, result.x_measured, result.x_hat, result.u_body), "sha256",
                    "header", time0, pose, {"topic": scenario.topics.pose, "type": "geometry_msgs/msg/PoseStamped"},
-                   nominal, t_ns.copy(), result.u_body.copy(), statuses, meta, quality, False)
+                   nominal, t_ns.copy(), result.u_body.copy(), statuses, meta, quality, False, pose_samples=pose,
+                   time_base_requested="header", samples={"pose": {**counts, "retimed": 0}, "nominal": {**counts,
+                   "retimed": 0}, "cmd_vel": dict(counts)})

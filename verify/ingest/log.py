@@ -1,14 +1,16 @@
 """A log file -> the certifier's view of it: pose, nominal, inputs, solver status, metadata and data quality.
 
-input: a log path, the scenario (topic names, rates, speed bound), the time base and the salvage flag -> output: a
-frozen ``LogData`` whose streams are sorted by time, de-duplicated, with times in integer ns (absolute) and
-``time0_ns`` (first pose sample unless overridden). Unusable input raises ``UnusableInputError`` subclasses.
+input: a log path, the scenario (topic names, rates, speed bound), the time base (``auto``, ``header``, ``log``:
+``verify.ingest.timebase``) and the salvage flag -> output: a frozen ``LogData`` whose streams are sorted by time,
+with times in integer ns (absolute) and ``time0_ns`` (first pose sample unless overridden). No sample is dropped:
+duplicates that agree are merged, duplicates that disagree are kept for the per-sample checks (``pose_samples``) and
+are unknown (NaN) to the formula; the counts are in ``samples``. Unusable input raises ``UnusableInputError``.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,8 +21,9 @@ from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
-from verify.ingest.quality import clean_order, pose_findings, stream_findings, yaw_from_quaternion
+from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
+from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples
 
 __all__ = ["LogData", "PoseStream", "file_sha256", "read_log"]
 
@@ -56,6 +59,11 @@ class LogData:
     metadata: dict[str, Any] | None
     data_quality: dict[str, Any]
     partial: bool
+    pose_samples: PoseStream  # every pose sample sorted by time (duplicates that disagree kept): per-sample checks
+    time_base_requested: str = "auto"
+    time_base_note: str | None = None
+    samples: dict[str, dict[str, int]] = field(default_factory=dict)  # per stream: read, judged, merged, ...
+    stream_problems: dict[str, str] = field(default_factory=dict)  # stream -> why nothing judged on it can pass
 
 
 
@@ -91,12 +99,29 @@ def _pose_topic(raw: RawLog, scenario: Scenario, path: str) -> str:
                             f"{', '.join(sorted(raw.available)) or 'no topics'}", path=path)
 
 
-def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header", salvage: bool = False,
+def _stream(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, theta_rad: FloatArray
+            ) -> tuple[PoseStream, PoseStream, JudgedSamples]:
+    """(formula stream: one sample per time, NaN where duplicates disagree; every sample sorted; the accounting)."""
+    js = judged_samples(t_ns, np.column_stack([x_m, y_m, theta_rad]))
+    i = js.index
+    conflict = js.conflict
+    x, y, th = x_m[i].copy(), y_m[i].copy(), theta_rad[i].copy()
+    x[conflict] = np.nan
+    y[conflict] = np.nan
+    th[conflict] = np.nan
+    one = PoseStream(js.t_ns, x, y, th)
+    if js.all_index.shape[0] == i.shape[0]:
+        return one, one, js
+    a = js.all_index
+    return one, PoseStream(t_ns[a], x_m[a], y_m[a], theta_rad[a]), js
+
+
+def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", salvage: bool = False,
              time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
     """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
     a thread beside the reading."""
-    if time_base not in ("header", "log"):
-        raise UnusableInputError(f"time_base={time_base!r} must be 'header' or 'log'")
+    if time_base not in TIME_BASES:
+        raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
     if not p.exists():
         raise LogReadError("no such file or directory", path=str(p))
@@ -114,7 +139,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "header",
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
               job: DigestJob) -> LogData:
     t = scenario.topics
-    wanted = {t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC}
+    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -133,48 +158,71 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         raise LogReadError(err.reason, path=str(p)) from err
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
-    stamps = cols.stamp_ns if time_base == "header" else cols.log_ns
-    order = clean_order(stamps)
-    finite_t = stamps[order.index]
-    t0 = int(finite_t[0]) if time0_ns is None else int(time0_ns)
+    base = choose_time_base(cols.stamp_ns, cols.log_ns, time_base)
+    stamps = base.t_ns
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
-    idx = order.index
-    pose = PoseStream(finite_t, cols.x_m[idx], cols.y_m[idx], yaw[idx])
-    pq = stream_findings(stamps, cols.log_ns if time_base == "header" else None, order,
+    pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
+    t0 = int(pose.t_ns[0]) if time0_ns is None else int(time0_ns)
+    order = clean_order(stamps)
+    pq = stream_findings(stamps, cols.log_ns if base.name == "header" else None, order,
                          expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
-    if time_base == "log":
+    if base.name == "log":
         pq["header_vs_log_offset_s"] = stream_findings(cols.stamp_ns, cols.log_ns, clean_order(cols.stamp_ns),
                                                        expected_rate_hz=None, time0_ns=t0
                                                        ).get("header_vs_log_offset_s")
+        header_order = clean_order(cols.stamp_ns)
+        pq["duplicate_stamps"] = header_order.duplicates
+        pq["out_of_order_stamps"] = header_order.out_of_order
+    pq["stamps_near_1970"] = int(np.count_nonzero(cols.stamp_ns < NEAR_1970_NS))
+    pq["retimed_stamps"] = base.retimed
+    pq.update(pjs.counts())
     jump_tol_m = 0.01 + 6.0 * scenario.mocap.noise_std
-    pq.update(pose_findings(pose.t_ns, pose.x_m, pose.y_m, bad_q[idx], max_speed_mps=scenario.max_speed_mps,
+    pq.update(pose_findings(pose_samples.t_ns, pose_samples.x_m, pose_samples.y_m,
+                            bad_q[pjs.all_index], max_speed_mps=scenario.max_speed_mps,
                             jump_tolerance_m=jump_tol_m, time0_ns=t0))
     pq["fast_decode"] = cols.fast
     quality["pose"] = pq
+    samples: dict[str, dict[str, int]] = {"pose": {**pjs.counts(), "retimed": base.retimed}}
+    problems: dict[str, str] = {}
+    if base.note:
+        quality["notes"].append(f"{pose_topic}: {base.note}")
+        if not base.usable:
+            problems["pose"] = base.note
 
     nominal = None
-    if t.nominal in raw.topics and raw.topics[t.nominal].payloads:
+    if t.nominal is not None and t.nominal in raw.topics and raw.topics[t.nominal].payloads:
         ncols = decode_pose(raw.topics[t.nominal], raw.ros1)
-        nst = ncols.stamp_ns if time_base == "header" else ncols.log_ns
-        norder = clean_order(nst)
+        nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
+        nst = nbase.t_ns
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
-        ni = norder.index
-        nominal = PoseStream(nst[ni], ncols.x_m[ni], ncols.y_m[ni], nyaw[ni])
-        quality["nominal"] = stream_findings(nst, None, norder, expected_rate_hz=scenario.mocap.rate_hz,
-                                             time0_ns=t0)
+        nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
+        quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
+                                                time0_ns=t0), **njs.counts(), "retimed_stamps": nbase.retimed}
+        samples["nominal"] = {**njs.counts(), "retimed": nbase.retimed}
+        if nbase.note:
+            quality["notes"].append(f"{t.nominal}: {nbase.note}")
+            problems["nominal"] = nbase.note
     else:
-        quality["nominal"] = {"count": 0, "missing": True}
+        quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
     cmd_t = cmd_u = None
-    if t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
+    if t.cmd_vel is not None and t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
         tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
-        corder = clean_order(tw.log_ns)
-        cmd_t, cmd_u = tw.log_ns[corder.index], tw.u[corder.index]
-        cq = stream_findings(tw.log_ns, None, corder, expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
+        cst = tw.stamp_ns if (tw.stamp_ns is not None and base.name == "header") else tw.log_ns
+        corder = clean_order(cst)
+        cjs = judged_samples(cst, tw.u)
+        cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
+        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
+                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
+        cq.update(cjs.counts())
+        cq["type"] = raw.topics[t.cmd_vel].msgtype
+        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
         quality["cmd_vel"] = cq
+        samples["cmd_vel"] = cjs.counts()
     else:
-        quality["cmd_vel"] = {"count": 0, "missing": True}
+        quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
     statuses = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
@@ -188,6 +236,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         log_digest = job.result()
     except OSError as err:
         raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
-    return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, time_base, t0, pose,
+    return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, base.name, t0, pose,
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
-                   nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial)
+                   nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
+                   pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,
+                   samples=samples, stream_problems=problems)
