@@ -76,6 +76,7 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
             stop_at_first: bool, shrink_budget: int | None, replay_text: str | None, workers: int | None,
             dask: str | None, out_dir: str | None) -> None:
     """Search disturbances, start poses and MoCap noise within the scenario's bounds for a run that breaks a check."""
+    from tubempc.commands.output import detail, say
     from tubempc.falsify import (
         FalsifyRequest,
         apply_overrides,
@@ -109,32 +110,32 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
             raise click.ClickException(f"the replayed run failed: {ev.error}")
         files = write_case(setup, ev, out, metadata={"replay": list(z)})
         state = "VIOLATION" if ev.violated else "no violation"
-        click.echo(f"replay: {state}: margin {ev.margin:.9g} ({ev.worst_check}) in memory, "
+        say(f"replay: {state}: margin {ev.margin:.9g} ({ev.worst_check}) in memory, "
                    f"{files['margin_from_log']:.9g} ({files['check_from_log']}) from the written log; certificate "
                    f"verdict {files['certificate_verdict']}")
-        click.echo(f"log: {files['log']}\ncertificate: {files['certificate']}\nreport: {files['report_html']}")
+        say(f"log: {files['log']}\ncertificate: {files['certificate']}\nreport: {files['report_html']}")
         raise click.exceptions.Exit(1 if files["violated_from_log"] else 0)
 
-    click.echo(f"falsify: scenario {scenario.name}, method {method}, budget {budget}, seed {seed}, family {family}"
-               + (f", controller overrides {', '.join(overrides)}" if overrides else ""), err=True)
+    detail(f"falsify: scenario {scenario.name}, method {method}, budget {budget}, seed {seed}, family {family}"
+           + (f", controller overrides {', '.join(overrides)}" if overrides else ""))
     outcome = write_outcome(run_falsify(req, scenario, workers=workers, dask=dask), out)
     data = outcome.to_json()
     ref = data["reference"]
-    click.echo(f"unperturbed run: margin {ref['margin']:.9g} ({ref['check']}), {ref['duration_s']:.1f} s")
+    say(f"unperturbed run: margin {ref['margin']:.9g} ({ref['check']}), {ref['duration_s']:.1f} s")
     shrink = f" + {data['shrink_simulations']} shrinking" if data["shrink_simulations"] else ""
-    click.echo(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
+    say(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
                f"{data['timing']['elapsed_s']:.1f} s; median {data['timing']['simulation_s_median']:.3f} s per "
                f"simulation + {data['timing']['judge_s_median']:.3f} s to judge it")
     worst = data["worst"]
     if worst is not None:
         first = data["first_violation_sim"]
         found = f"VIOLATION first found at simulation {first}" if first else "no violation found"
-        click.echo(f"{found}; worst margin {worst['margin']:.9g} ({worst['check']}) at simulation {worst['sim']}")
+        say(f"{found}; worst margin {worst['margin']:.9g} ({worst['check']}) at simulation {worst['sim']}")
         if data["minimal"] is not None and data["minimal"]["sim"] != worst["sim"]:
             mini = data["minimal"]
-            click.echo(f"shrunk counterexample: margin {mini['margin']:.9g} ({mini['check']})\n"
+            say(f"shrunk counterexample: margin {mini['margin']:.9g} ({mini['check']})\n"
                        f"  replay: {mini['replay']}")
-        click.echo(f"worst case: certificate verdict {data['files']['worst']['certificate_verdict']} (from the "
+        say(f"worst case: certificate verdict {data['files']['worst']['certificate_verdict']} (from the "
                    f"written log: margin {data['files']['worst']['margin_from_log']:.9g})\n  replay: {worst['replay']}")
-    click.echo(f"verdict: {data['verdict']}; {out / 'falsify.json'}")
+    say(f"verdict: {data['verdict']}; {out / 'falsify.json'}")
     raise click.exceptions.Exit(outcome.exit_code)

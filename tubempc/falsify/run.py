@@ -182,6 +182,10 @@ def prepare(req: FalsifyRequest, scenario: Scenario) -> tuple[FalsifySetup, Eval
     if reference.error is not None:
         raise FalsifyError(f"the unperturbed run cannot be simulated with the controller's scenario: "
                            f"{reference.error}")
+    if not any(isinstance(c.get("margin"), int | float) or c.get("verdict") == "fail"
+               for c in reference.checks.values()):
+        raise FalsifyError(f"--checks {','.join(req.checks)}: none of them is judged with a margin for scenario "
+                           f"{scenario.name!r} (the scenario's checks: selection leaves none of them)")
     if req.horizon_s is None:
         setup = replace(setup, space=replace(space, horizon_s=max(reference.duration_s, space.step_s)))
     return setup, reference
