@@ -196,3 +196,11 @@ def test_prepare_uses_the_unperturbed_run_length_as_horizon() -> None:
     setup, reference = prepare(_request(), SC)
     assert setup.space.horizon_s == pytest.approx(reference.duration_s)
     assert reference.margin > 0 and not reference.violated
+
+
+@pytest.mark.slow  # starts a local Dask cluster
+def test_random_search_on_dask_equals_inline() -> None:
+    req = _request(method="random", budget=2, seed=5)
+    inline = run_falsify(req, SC, workers=1).result.evaluations
+    remote = run_falsify(req, SC, workers=2, dask="local").result.evaluations
+    assert [(e.z, e.margin, e.violated) for e in remote] == [(e.z, e.margin, e.violated) for e in inline]
