@@ -204,3 +204,22 @@ def test_random_search_on_dask_equals_inline() -> None:
     inline = run_falsify(req, SC, workers=1).result.evaluations
     remote = run_falsify(req, SC, workers=2, dask="local").result.evaluations
     assert [(e.z, e.margin, e.violated) for e in remote] == [(e.z, e.margin, e.violated) for e in inline]
+
+
+def test_mocap_noise_is_searched_within_its_std_and_runs_with_the_switching_push() -> None:
+    noisy = apply_overrides(SC, ["mocap.noise_std=0.001"])
+    space = make_space(noisy, "R4", family="switch", switches=2, horizon_s=19.0)
+    assert space.names()[-2:] == ["noise.std", "noise.seed"]
+    rng = np.random.default_rng(7)
+    stds = [space.decode(z).noise_std_m for z in rng.uniform(-1, 1, size=(50, space.dim))]
+    assert max(stds) <= 0.001 and min(stds) >= 0.0 and max(stds) > 0.0005
+    # noise with an outward push takes the sampled (CasADi) path of the closed loop; judged like any run
+    from tubempc.falsify import FalsifySetup, evaluate
+    from tubempc.falsify.objective import DEFAULT_CHECKS
+
+    setup = FalsifySetup(noisy, noisy, "R4", (("R5", None),), "G[0,inf) !obs_4", DEFAULT_CHECKS, space)
+    z = rng.uniform(-1, 1, size=space.dim)
+    z[2] = 1.0  # the first interval is the outward push
+    ev = evaluate(setup, tuple(z))
+    assert ev.error is None and math.isfinite(ev.margin)
+    assert ev.checks["tube"]["verdict"] in ("pass", "fail")
