@@ -19,9 +19,9 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -95,6 +95,27 @@ class _Runner:
                 self.cache[ev.z] = ev
                 self.order.append(ev)
         return [self.cache[z] for z in points]
+
+
+@contextlib.contextmanager
+def _dask_scheduler(dask: str | None, workers: int | None, *, needed: bool) -> Iterator[str | None]:
+    """``"local"``: one local cluster for the whole search (not one per generation); its address is handed to
+    ``parallel_map``. Other values pass through."""
+    if dask != "local" or not needed:
+        yield dask
+        return
+    import importlib
+    import logging
+    import os
+
+    distributed: Any = importlib.import_module("distributed")  # partly typed: untyped at this one boundary
+    cluster = distributed.LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
+                                       processes=True, host="127.0.0.1", dashboard_address=None,
+                                       silence_logs=logging.ERROR)
+    try:
+        yield str(cluster.scheduler_address)
+    finally:
+        cluster.close()
 
 
 def _score(ev: Evaluation) -> float:
@@ -208,19 +229,21 @@ def search(setup: FalsifySetup, method: Method, *, budget: int, seed: int = 0, w
     if budget < 1:
         raise ValueError(f"budget={budget!r} must be at least 1")
     dim = setup.space.dim
-    runner = _Runner(setup, workers=workers, dask=dask, known=known)
     start = time.perf_counter()
     shrunk: list[Evaluation] = []
     minimal = None
-    if method == "random":
-        import os
+    with _dask_scheduler(dask, workers, needed=method != "targeted") as address:
+        runner = _Runner(setup, workers=workers, dask=address, known=known)
+        if method == "random":
+            import os
 
-        _random(runner, dim, budget, seed, stop_at_first=stop_at_first, chunk=max(1, workers or os.cpu_count() or 1))
-    elif method == "optimizer":
-        _optimizer(runner, dim, budget, seed, stop_at_first=stop_at_first)
-    else:
-        shrunk, minimal = _targeted(runner, dim, budget, seed, stop_at_first=stop_at_first,
-                                    shrink_budget=budget if shrink_budget is None else shrink_budget)
+            _random(runner, dim, budget, seed, stop_at_first=stop_at_first,
+                    chunk=max(1, workers or os.cpu_count() or 1))
+        elif method == "optimizer":
+            _optimizer(runner, dim, budget, seed, stop_at_first=stop_at_first)
+        else:
+            shrunk, minimal = _targeted(runner, dim, budget, seed, stop_at_first=stop_at_first,
+                                        shrink_budget=budget if shrink_budget is None else shrink_budget)
     shrink_ids = {id(e) for e in shrunk}
     ordered = tuple(e for e in runner.order if id(e) not in shrink_ids)
     return SearchResult(method, budget, seed, ordered, tuple(shrunk), minimal, time.perf_counter() - start)
