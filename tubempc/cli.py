@@ -17,6 +17,7 @@ from typing import NoReturn
 import click
 
 from tubempc.commands.demo import demo
+from tubempc.commands.falsify import falsify
 from tubempc.commands.output import add_verbosity_options, say
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
@@ -131,6 +132,7 @@ cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
+cli.add_command(falsify)
 add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
 
 
