@@ -1,14 +1,24 @@
-"""Hypothesis profiles for all test suites, chosen with HYPOTHESIS_PROFILE=dev|ci|nightly (default dev).
+"""Test-session set-up shared by every suite: hypothesis profiles and a temporary abstraction cache.
 
-ci: derandomized (reproducible in CI), modest example counts so that the whole property suite stays within
-five minutes on two cores; nightly: many more examples, for scheduled runs.
+Profiles, chosen with HYPOTHESIS_PROFILE=dev|ci|nightly (default dev). ci: derandomized (reproducible in CI), modest
+example counts so that the whole property suite stays within five minutes on two cores; nightly: many more examples,
+for scheduled runs, with the example database kept in ``.hypothesis/nightly`` (or $HYPOTHESIS_DATABASE) so that a
+failure found one night is replayed first the next, and ``print_blob`` on.
+
+Cache: the WTS abstraction is cached on disk (``$TUBEMPC_CACHE``, default ``~/.cache/tubempc``). Tests must not read
+a cache left warm by an earlier run or write into the user's home, so every test session gets a fresh temporary
+cache folder of its own (each xdist worker too); set TUBEMPC_TEST_CACHE to a folder to reuse one on purpose.
 """
 
 from __future__ import annotations
 
 import os
+import tempfile
+from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, settings
+from hypothesis.database import DirectoryBasedExampleDatabase
 
 settings.register_profile("dev", max_examples=50, deadline=None)
 settings.register_profile(
@@ -19,6 +29,31 @@ settings.register_profile(
     print_blob=True,
     suppress_health_check=[HealthCheck.too_slow],
 )
-settings.register_profile("nightly", max_examples=1000, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile(
+    "nightly",
+    max_examples=1000,
+    deadline=None,
+    print_blob=True,
+    database=DirectoryBasedExampleDatabase(
+        os.environ.get("HYPOTHESIS_DATABASE", str(Path(__file__).parent / ".hypothesis" / "nightly"))),
+    suppress_health_check=[HealthCheck.too_slow],
+)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+_SESSION_CACHE: tempfile.TemporaryDirectory[str] | None = None
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Point the abstraction cache at a fresh temporary folder for this test session."""
+    global _SESSION_CACHE  # noqa: PLW0603 - one folder per session, removed at its end
+    chosen = os.environ.get("TUBEMPC_TEST_CACHE")
+    if chosen:
+        os.environ["TUBEMPC_CACHE"] = chosen
+        return
+    _SESSION_CACHE = tempfile.TemporaryDirectory(prefix="tubempc-test-cache-")
+    os.environ["TUBEMPC_CACHE"] = _SESSION_CACHE.name
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    if _SESSION_CACHE is not None:
+        _SESSION_CACHE.cleanup()

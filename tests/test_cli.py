@@ -54,3 +54,42 @@ def test_scenario_show_and_validate(tmp_path: Path) -> None:
 def test_missing_file(args: tuple[str, ...]) -> None:
     out = run(*args)
     assert out.returncode == EXIT_UNUSABLE and "file not found" in out.stderr
+
+
+def test_version_short_and_long() -> None:
+    for flag in ("-V", "--version"):
+        out = run(flag)
+        assert out.returncode == 0 and out.stdout.startswith("tubempc, version ")
+
+
+def test_scenario_list_and_unknown_scenario_name_lists_builtins() -> None:
+    listed = run("scenario", "list")
+    assert listed.returncode == 0 and listed.stdout.startswith("nexus-sml: 9 regions")
+    out = run("plan", "--scenario", "nope")
+    assert out.returncode == EXIT_UNUSABLE and out.stderr.count("\n") == 1
+    assert "nope" in out.stderr and "nexus-sml" in out.stderr and "scenario list" in out.stderr
+
+
+def test_quiet_and_verbose_on_every_command() -> None:
+    from tubempc.cli import cli
+
+    def walk(cmd: object, path: str) -> list[tuple[str, object]]:
+        subs = getattr(cmd, "commands", {})
+        return [(path, cmd)] + [p for name, sub in subs.items() for p in walk(sub, f"{path} {name}")]
+
+    for path, cmd in walk(cli, "tubempc"):
+        opts = {o for p in getattr(cmd, "params", []) for o in getattr(p, "opts", [])}
+        assert {"-q", "--quiet", "-v", "--verbose"} <= opts, path
+    assert run("spec", "-q", "a & F[1,2] b").stdout.strip() == "a & F[1,2] b"  # asked-for output stays
+    quiet = run("scenario", "validate", "-q", "nexus-sml")
+    assert quiet.returncode == 0 and quiet.stdout == ""
+    assert run("-q", "scenario", "validate", "nexus-sml").stdout == ""
+
+
+def test_plan_impossible_design_is_exit_3_naming_the_file(tmp_path: Path) -> None:
+    text = run("scenario", "show").stdout
+    path = tmp_path / "heavy.yaml"
+    path.write_text(text.replace("bound: 0.02}", "bound: 5.0}"))
+    out = run("plan", "--scenario", str(path), "--no-cache")
+    assert out.returncode == EXIT_UNUSABLE and str(path) in out.stderr and "cannot be designed" in out.stderr
+    assert out.stderr.strip().count("\n") == 0

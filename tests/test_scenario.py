@@ -106,16 +106,18 @@ def _broken(**changes: Any) -> dict[str, Any]:
     [
         ({"robot__radius": -0.1}, "robot.radius", "greater than 0"),
         ({"workspace__x": [1, -1]}, "workspace", "must be below"),
-        ({"inputs__max_abs": [0.2, 0.2]}, "inputs.max_abs[2]", "required field is missing"),
+        ({"inputs__max_abs": [0.2, 0.2]}, "inputs", "holonomic model takes 3 bounds"),
+        ({"inputs__model": "unicycle"}, "inputs", "unicycle model takes 2 bounds"),
         ({"mpc__h": 0.7}, "mpc", "not a whole number of steps"),
-        ({"regions__0__radius": 0.2}, None, "cannot contain the robot disc"),
-        ({"regions__0__center": [2.4, 0.0]}, None, "does not fit inside the workspace"),
         ({"initial_region": "R42"}, None, "initial_region: 'R42' is not one of the regions"),
         ({"spec": "F[30,50 mission_2"}, "spec", "column 9"),
         ({"spec": "F[0,10] mission_9"}, None, "mission_9 label no region"),
-        ({"regions__1__center": [-1.99, -1.5]}, None, "overlap"),
         ({"robot__radiuss": 0.3}, "robot.radiuss", "unknown field"),
-        ({"disturbance": ...}, "disturbance", "required field is missing"),
+        ({"workspace__polygon": [[0, 0], [1, 0], [0, 1]]}, "workspace", "not both"),
+        ({"regions__0__polygon": [[0, 0], [1, 0], [1, 1]]}, "regions[0]", "not both"),
+        ({"regions__0__radius": ...}, "regions[0]", "give a disc"),
+        ({"checks": ["spec", "speed"]}, "checks[1]", "Input should be"),
+        ({"checks": []}, "checks", "at least one check"),
         ({"topics__pose": "no slash"}, "topics.pose", "must start with '/'"),
         ({"regions__0__name": "bad name"}, "regions[0].name", "pattern"),
         ({"regions__0__center": [float("nan"), 0.0]}, "regions[0].center[0]", "finite"),
@@ -130,6 +132,76 @@ def test_errors_name_file_and_field(changes: dict[str, Any], field: str | None, 
     if field is not None:
         assert info.value.field == field, msg
     assert fragment in msg
+
+
+@pytest.mark.parametrize(
+    ("changes", "field", "fragment"),
+    [
+        ({"regions__0__radius": 0.2}, "regions[0]", "cannot contain the robot disc"),
+        ({"regions__0__center": [2.4, 0.0]}, "regions[0]", "does not fit inside the workspace"),
+        ({"regions__1__center": [-1.99, -1.5]}, "regions", "overlap"),
+        ({"disturbance": ...}, "disturbance", "required for planning"),
+        ({"mpc": ...}, "mpc", "required for planning"),
+        ({"tube": ...}, "tube", "required for planning"),
+        ({"initial_region": ...}, "initial_region", "required for planning"),
+        ({"inputs__model": "unicycle", "inputs__max_abs": [0.3, 1.0]}, "inputs.model", "fully actuated"),
+        ({"regions__0__radius": ..., "regions__0__center": ..., "regions__0__polygon": [[-2.4, -2.4], [-1.4, -2.4],
+                                                                                       [-1.4, -1.4]]},
+         "regions[0]", "polygon"),
+    ],
+)
+def test_certification_accepts_what_the_planner_refuses(changes: dict[str, Any], field: str, fragment: str) -> None:
+    """Lenient for the certifier (the scenario loads), strict for the planner (ScenarioError naming the field)."""
+    sc = scenario_from_dict(_broken(**changes), source="lab.yaml")
+    with pytest.raises(ScenarioError) as info:
+        sc.require_planning()
+    assert info.value.field == field, str(info.value)
+    assert fragment in str(info.value)
+    assert builtin_scenario().planning_problems() == []
+
+
+def test_certification_warnings_name_the_field() -> None:
+    poke = scenario_from_dict(_broken(regions__0__center=[-2.06, -1.78]), source="lab.yaml")  # 1 cm past the wall
+    assert poke.certification_warnings() == ["regions[0] (R1): reaches outside the workspace box"]
+    nested = _broken()
+    nested["regions"].append({"name": "room", "polygon": [[-2.5, -2.5], [-1.0, -2.5], [-1.0, -1.0], [-2.5, -1.0]],
+                              "labels": ["in_room"]})
+    warnings = scenario_from_dict(nested).certification_warnings()
+    k = len(nested["regions"]) - 1
+    assert any(f"regions[0] (R1) and regions[{k}] (room) may overlap" in w for w in warnings), warnings
+    assert builtin_scenario().certification_warnings() == []
+
+
+def test_optional_fields_keep_the_form_and_the_hash() -> None:
+    sc = builtin_scenario()
+    again = scenario_from_dict(sc.to_dict())
+    assert again == sc and again.sha256() == sc.sha256()
+    assert "checks" not in sc.to_dict() and "model" not in sc.to_dict()["inputs"]
+    minimal = _broken(disturbance=..., tube=..., mpc=..., initial_region=..., topics={"pose": "/odom"})
+    m = scenario_from_dict(minimal)
+    assert m.topics.cmd_vel is None and m.topics.nominal is None
+    assert scenario_from_dict(m.to_dict()) == m
+    with pytest.raises(ScenarioError, match="mpc: required for planning"):
+        _ = m.mpc
+
+
+@pytest.mark.parametrize(
+    "polygon",
+    [
+        [[0, 0], [1, 0]],  # too few
+        [[0, 0], [1, 1], [1, 0], [0, 1]],  # bow tie (zero area)
+        [[0, 0], [2, 2], [2, 0], [0, 1]],  # bow tie (edges cross)
+        [[0, 0], [1, 0], [2, 0]],  # zero area
+        [[0, 0], [1, 0], [1, 1], [0, 0]],  # repeated vertex
+        [[0, 0], [2, 0], [1, 0], [1, 1]],  # folds back on itself
+    ],
+)
+def test_non_simple_polygons_are_refused(polygon: list[list[float]]) -> None:
+    data = _broken()
+    data["regions"].append({"name": "bad", "polygon": polygon})
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_dict(data, source="lab.yaml")
+    assert info.value.field == f"regions[{len(data['regions']) - 1}]", str(info.value)
 
 
 def test_file_errors(tmp_path: Path) -> None:

@@ -15,6 +15,7 @@ from typing import NoReturn
 import click
 
 from tubempc.commands.demo import demo
+from tubempc.commands.output import add_verbosity_options, say
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
 from tubempc.commands.simulate import simulate
@@ -23,6 +24,7 @@ from tubempc.mitl import parse
 from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
 from verify.command import certify
 from verify.errors import VerifyError
+from verify.online.command import watch
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
            "cli", "main"]
@@ -36,7 +38,7 @@ EXIT_INTERNAL = 70
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="tubempc")
+@click.version_option(None, "-V", "--version", package_name="tubempc")
 @click.option("--debug", is_flag=True, help="Show full tracebacks instead of one-line errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
@@ -48,6 +50,16 @@ def cli(ctx: click.Context, debug: bool) -> None:
 @cli.group()
 def scenario() -> None:
     """Inspect and validate scenario files."""
+
+
+@scenario.command("list")
+def scenario_list() -> None:
+    """List the built-in scenarios (name, regions, formula); any of them is a valid --scenario value."""
+    for name in BUILTIN_SCENARIOS:
+        s = load_scenario(name)
+        click.echo(f"{name}: {len(s.regions)} regions ({len(s.unsafe_regions)} unsafe), workspace "
+                   f"{s.workspace.x[1] - s.workspace.x[0]:g} m x {s.workspace.y[1] - s.workspace.y[0]:g} m, "
+                   f"spec {s.formula}")
 
 
 @scenario.command("show")
@@ -65,7 +77,7 @@ def scenario_show(name: str) -> None:
 def scenario_validate(path: str) -> None:
     """Validate a scenario file; print a summary or one line naming the problem (exit 3)."""
     s = load_scenario(path)
-    click.echo(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
+    say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
                f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
 
 
@@ -77,10 +89,12 @@ def spec(text: str) -> None:
 
 
 cli.add_command(certify)
+cli.add_command(watch)
 cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
+add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
 
 
 def _exit_code(err: BaseException) -> int:

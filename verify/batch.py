@@ -18,6 +18,7 @@ import ``verify`` and read the same paths).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import logging
 import multiprocessing
 import os
@@ -36,7 +37,9 @@ from tqdm import tqdm
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
 from verify.errors import UnusableInputError, VerifyError
+from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
 from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
+from verify.selection import select_checks
 
 __all__ = [
     "EXIT_INTERNAL",
@@ -186,6 +189,7 @@ class _Job:
     spec: str | None
     time_base: str
     salvage: bool
+    checks: tuple[str, ...] | None = None
 
 
 def _certify_function() -> Callable[..., CertifyResultLike]:
@@ -199,7 +203,7 @@ def _certify_one(job: _Job) -> BatchItem:
     start = time.perf_counter()
     try:
         result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
-                                     salvage=job.salvage)
+                                     salvage=job.salvage, checks=job.checks)
     except VerifyError as err:
         return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
     except Exception as err:  # a bug in one log's certification must not take the other logs down
@@ -349,8 +353,8 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
-                 workers: int | None = None,
-                 dask: str | None = None, progress: bool | None = None) -> BatchResult:
+                 workers: int | None = None, dask: str | None = None, progress: bool | None = None,
+                 checks: Sequence[str] | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
     Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
@@ -366,7 +370,10 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     logs, problems = discover_logs(raw)
     ordered = [str(p) for p in logs] + [p for p, _ in problems]
     names = dict(zip(ordered, _folder_names(ordered), strict=True))
-    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage) for p in logs]
+    if checks is not None:
+        select_checks(scenario, checks)  # unknown or unsupported checks concern every log: raise before the jobs
+    chosen = tuple(checks) if checks is not None else None
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen) for p in logs]
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify",
                         on_crash=_worker_died)
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
@@ -375,17 +382,14 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
 
 def summary_lines(batch: BatchResult) -> list[str]:
     """One line per log for a terminal: ``path: verdict (failed checks with first violation times)``."""
+    from verify.certify import verdict_line
+
     lines = []
     for item in batch.items:
         if item.result is None:
             lines.append(f"{item.path}: {item.verdict} ({item.error})")
             continue
-        bad = [c for c in item.result.certificate.get("checks", []) or []
-               if isinstance(c, dict) and c.get("verdict") != "pass"]
-        detail = "; ".join(f"{c.get('name')}: {c.get('verdict')}" + (
-            f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
-            for c in bad)
-        lines.append(f"{item.path}: {item.verdict}" + (f" ({detail})" if detail else ""))
+        lines.append(verdict_line(item.path, item.result.certificate))
     counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
     lines.append(f"{len(batch.items)} log(s): {counts}; exit code {batch.exit_code}")
     return lines
@@ -412,27 +416,25 @@ class _WriteJob:
     scenario: Scenario
     folder: str
     reports: bool
+    junit_inconclusive: InconclusiveAs = "failure"
 
 
-def _write_item(job: _WriteJob) -> bytes:
-    """Write one log's folder; return its JUnit ``<testsuite>`` as XML bytes (picklable)."""
-    import xml.etree.ElementTree as ET
-
-    from verify.report import junit_xml, write_reports
+def _write_item(job: _WriteJob) -> JUnitSuite:
+    """Write one log's folder; return its JUnit suite (a picklable value)."""
+    from verify.report import write_reports
 
     item, sub = job.item, Path(job.folder)
     sub.mkdir(parents=True, exist_ok=True)
     if item.result is not None:
         _write_certificate(item.result, sub)
         if job.reports:
-            write_reports(item.result, job.scenario, sub, suite_name=item.name)
-        return ET.tostring(junit_xml(item.result, suite_name=item.name))
+            write_reports(item.result, job.scenario, sub, suite_name=item.name,
+                          junit_inconclusive=job.junit_inconclusive)
+        suite = certificate_suite(item.result.certificate, suite_name=item.name, inconclusive=job.junit_inconclusive)
+        return dataclasses.replace(suite, time_s=item.elapsed_s)
     (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
-    suite = ET.Element("testsuite", {"name": item.name, "tests": "1", "failures": "0", "errors": "1",
-                                     "skipped": "0", "time": f"{item.elapsed_s:.3f}"})
-    case = ET.SubElement(suite, "testcase", {"classname": item.name, "name": "read log", "time": "0"})
-    ET.SubElement(case, "error", {"message": item.error or "", "type": item.verdict})
-    return ET.tostring(suite)
+    case = JUnitCase("read log", item.name, "error", item.verdict, item.error or "")
+    return JUnitSuite(item.name, (case,), time_s=item.elapsed_s)
 
 
 def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool) -> str:
@@ -466,22 +468,20 @@ def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool)
 
 
 def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True, workers: int | None = None,
-                dask: str | None = None, progress: bool | None = None) -> dict[str, Path]:
+                dask: str | None = None, progress: bool | None = None,
+                junit_inconclusive: InconclusiveAs = "failure") -> dict[str, Path]:
     """Write ``<out_dir>/<log>/`` (certificate.json + reports, or error.txt) and the summaries.
 
     The per-log folders are written in parallel like ``certify_many`` (figures take about 2 s per log).
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
-    import xml.etree.ElementTree as ET
-
     from verify.outputs import prepare_output_dir
-    from verify.report import write_junit
 
     out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
-    jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports) for item in batch.items]
-    suites = [ET.fromstring(x) for x in parallel_map(_write_item, jobs, workers=workers, dask=dask,
-                                                     progress=progress, desc="reports")]
+    jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
+            for item in batch.items]
+    suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports")
     rows = batch.rows()
     columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
     with (out / "summary.csv").open("w", newline="", encoding="utf-8") as fh:

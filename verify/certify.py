@@ -4,14 +4,16 @@ input: a log path, a scenario (value, file path or built-in name), an optional M
 salvage flag and an optional time 0 -> output: a frozen ``CertifyResult``; ``write_certificate`` writes its JSON.
 
 ``certify_log`` is a module-level, picklable function that never writes files (the batch runner calls it in worker
-processes). The overall verdict is "fail" if any check fails, else "inconclusive" if any check is inconclusive or
-the log is partial (salvaged), else "pass".
+processes). Only the selected checks run (``verify.selection``); the others are listed under ``not_checked`` with
+the reason. The overall verdict, over the selected checks, is "fail" if any fails, else "inconclusive" if any is
+inconclusive, the log is partial (salvaged) or no check ran, else "pass".
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -25,13 +27,15 @@ from verify.checks import CheckResult, check_clearance, check_input_box, check_t
 from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containing_region
 from verify.ingest import LogData, read_log
+from verify.ingest.digest import DEFAULT_DIGEST
+from verify.selection import Selection, select_checks
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of
 from verify.trajectory import TrajectoryVerdict, check_trajectory
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "resolve_scenario",
-           "write_certificate"]
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
+           "resolve_scenario", "verdict_line", "write_certificate"]
 
-CERTIFICATE_VERSION = 1
+CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
@@ -79,6 +83,8 @@ def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
 
 def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
              ) -> tuple[str, str | None]:
+    if not checks:
+        return "inconclusive", "no check was run: nothing is certified"
     verdicts = [c["verdict"] for c in checks]
     if "fail" in verdicts:
         return "fail", None
@@ -93,18 +99,23 @@ def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, st
 
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
-                time_base: str = "auto", salvage: bool = False, time0_ns: int | None = None) -> CertifyResult:
-    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files."""
+                time_base: str = "auto", salvage: bool = False, time0_ns: int | None = None,
+                digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None) -> CertifyResult:
+    """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
+
+    ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256".
+    ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names)."""
     sc = resolve_scenario(scenario)
+    selection = select_checks(sc, checks)
     formula = parse_spec(spec if spec is not None else sc.spec)
     known = {lab for r in sc.regions for lab in r.labels}
     unknown = sorted(atoms(formula) - known)
     if unknown:
         raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
                         f"{sc.name!r}")
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
     with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
-        return _judge(log, sc, formula_text=str(formula))
+        return _judge(log, sc, formula_text=str(formula), selection=selection)
 
 
 def _spec_margin(traj: TrajectoryVerdict) -> float | None:
@@ -121,7 +132,10 @@ def _spec_margin(traj: TrajectoryVerdict) -> float | None:
     return float(finite.min()) if finite.size and float(finite.min()) < 0 else None
 
 
-def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
+def _judge(log: LogData, sc: Scenario, *, formula_text: str,
+           selection: Selection | None = None) -> CertifyResult:
+    if selection is None:
+        selection = select_checks(sc)
     formula = parse_spec(formula_text)
     t0 = log.time0_ns
     pose = log.pose
@@ -150,17 +164,25 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
-    nominal = None
-    if log.nominal is not None:
-        nominal = (log.nominal.t_ns, log.nominal.x_m, log.nominal.y_m)
-    period_ns = round(1e9 / sc.mocap.rate_hz)
+    checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
     tol_m = 3.0 * sc.mocap.noise_std
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
-    tube = check_tube(every.t_ns, every.x_m, every.y_m, nominal, radius_m=sc.tube_radius_m, tolerance_m=tol_m,
-                      match_ns=period_ns // 2)
-    checks = [spec_traj, spec_run, tube, check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs.max_abs),
-              check_workspace(every.t_ns, every.x_m, every.y_m, sc),
-              check_clearance(every.t_ns, every.x_m, every.y_m, sc)]
+    tube_info: dict[str, Any] | None = None
+    if "tube" in selection:
+        nominal = None
+        if log.nominal is not None:
+            nominal = (log.nominal.t_ns, log.nominal.x_m, log.nominal.y_m)
+        period_ns = round(1e9 / sc.mocap.rate_hz)
+        checks.append(check_tube(every.t_ns, every.x_m, every.y_m, nominal, radius_m=sc.tube_radius_m,
+                                 tolerance_m=tol_m, match_ns=period_ns // 2))
+        tube_info = {"radius_m": sc.tube_radius_m, "noise_tolerance_m": tol_m,
+                     "noise_tolerance_rule": "3 * scenario.mocap.noise_std"}
+    if "input_box" in selection:
+        checks.append(check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs))
+    if "workspace" in selection:
+        checks.append(check_workspace(every.t_ns, every.x_m, every.y_m, sc))
+    if "obstacle_clearance" in selection:
+        checks.append(check_clearance(every.t_ns, every.x_m, every.y_m, sc))
     entries = [_check_entry(c, t0) for c in checks]
     verdict, why = _overall(entries, log.partial, log.stream_problems)
     cert: dict[str, Any] = {
@@ -172,7 +194,9 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         "scenario_sha256": sc.sha256(),
         "log": log.path,
         "log_format": log.format,
-        "log_sha256": log.log_sha256,
+        "log_digest": log.log_digest,
+        "log_digest_algorithm": log.digest_algorithm,
+        **({"log_sha256": log.log_digest} if log.digest_algorithm == "sha256" else {}),
         "partial": log.partial,
         "time_base": log.time_base,
         "time_base_requested": log.time_base_requested,
@@ -184,8 +208,12 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str) -> CertifyResult:
         "pose_source": log.pose_source,
         "speed_bound_mps": v_max,
         "robot_radius_m": sc.robot.radius,
-        "tube": {"radius_m": sc.tube_radius_m, "noise_tolerance_m": tol_m,
-                 "noise_tolerance_rule": "3 * scenario.mocap.noise_std"},
+        **({"tube": tube_info} if tube_info is not None else {}),
+        "input_model": sc.inputs.model,
+        "checks_selected": list(selection.selected),
+        "checks_source": selection.source,
+        "not_checked": [{"name": n, "reason": r} for n, r in selection.not_checked],
+        "scenario_warnings": sc.certification_warnings(),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         "data_quality": log.data_quality,
@@ -218,6 +246,37 @@ def _jsonable(obj: Any) -> Any:
     if isinstance(obj, float):
         return _num(obj)
     return obj
+
+
+def verdict_line(log: str | Path, certificate: dict[str, Any]) -> str:
+    """``run.mcap: fail (spec_trajectory: fail at t=54.80 s; tube: inconclusive)`` for a terminal."""
+    bad = [c for c in certificate.get("checks", []) or [] if isinstance(c, dict) and c.get("verdict") != "pass"]
+    parts = []
+    for c in bad:
+        t = c.get("first_violation_time")
+        when = f" at t={t:.2f} s" if isinstance(t, int | float) else ""
+        parts.append(f"{c.get('name')}: {c.get('verdict')}{when}")
+    line = f"{log}: {certificate.get('verdict')}" + (f" ({'; '.join(parts)})" if parts else "")
+    selected = certificate.get("checks_selected")
+    if selected is not None:
+        line += f" [checks: {', '.join(selected)}"
+        skipped = [c.get("name") for c in certificate.get("not_checked", []) or [] if isinstance(c, dict)]
+        if skipped:
+            line += f"; not checked: {', '.join(str(n) for n in skipped)}"
+        line += "]"
+    return line
+
+
+def check_lines(certificate: dict[str, Any]) -> list[str]:
+    """One line per check with its margin and first violation (``certify -v``)."""
+    lines = []
+    for c in certificate.get("checks", []) or []:
+        margin, t = c.get("margin"), c.get("first_violation_time")
+        unit = c.get("margin_unit") or ""
+        m = f"margin {margin:.4g} {unit}".rstrip() if isinstance(margin, int | float) else "margin -"
+        lines.append(f"  {c.get('name')}: {c.get('verdict')}, {m}"
+                     + (f", first violation at t={t:.2f} s" if isinstance(t, int | float) else ""))
+    return lines
 
 
 class HasCertificate(Protocol):

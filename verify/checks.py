@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.scenario import Scenario
+from tubempc.scenario import InputLimits, Scenario
 from verify.geometry import gap_bounds, region_margins, step_bound_m, workspace_margin
 
-__all__ = ["INPUT_TOLERANCE", "CheckResult", "check_clearance", "check_input_box", "check_tube", "check_workspace"]
+__all__ = ["INPUT_COMPONENTS", "INPUT_TOLERANCE", "CheckResult", "check_clearance", "check_input_box", "check_tube",
+           "check_workspace"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -120,17 +121,41 @@ def check_tube(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, nominal: tuple[
     return CheckResult("tube", "pass", _finite_min(margin), None, {**details, "max_deviation_m": float(dev.max())})
 
 
-def check_input_box(t_ns: IntArray | None, u: FloatArray | None, max_abs: tuple[float, float, float]
-                    ) -> CheckResult:
-    details: dict[str, Any] = {"max_abs": list(max_abs), "tolerance": INPUT_TOLERANCE, "frame": "body (as logged)"}
+#: the component names of each input model, in the order of the bounds (``inputs.max_abs``)
+INPUT_COMPONENTS = {"holonomic": ("linear.x", "linear.y", "angular.z"),
+                    "unicycle": ("linear.x", "angular.z", "linear.y")}
+
+
+def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLimits) -> CheckResult:
+    """Each command ``(linear.x, linear.y, angular.z)`` (body frame, as logged) against the input model's box.
+
+    holonomic: ``|u_i| <= max_abs[i]``; unicycle: ``|linear.x| <= v``, ``|angular.z| <= w`` and
+    ``|linear.y| <= lateral_tolerance`` (a differential drive cannot move sideways). Margins in the component's unit
+    (m/s or rad/s); the worst component is named."""
+    names = INPUT_COMPONENTS[limits.model]
+    if limits.model == "holonomic":
+        bounds = np.asarray(limits.max_abs, dtype=np.float64)
+        cols = [0, 1, 2]
+    else:
+        bounds = np.array([limits.max_abs[0], limits.max_abs[1], limits.lateral_tolerance], dtype=np.float64)
+        cols = [0, 2, 1]
+    details: dict[str, Any] = {"model": limits.model, "max_abs": list(limits.max_abs),
+                               "bounds": dict(zip(names, bounds.tolist(), strict=True)),
+                               "tolerance": INPUT_TOLERANCE, "frame": "body (as logged)"}
     if t_ns is None or u is None or t_ns.size == 0:
         return CheckResult("input_box", "inconclusive", None, None, {**details, "reason": "no cmd_vel logged"})
-    margin = np.min(np.asarray(max_abs)[None, :] + INPUT_TOLERANCE - np.abs(u), axis=1)
+    per = bounds[None, :] + INPUT_TOLERANCE - np.abs(u[:, cols])
+    margin = np.min(per, axis=1)
+    with np.errstate(all="ignore"):
+        worst = np.nanmin(per, axis=0) if np.isfinite(per).any() else np.full(3, np.nan)
+    details["component_margins"] = {n: (float(m) if np.isfinite(m) else None) for n, m in zip(names, worst,
+                                                                                              strict=True)}
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))
+        comp = int(np.argmin(per[k]))
         return CheckResult("input_box", "fail", _finite_min(margin), int(t_ns[k]),
-                           {**details, "component": int(np.argmin(np.asarray(max_abs) - np.abs(u[k])))})
+                           {**details, "component": names[comp], "value": float(u[k, cols[comp]])})
     if np.isnan(margin).any():
         return CheckResult("input_box", "inconclusive", _finite_min(margin), None,
                            {**details, "reason": f"{int(np.isnan(margin).sum())} NaN input(s)"})

@@ -12,15 +12,29 @@ under ``--out``, and the worst exit code by severity: pass 0 < inconclusive 2 < 
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
-from typing import Literal, cast
+from typing import Any, Literal, cast
 
 import click
 
 from verify.errors import UnusableInputError
 
 __all__ = ["certify"]
+
+
+def _verbosity() -> int:
+    """-1 quiet, 0 normal, 1+ verbose: set by ``tubempc.cli``'s -q/-v options in the context's meta."""
+    ctx = click.get_current_context(silent=True)
+    return int(ctx.meta.get("verbosity", 0)) if ctx is not None else 0
+
+
+def _json_entry(item: Any) -> dict[str, Any]:
+    """A batch item for ``--json``: its certificate, or the log, verdict, exit code and error of an unusable log."""
+    if item.result is not None:
+        return dict(item.result.certificate)
+    return {"log": item.path, "verdict": item.verdict, "exit_code": item.exit_code, "error": item.error}
 
 
 def _single_log(logs: tuple[Path, ...]) -> bool:
@@ -39,6 +53,9 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="auto", show_default=True,
               help="auto: header stamps unless they cannot order the samples (then log time, noted in the "
                    "certificate); header: header stamps (no pass if they cannot order the samples); log: receive time.")
+@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
+              help="Checks to run: spec, obstacle_clearance, workspace, tube, input_box (default: the scenario's "
+                   "checks:, else every check whose data the scenario names).")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
 @click.option("--force", is_flag=True, help="Replace the reports in an existing, non-empty --out folder.")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
@@ -47,40 +64,48 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--dask", "dask", default=None, metavar="local|tcp://HOST:PORT",
               help="Certify several logs on Dask distributed (a local cluster, or a running scheduler).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+@click.option("--junit-inconclusive", type=click.Choice(["failure", "skipped"]), default="failure", show_default=True,
+              help="junit.xml: an inconclusive check is a <failure type=\"inconclusive\"> (CI turns red: not a pass) "
+                   "or <skipped> (shown green or grey by most dashboards).")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the certificate as JSON on stdout (a list for several logs); the summary goes to stderr.")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
-            progress: bool | None) -> None:
+            progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
     """
-    from verify.certify import certify_log, resolve_scenario, write_certificate
+    from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
+    from verify.junit import InconclusiveAs
     from verify.outputs import prepare_output_dir
+    from verify.selection import parse_check_list
 
+    level = _verbosity()
     sc = resolve_scenario(scenario)
+    checks = parse_check_list(checks_text) if checks_text is not None else None
     if out_dir is not None:
         prepare_output_dir(out_dir, force=force, inputs=logs)
     if _single_log(logs) and dask is None:
-        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage)
-        cert = result.certificate
-        line = f"{logs[0]}: {cert['verdict']}"
-        failed = [c for c in cert["checks"] if c["verdict"] != "pass"]
-        if failed:
-            line += " (" + "; ".join(
-                f"{c['name']}: {c['verdict']}"
-                + (f" at t={c['first_violation_time']} s" if c.get("first_violation_time") is not None else "")
-                for c in failed) + ")"
+        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks)
+        line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
             try:
                 line += f" -> {write_certificate(result, out_dir)}"
                 if not no_report:
                     from verify.report import write_reports
 
-                    write_reports(result, sc, out_dir, suite_name=logs[0].name)
+                    write_reports(result, sc, out_dir, suite_name=logs[0].name,
+                                  junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
             except OSError as err:
                 raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)
                                          ) from None
-        click.echo(line)
+        if as_json:
+            click.echo(json.dumps(result.certificate, indent=2))
+        if level >= 0:
+            click.echo(line, err=as_json)
+        if level > 0:
+            click.echo("\n".join(check_lines(result.certificate)), err=True)
         sys.stdout.flush()
         # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting
         sys.exit(result.exit_code)
@@ -89,16 +114,20 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
-                         progress=progress)
-    for text in summary_lines(batch):
-        click.echo(text)
-    for item in batch.items:  # every unusable input also gets its one line on stderr
-        if item.exit_code == 3 and item.error:
-            click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
+                         progress=progress, checks=checks)
+    if as_json:
+        click.echo(json.dumps([_json_entry(item) for item in batch.items], indent=2))
+    if level >= 0:
+        for text in summary_lines(batch):
+            click.echo(text, err=as_json)
+        for item in batch.items:  # every unusable input also gets its one line on stderr
+            if item.exit_code == 3 and item.error:
+                click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
-        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress)
+        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
+                              junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
         summary = written.get("summary.md")
-        if summary is not None:
-            click.echo(f"summary: {summary}")
+        if summary is not None and level >= 0:
+            click.echo(f"summary: {summary}", err=as_json)
     sys.stdout.flush()
     sys.exit(batch.exit_code)

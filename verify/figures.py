@@ -1,12 +1,14 @@
 """Certification result + scenario -> PNG figures (matplotlib, Agg, no pyplot state).
 
-input: the arrays of a certification (trajectory, nominal, inputs, robustness), its certificate (timed run, failed
+input: the arrays of a certification (trajectory, nominal, inputs), its certificate (formula, timed run, failed
 checks) and the scenario -> output: PNG bytes per figure, or ``None`` when the data for a figure is absent.
 
-Figures: the workspace map (regions coloured by kind, trajectory, tube band around the nominal, reconstructed
-timed run, violations marked), the states x(t), y(t), theta(t) with workspace bounds and the tube band (the paper's
-figures 6-8), the inputs u1..u3 with their box (figures 9-11), robustness over time, and the sampling intervals
-(data quality: dropouts and out-of-order stamps). matplotlib is confined to this module.
+Figures, in report order: the workspace map (``verify.workspace_map``), one panel per obligation of the formula
+(``verify.obligations``: the margin of its target, its window, verdict and violation), the clearance of the robot
+disc from obstacles and the workspace edge, the states x(t), y(t), theta(t) (unwrapped) with the workspace bounds
+and the tube band (the paper's figures 6-8), the tube error, the inputs u1..u3 with their box (figures 9-11), and
+the sampling intervals (data quality: dropouts and out-of-order stamps). matplotlib is confined to the figure
+modules (this one and ``verify.workspace_map``).
 """
 
 from __future__ import annotations
@@ -20,27 +22,28 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from matplotlib.patches import Circle, Polygon, Rectangle
 
 from tubempc.scenario import Scenario
+from verify.geometry import region_margins, workspace_margin
+from verify.obligations import Obligation, obligations_of
+from verify.workspace_map import workspace_figure
 
 __all__ = [
-    "MAX_PLOT_POINTS",
     "FigureSpec",
+    "clearance_figure",
+    "failed_checks",
     "inputs_figure",
+    "obligations_figure",
     "render_figures",
-    "robustness_figure",
     "sampling_figure",
     "states_figure",
     "tube_figure",
     "workspace_figure",
 ]
 
-MAX_PLOT_POINTS = 5_000  # map paths are decimated to this many points; markers (violations, run) stay exact
 ENVELOPE_BUCKETS = 1_000  # time series keep the min and max of each of this many time buckets: spikes stay
-MAX_BAND_POINTS = 2_000  # the tube band outline (a polygon: costly to draw) per side
 _DPI = 110
-_KIND_COLOURS = {"unsafe": "#d62728", "labelled": "#2ca02c", "free": "#7f7f7f"}
+_VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
 _FAIL_COLOUR = "#d62728"
 
 
@@ -80,22 +83,8 @@ def _envelope(frame: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
     return frame.iloc[np.unique(np.clip(np.concatenate(keep), 0, n - 1))]
 
 
-def _decimate(frame: pd.DataFrame) -> pd.DataFrame:
-    n = len(frame)
-    if n <= MAX_PLOT_POINTS:
-        return frame
-    step = math.ceil(n / MAX_PLOT_POINTS)
-    return frame.iloc[::step]
-
-
 def _usable(frame: pd.DataFrame | None, columns: Sequence[str]) -> bool:
     return frame is not None and len(frame) > 0 and all(c in frame.columns for c in columns)
-
-
-def _region_kind(labels: Sequence[str], unsafe: bool) -> str:
-    if unsafe:
-        return "unsafe"
-    return "labelled" if labels else "free"
 
 
 def failed_checks(certificate: Mapping[str, Any]) -> list[tuple[str, float]]:
@@ -110,112 +99,23 @@ def failed_checks(certificate: Mapping[str, Any]) -> list[tuple[str, float]]:
     return out
 
 
-def _position_at(trajectory: pd.DataFrame, t_s: float) -> tuple[float, float] | None:
-    if not _usable(trajectory, ("t_s", "x_m", "y_m")):
-        return None
-    t = trajectory["t_s"].to_numpy(dtype=float)
-    i = int(np.clip(np.searchsorted(t, t_s), 0, len(t) - 1))
-    return float(trajectory["x_m"].iloc[i]), float(trajectory["y_m"].iloc[i])
-
-
-def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
-    """Outline of the band of half-width ``radius_m`` around the nominal path (left side, then right reversed)."""
-    xy = nominal[["x_m", "y_m"]].to_numpy(dtype=float)
-    xy = xy[np.all(np.isfinite(xy), axis=1)]
-    if len(xy) > MAX_BAND_POINTS:
-        xy = xy[np.unique(np.r_[np.arange(0, len(xy), math.ceil(len(xy) / MAX_BAND_POINTS)), len(xy) - 1])]
-    if len(xy) < 2 or radius_m <= 0:
-        return None
-    keep = np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0, axis=1)])
-    xy = xy[keep]
-    if len(xy) < 2:
-        return None
-    tangent = np.gradient(xy, axis=0)
-    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
-    norm[norm == 0] = 1.0
-    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]]) / norm
-    left = xy + radius_m * normal
-    right = xy - radius_m * normal
-    return np.vstack([left, right[::-1]])
-
-
-def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
-                     nominal: pd.DataFrame | None) -> bytes:
-    """The map: workspace box, regions by kind, trajectory, tube band, timed run, violations."""
-    fig = Figure(figsize=(8.5, 6.2))
-    fig.subplots_adjust(left=0.08, right=0.70, bottom=0.08, top=0.94)  # fixed margins: 2x cheaper than a layout
-    ax = fig.add_subplot()
-    ws = scenario.workspace
-    ax.add_patch(Rectangle((ws.x[0], ws.y[0]), ws.x[1] - ws.x[0], ws.y[1] - ws.y[0], fill=False, lw=1.5,
-                           ec="black", label="workspace"))
-    seen: set[str] = set()
-    for region in scenario.regions:
-        kind = _region_kind(region.labels, region.unsafe)
-        colour = _KIND_COLOURS[kind]
-        label = {"unsafe": "unsafe region", "labelled": "labelled region", "free": "unlabelled region"}[kind]
-        ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25,
-                            label=None if kind in seen else label))
-        seen.add(kind)
-        text = region.name + (f"\n{', '.join(region.labels)}" if region.labels else "")
-        ax.annotate(text, (region.center[0], region.center[1] + 0.45 * region.radius), ha="center", va="center",
-                    fontsize=8)
-    r_q = scenario.tube_radius_m
-    if _usable(nominal, ("x_m", "y_m")) and nominal is not None:
-        poly = _tube_polygon(nominal, r_q)
-        if poly is not None:
-            ax.add_patch(Polygon(poly, closed=True, fc="#1f77b4", ec="none", alpha=0.3,
-                                 label=f"tube r_q = {r_q:.3g} m"))
-        nom = _decimate(nominal)
-        ax.plot(nom["x_m"], nom["y_m"], "--", color="#1f77b4", lw=1.0, label="nominal")
-    if _usable(trajectory, ("x_m", "y_m")) and trajectory is not None:
-        tr = _decimate(trajectory)
-        ax.plot(tr["x_m"], tr["y_m"], "-", color="black", lw=1.2, label="trajectory")
-        first = trajectory.iloc[0]
-        ax.add_patch(Circle((float(first["x_m"]), float(first["y_m"])), scenario.robot.radius, fill=False,
-                            ec="black", ls=":", label="robot disc at t = 0"))
-        listing: list[str] = []
-        for i, entry in enumerate(certificate.get("timed_run", []) or []):
-            if not isinstance(entry, Mapping):
-                continue
-            t = entry.get("time")
-            if not isinstance(t, int | float):
-                continue
-            pos = _position_at(trajectory, float(t))
-            if pos is None:
-                continue
-            ax.plot(*pos, "o", color="#ff7f0e", ms=6, label="timed run" if i == 0 else None)
-            ax.annotate(str(i), pos, xytext=(5, -11), textcoords="offset points", fontsize=8, color="#ff7f0e",
-                        weight="bold")
-            listing.append(f"{i}: {entry.get('region', '?')} @ {float(t):.2f} s")
-        if listing:
-            shown = listing if len(listing) <= 20 else [*listing[:19], f"... ({len(listing) - 19} more)"]
-            ax.text(1.02, 0.0, "timed run\n" + "\n".join(shown), transform=ax.transAxes, va="bottom", ha="left",
-                    fontsize=8, color="#ff7f0e")
-        by_time: dict[float, list[str]] = {}
-        for name, t_fail in failed_checks(certificate):
-            by_time.setdefault(round(t_fail, 6), []).append(name)
-        for j, (t_fail, names) in enumerate(sorted(by_time.items())):
-            pos = _position_at(trajectory, t_fail)
-            if pos is None:
-                continue
-            ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=10, label="first violation" if j == 0 else None)
-            ax.annotate(f"{', '.join(names)} @ {t_fail:.2f} s", pos, xytext=(6, 6 + 10 * j),
-                        textcoords="offset points", fontsize=8, color=_FAIL_COLOUR)
-    pad = 0.1
-    ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
-    ax.set_ylim(ws.y[0] - pad, ws.y[1] + pad)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title("Workspace, trajectory and timed run")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
-    return _png(fig)
-
-
-def _mark_violations(axes: Sequence[Any], certificate: Mapping[str, Any]) -> None:
+def _mark_violations(axes: Sequence[Any], certificate: Mapping[str, Any], *,
+                     names: Sequence[str] | None = None) -> None:
+    """A dotted line at each failed check's first violation (only the checks in ``names`` when given)."""
     for ax in axes:
         for name, t_fail in failed_checks(certificate):
-            ax.axvline(t_fail, color=_FAIL_COLOUR, lw=0.8, ls=":", label=f"violation: {name}")
+            if names is None or name in names:
+                ax.axvline(t_fail, color=_FAIL_COLOUR, lw=0.8, ls=":", label=f"violation: {name} ({t_fail:.2f} s)")
+
+
+def _unwrapped(frame: pd.DataFrame) -> pd.DataFrame:
+    """``theta_rad`` unwrapped (continuous through +-pi, not a sawtooth); NaN samples stay NaN and are skipped."""
+    if "theta_rad" not in frame.columns:
+        return frame
+    theta = frame["theta_rad"].to_numpy(dtype=float).copy()
+    ok = np.isfinite(theta)
+    theta[ok] = np.unwrap(theta[ok])
+    return frame.assign(theta_rad=theta)
 
 
 def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
@@ -223,8 +123,8 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     """x(t), y(t), theta(t); nominal and its tube band; the bounds on the robot's centre from the workspace."""
     if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m", "theta_rad")):
         return None
-    tr = _envelope(trajectory, ("x_m", "y_m", "theta_rad"))
-    nom = (_envelope(nominal, [c for c in ("x_m", "y_m", "theta_rad") if c in nominal.columns])
+    tr = _envelope(_unwrapped(trajectory), ("x_m", "y_m", "theta_rad"))
+    nom = (_envelope(_unwrapped(nominal), [c for c in ("x_m", "y_m", "theta_rad") if c in nominal.columns])
            if nominal is not None and _usable(nominal, ("t_s", "x_m", "y_m")) else None)
     fig = Figure(figsize=(8.0, 7.5))
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
@@ -232,7 +132,8 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     eta = scenario.robot.radius
     r_q = scenario.tube_radius_m
     bounds = {"x_m": scenario.workspace.x, "y_m": scenario.workspace.y}
-    for ax, col, ylabel in zip(axes, ("x_m", "y_m", "theta_rad"), ("x [m]", "y [m]", "theta [rad]"), strict=True):
+    ylabels = ("x [m]", "y [m]", "theta [rad], unwrapped")
+    for ax, col, ylabel in zip(axes, ("x_m", "y_m", "theta_rad"), ylabels, strict=True):
         ax.plot(tr["t_s"], tr[col], color="black", lw=1.0, label="measured")
         if nom is not None and col in nom.columns:
             ax.plot(nom["t_s"], nom[col], "--", color="#1f77b4", lw=1.0, label="nominal")
@@ -312,33 +213,89 @@ def tube_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: 
     return _png(fig)
 
 
-def robustness_figure(certificate: Mapping[str, Any], robustness: pd.DataFrame | None) -> bytes | None:
-    """The formula's robustness rho(t) in metres; negative means violated at that time."""
-    if robustness is None or not _usable(robustness, ("t_s", "rho_m")):
+def _window_label(window: tuple[float, float]) -> str:
+    hi = "inf" if math.isinf(window[1]) else f"{window[1]:g}"
+    return f"window [{window[0]:g}, {hi}] s"
+
+
+def obligations_figure(obligations: Sequence[Obligation], duration_s: float | None) -> bytes | None:
+    """One panel per top-level obligation: the margin of its body over time, its window shaded, its verdict and
+    the witness of a violation. A missed window shows as a curve that turns positive only after the window."""
+    if not obligations:
         return None
-    data = _envelope(robustness, ("rho_m",))
-    t = data["t_s"].to_numpy(dtype=float)
-    rho = data["rho_m"].to_numpy(dtype=float)
+    n = len(obligations)
+    fig = Figure(figsize=(8.0, 1.2 + 2.0 * n))
+    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.5 / (1.2 + 2.0 * n), top=1 - 0.75 / (1.2 + 2.0 * n),
+                        hspace=0.6)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    end = duration_s if duration_s is not None and math.isfinite(duration_s) else None
+    for ax, ob in zip(axes, obligations, strict=True):
+        env = _envelope(pd.DataFrame({"t_s": ob.t_s, "rho_m": ob.body_margin_m}), ("rho_m",))
+        t, rho = env["t_s"].to_numpy(dtype=float), env["rho_m"].to_numpy(dtype=float)
+        last = end if end is not None else (float(t[-1]) if t.size else 0.0)
+        if ob.window_s is not None:
+            lo, hi = ob.window_s
+            if lo < last:
+                ax.axvspan(lo, min(hi, last), color="#1f77b4", alpha=0.12, lw=0, label=_window_label(ob.window_s))
+            note = ("" if hi <= last else f"{_window_label(ob.window_s)} opens after the log ends" if lo >= last
+                    else "the window continues past the log end")
+            if note:
+                ax.annotate(note, (0.995, 0.96), xycoords="axes fraction", ha="right", va="top", fontsize=7,
+                            color="#1f77b4", bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none"})
+            in_window = (t >= lo) & (t <= hi)
+        else:
+            in_window = np.ones_like(t, dtype=bool)
+        ax.plot(t, rho, color="black", lw=1.0, label=f"margin of {_short(ob.body)}")
+        if ob.verdict == "fail":  # where the failed obligation's target was missed inside its window
+            ax.fill_between(t, rho, 0.0, where=in_window & (rho < 0), color=_FAIL_COLOUR, alpha=0.25, lw=0)
+        ax.axhline(0.0, color="grey", lw=0.8)
+        if ob.violation_s is not None:
+            ax.axvline(ob.violation_s, color=_FAIL_COLOUR, lw=1.2, ls="--")
+            ax.plot([ob.violation_s], [0.0], "X", color=_FAIL_COLOUR, ms=9, label=f"violated at {ob.violation_s:.2f} s")
+        colour = _VERDICT_COLOURS.get(ob.verdict, "#555555")
+        margin = "" if ob.margin_m is None else f", margin {ob.margin_m:.3g} m"
+        if ob.verdict == "inconclusive" and ob.reason:
+            margin += f" ({_short(ob.reason, 50)})"
+        ax.set_title(f"{_short(ob.formula, 70)}: {ob.verdict.upper()}{margin}", fontsize=9, color=colour,
+                     loc="left", weight="bold")
+        ax.set_ylabel("margin [m]")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper left", fontsize=7)
+        if end is not None:
+            ax.set_xlim(min(0.0, float(t[0])) if t.size else 0.0, end)
+    axes[-1].set_xlabel("t [s]")
+    fig.suptitle("Obligations: margin of each obligation's target over time (> 0: satisfied there)", fontsize=10)
+    return _png(fig)
+
+
+def _short(text: str, limit: int = 40) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def clearance_figure(certificate: Mapping[str, Any], scenario: Scenario,
+                     trajectory: pd.DataFrame | None) -> bytes | None:
+    """Distance from the robot disc to the nearest unsafe region and to the workspace edge (negative: touching)."""
+    if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m")):
+        return None
+    x = trajectory["x_m"].to_numpy(dtype=float)
+    y = trajectory["y_m"].to_numpy(dtype=float)
+    frame = pd.DataFrame({"t_s": trajectory["t_s"].to_numpy(dtype=float),
+                          "edge_m": workspace_margin(x, y, scenario)})
+    unsafe = [k for k, r in enumerate(scenario.regions) if r.unsafe]
+    if unsafe:
+        frame["obstacle_m"] = -np.max(region_margins(x, y, scenario)[unsafe], axis=0)
+    env = _envelope(frame, [c for c in ("edge_m", "obstacle_m") if c in frame.columns])
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
     ax = fig.add_subplot()
-    ax.plot(t, rho, color="black", lw=1.0, label="robustness")
-    ax.fill_between(t, rho, 0.0, where=rho < 0, color=_FAIL_COLOUR, alpha=0.3, lw=0, label="violated")
+    if "obstacle_m" in env.columns:
+        ax.plot(env["t_s"], env["obstacle_m"], color=_FAIL_COLOUR, lw=1.0, label="to the nearest unsafe region")
+    ax.plot(env["t_s"], env["edge_m"], color="black", lw=1.0, label="to the workspace edge")
     ax.axhline(0.0, color="grey", lw=0.8)
-    # Where a bounded window of the formula reaches past the end of the log, rho(t) is undecided (no finite bound):
-    # show that span instead of letting the curve stop without explanation.
-    duration = certificate.get("duration_s")
-    decided = t[np.isfinite(rho)]
-    if isinstance(duration, int | float) and math.isfinite(duration) and len(t):
-        last = float(decided[-1]) if len(decided) else 0.0
-        if last < duration - 1e-9:
-            ax.axvspan(last, duration, color="grey", alpha=0.15, lw=0,
-                       label="undecided: a window reaches past the end of the log")
-        ax.set_xlim(min(0.0, float(t[0])), duration)
-    _mark_violations([ax], certificate)
+    _mark_violations([ax], certificate, names=("obstacle_clearance", "workspace"))
     ax.set_xlabel("t [s]")
-    ax.set_ylabel("rho [m]")
-    ax.set_title("Robustness of the formula over time")
+    ax.set_ylabel("clearance of the disc [m]")
+    ax.set_title("Clearance over time (robot disc; < 0: touching)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=7)
     return _png(fig)
@@ -374,17 +331,30 @@ def sampling_figure(scenario: Scenario, trajectory: pd.DataFrame | None) -> byte
 def render_figures(certificate: Mapping[str, Any], scenario: Scenario, *, trajectory: pd.DataFrame | None,
                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
                    robustness: pd.DataFrame | None) -> list[FigureSpec]:
-    """Every figure that the data allows, in report order."""
+    """Every figure that the data allows, in the order a reader asks: the map and the obligations, clearance, then
+    states, tube and inputs, then data quality. (``robustness``, the whole formula's signal, is not drawn: one
+    curve for a conjunction hides which obligation failed; each obligation gets its own panel instead.)"""
+    del robustness
+    formula = certificate.get("formula")
+    duration = certificate.get("duration_s")
+    duration_s = float(duration) if isinstance(duration, int | float) else None
+    obligations = (obligations_of(formula, trajectory, scenario, max_speed_mps=scenario.max_speed_mps)
+                   if isinstance(formula, str) and trajectory is not None else ())
     out: list[FigureSpec] = [FigureSpec(
-        "workspace", "Workspace map: regions by kind, trajectory, tube band around the nominal, timed run and "
-        "first violations.", workspace_figure(certificate, scenario, trajectory, nominal))]
+        "workspace", "Workspace map: regions, the path coloured by time with its direction, the tube band around the "
+        "nominal, the timed run (numbered), and each first violation with what failed.",
+        workspace_figure(certificate, scenario, trajectory, nominal))]
     optional = (
-        ("states", "x(t), y(t), theta(t) with the nominal, the tube band and the workspace bounds.",
+        ("obligations", "Each obligation of the formula on its own panel: the margin of its target (metres, > 0 "
+         "satisfied), its window shaded, its verdict and where it was violated.",
+         obligations_figure(obligations, duration_s)),
+        ("clearance", "Clearance of the robot disc from the nearest unsafe region and from the workspace edge.",
+         clearance_figure(certificate, scenario, trajectory)),
+        ("states", "x(t), y(t), theta(t) (unwrapped) with the nominal, the tube band and the workspace bounds.",
          states_figure(certificate, scenario, trajectory, nominal)),
         ("tube", "Tube error |p - p_hat| over time against the tube radius r_q.",
          tube_figure(certificate, scenario, trajectory, nominal)),
         ("inputs", "u1, u2, u3 over time with the input box.", inputs_figure(certificate, scenario, inputs)),
-        ("robustness", "Robustness of the formula over time (metres).", robustness_figure(certificate, robustness)),
         ("sampling", "Pose stamp intervals (data quality).", sampling_figure(scenario, trajectory)),
     )
     out.extend(FigureSpec(stem, caption, png) for stem, caption, png in optional if png is not None)

@@ -2,8 +2,8 @@
 
 input: a ``CertifyResult`` (certificate dict plus trajectory/nominal/inputs/robustness frames) and the scenario
 -> output: ``report.md`` (figures as files under ``figures/``), a self-contained ``report.html`` (figures embedded
-as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (one test case per check: ``failure`` for a
-failed check, ``skipped`` for an inconclusive one) so that CI systems show the checks natively.
+as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (``verify.junit``: one test case per check, a
+``failure`` for a failed check and, by default, for an inconclusive one) so that CI systems show the checks natively.
 
 Every string that comes from a log or a scenario is escaped: ``html.escape`` in HTML, entity and backslash escapes
 in Markdown, ElementTree (plus removal of characters XML 1.0 cannot carry) in JUnit.
@@ -27,6 +27,7 @@ import pandas as pd
 from tubempc.scenario import Scenario
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
+from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
 
 __all__ = [
     "CertifyResultLike",
@@ -35,12 +36,13 @@ __all__ = [
     "html_report",
     "junit_xml",
     "markdown_report",
+    "write_junit",
     "write_reports",
 ]
 
 _MAIN_KEYS = ("checks", "timed_run", "data_quality")
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
-_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+_MD_ENTITY = re.compile(r"&(?=#?\w+;)")  # only an '&' that would start an entity is escaped: 'a & b' stays
 _MD_SPECIAL = re.compile(r"([\\`*\[\]|~]|(?<!\w)_|_(?!\w))")  # links, emphasis, code, tables; not intraword _
 
 
@@ -102,9 +104,42 @@ def _check_rows(certificate: Mapping[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+_ROW_KEYS = ("name", "verdict", "margin", "margin_unit", "first_violation_time")
+
+
 def _check_details(check: Mapping[str, Any]) -> str:
-    extra = {k: v for k, v in check.items() if k not in ("name", "verdict", "margin", "first_violation_time")}
+    extra = {k: v for k, v in check.items() if k not in _ROW_KEYS}
     return "; ".join(f"{k}: {_fmt(v)}" for k, v in sorted(extra.items(), key=lambda kv: str(kv[0])))
+
+
+def fmt_time(value: Any) -> str:
+    """A time in seconds for people: ``54.80 s`` (hundredths), ``-`` when absent."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return f"{value:.2f} s"
+    return "-"
+
+
+def fmt_margin(check: Mapping[str, Any]) -> str:
+    """A margin with 4 significant digits and its unit (``-0.004 m``), ``-`` when absent."""
+    value = check.get("margin")
+    if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
+        return "-"
+    unit = check.get("margin_unit")
+    return f"{value:.4g} {unit}" if isinstance(unit, str) and unit else f"{value:.4g}"
+
+
+_SUMMARY_KEYS = ("formula", "scenario", "log", "duration_s", "verdict_reason")
+
+
+def _summary_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
+    """The few facts a reader needs beside the verdict; everything else is under "Certificate details"."""
+    rows: list[tuple[str, str]] = []
+    for key in _SUMMARY_KEYS:
+        if key not in certificate and key != "scenario":
+            continue
+        value = certificate.get(key, scenario.name)
+        rows.append(("duration", fmt_time(value)) if key == "duration_s" else (key.replace("_", " "), _fmt(value)))
+    return rows
 
 
 def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
@@ -115,6 +150,26 @@ def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple
         rows.append((str(key), _fmt(certificate[key])))
     rows.append(("tube radius r_q (scenario)", f"{scenario.tube_radius_m:.6g} m"))
     return rows
+
+
+def _is_quiet(value: Any) -> bool:
+    """A data-quality value that reports nothing (0, empty, false, none): listed after the findings."""
+    return value in (0, 0.0, False, None, "", "{}", "[]") or (isinstance(value, list | dict) and not value)
+
+
+def _quality_rows(certificate: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """Flattened data-quality entries, the ones that report something first (their order otherwise kept)."""
+    rows = list(_flatten(certificate.get("data_quality", {}) or {}))
+    return [r for r in rows if not _is_quiet(r[1])] + [r for r in rows if _is_quiet(r[1])]
+
+
+def _figure_groups(figures: Sequence[FigureSpec]) -> dict[str, list[FigureSpec]]:
+    groups: dict[str, list[FigureSpec]] = {"map": [], "states": [], "quality": []}
+    for fig in figures:
+        key = ("map" if fig.stem in ("workspace", "obligations", "clearance") else
+               "quality" if fig.stem == "sampling" else "states")
+        groups[key].append(fig)
+    return groups
 
 
 def _verdict(certificate: Mapping[str, Any]) -> str:
@@ -139,43 +194,50 @@ class ReportSection:
 
 # ---- Markdown -----------------------------------------------------------------------------------------------------
 def _md(text: Any) -> str:
-    """Escape for a Markdown table cell: HTML entities first, then Markdown punctuation, no line breaks."""
+    """Escape for a Markdown table cell: tags and entity starts first, then Markdown punctuation, no line breaks."""
     raw = _fmt(text) if not isinstance(text, str) else text
-    escaped = html.escape(raw, quote=False)
+    escaped = _MD_ENTITY.sub("&amp;", raw).replace("<", "&lt;").replace(">", "&gt;")
     escaped = _MD_SPECIAL.sub(r"\\\1", escaped)
     return escaped.replace("\r", " ").replace("\n", " ")
 
 
 def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec], *,
                     figure_dir: str = "figures", sections: Sequence[ReportSection] = ()) -> str:
-    """The report as Markdown; figures are referenced as ``figure_dir/<stem>.png``."""
+    """The report as Markdown, in the order a reader asks: verdict and checks, map and obligations, states and
+    inputs, data quality, certificate details; figures are referenced as ``figure_dir/<stem>.png``."""
     cert = result.certificate
+    groups = _figure_groups(figures)
+
+    def figs(key: str) -> list[str]:
+        out: list[str] = []
+        for fig in groups[key]:
+            out += [f"![{_md(fig.caption)}]({figure_dir}/{fig.stem}.png)", "", f"*{_md(fig.caption)}*", ""]
+        return out
+
     lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
-             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", "", "| field | value |",
-             "|---|---|"]
-    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _meta_rows(cert, scenario)]
-    lines += ["", "## Checks", "", "| check | verdict | margin | first violation [s] | details |",
+             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", "", "| | |", "|---|---|"]
+    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _summary_rows(cert, scenario)]
+    lines += ["", "## Checks", "", "| check | verdict | margin | first violation | details |",
               "|---|---|---|---|---|"]
     for check in _check_rows(cert):
         lines.append(f"| {_md(check.get('name', '?'))} | {_md(check.get('verdict', '?'))} | "
-                     f"{_md(_fmt(check.get('margin')))} | {_md(_fmt(check.get('first_violation_time')))} | "
+                     f"{_md(fmt_margin(check))} | {_md(fmt_time(check.get('first_violation_time')))} | "
                      f"{_md(_check_details(check))} |")
-    lines += ["", "## Timed run", ""]
+    lines += ["", "## Map and obligations", "", *figs("map"), "### Timed run", ""]
     run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
     if run:
-        lines += ["| # | region | entered at [s] |", "|---|---|---|"]
-        lines += [f"| {i} | {_md(e.get('region', '?'))} | {_md(_fmt(e.get('time')))} |" for i, e in enumerate(run)]
+        lines += ["| # | region | entered at |", "|---|---|---|"]
+        lines += [f"| {i} | {_md(e.get('region', '?'))} | {_md(fmt_time(e.get('time')))} |" for i, e in enumerate(run)]
     else:
         lines.append("The robot disc was never fully inside a region.")
-    lines += ["", "## Data quality", ""]
-    dq = list(_flatten(cert.get("data_quality", {}) or {}))
+    lines += ["", "## States and inputs", "", *figs("states"), "## Data quality", ""]
+    dq = _quality_rows(cert)
     if dq:
         lines += ["| finding | value |", "|---|---|"] + [f"| {_md(k)} | {_md(_fmt(v))} |" for k, v in dq]
     else:
         lines.append("No data-quality findings were reported.")
-    lines += ["", "## Figures", ""]
-    for fig in figures:
-        lines += [f"![{_md(fig.caption)}]({figure_dir}/{fig.stem}.png)", "", f"*{_md(fig.caption)}*", ""]
+    lines += ["", *figs("quality"), "## Certificate details", "", "| field | value |", "|---|---|"]
+    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _meta_rows(cert, scenario)]
     for sec in sections:
         lines += ["", f"## {_md(sec.title)}", ""]
         if sec.columns:
@@ -191,6 +253,7 @@ body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#22
 table{border-collapse:collapse;margin:0.5em 0 1.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;
 vertical-align:top;font-size:0.92em}th{background:#f3f3f3}.badge{color:#fff;padding:2px 10px;border-radius:4px}
 figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}code{background:#f6f6f6}
+summary h2{display:inline}summary{cursor:pointer;margin:1em 0}
 """.strip()
 
 
@@ -205,43 +268,57 @@ def _badge(verdict: str) -> str:
 
 def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[FigureSpec], *,
                 sections: Sequence[ReportSection] = ()) -> str:
-    """A self-contained HTML page: inline CSS, figures as ``data:image/png;base64`` URIs, no script, no links."""
+    """A self-contained HTML page: inline CSS, figures as ``data:image/png;base64`` URIs, no script, no links.
+    Order: verdict and checks, map and obligations, states and inputs, then data quality and the certificate's
+    details collapsed (``<details>``)."""
     cert = result.certificate
     verdict = _verdict(cert)
+    groups = _figure_groups(figures)
+
+    def figs(key: str) -> list[str]:
+        out = []
+        for fig in groups[key]:
+            data = base64.b64encode(fig.png).decode("ascii")
+            out.append(f'<figure id="fig-{_e(fig.stem)}"><img alt="{_e(fig.caption)}" '
+                       f'src="data:image/png;base64,{data}"><figcaption>{_e(fig.caption)}</figcaption></figure>')
+        return out
+
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>Certificate {_e(verdict)}: {_e(scenario.name)}</title>", f"<style>{_CSS}</style></head><body>",
              f"<h1>Certificate {_badge(verdict)}</h1>",
              f"<p>Exit code {int(result.exit_code)} (0 pass, 1 violation, 2 inconclusive).</p>",
-             '<table class="meta">']
-    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _meta_rows(cert, scenario)]
+             '<table class="summary">']
+    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _summary_rows(cert, scenario)]
     parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'
-              "<th>margin</th><th>first violation [s]</th><th>details</th></tr>"]
+              "<th>margin</th><th>first violation</th><th>details</th></tr>"]
     for check in _check_rows(cert):
         parts.append(f"<tr><td>{_e(check.get('name', '?'))}</td><td>{_badge(str(check.get('verdict', '?')))}</td>"
-                     f"<td>{_e(check.get('margin'))}</td><td>{_e(check.get('first_violation_time'))}</td>"
+                     f"<td>{_e(fmt_margin(check))}</td><td>{_e(fmt_time(check.get('first_violation_time')))}</td>"
                      f"<td>{_e(_check_details(check))}</td></tr>")
-    parts += ["</table>", "<h2>Timed run</h2>"]
+    parts += ["</table>", "<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
     run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
     if run:
-        parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at [s]</th></tr>')
-        parts += [f"<tr><td>{i}</td><td>{_e(e.get('region', '?'))}</td><td>{_e(e.get('time'))}</td></tr>"
+        parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at</th></tr>')
+        parts += [f"<tr><td>{i}</td><td>{_e(e.get('region', '?'))}</td><td>{_e(fmt_time(e.get('time')))}</td></tr>"
                   for i, e in enumerate(run)]
         parts.append("</table>")
     else:
         parts.append("<p>The robot disc was never fully inside a region.</p>")
-    parts.append("<h2>Data quality</h2>")
-    dq = list(_flatten(cert.get("data_quality", {}) or {}))
+    parts += ["<h2>States and inputs</h2>", *figs("states")]
+    dq = _quality_rows(cert)
+    noted = sum(1 for _, v in dq if not _is_quiet(v))
+    parts.append(f"<details><summary><h2>Data quality</h2> ({noted} finding(s) that report something, listed first"
+                 f")</summary>")
     if dq:
         parts.append('<table class="data-quality"><tr><th>finding</th><th>value</th></tr>')
         parts += [f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in dq]
         parts.append("</table>")
     else:
         parts.append("<p>No data-quality findings were reported.</p>")
-    parts.append("<h2>Figures</h2>")
-    for fig in figures:
-        data = base64.b64encode(fig.png).decode("ascii")
-        parts.append(f'<figure id="fig-{_e(fig.stem)}"><img alt="{_e(fig.caption)}" '
-                     f'src="data:image/png;base64,{data}"><figcaption>{_e(fig.caption)}</figcaption></figure>')
+    parts += [*figs("quality"), "</details>", "<details><summary><h2>Certificate details</h2></summary>",
+              '<table class="meta">']
+    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _meta_rows(cert, scenario)]
+    parts += ["</table>", "</details>"]
     for sec in sections:
         parts.append(f"<h2>{_e(sec.title)}</h2>")
         if sec.columns:
@@ -255,58 +332,23 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
 
 
 # ---- JUnit --------------------------------------------------------------------------------------------------------
-def _x(value: Any) -> str:
-    return _XML_INVALID.sub("\ufffd", _fmt(value) if not isinstance(value, str) else value)
-
-
-def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify") -> ET.Element:
-    """``<testsuite>`` with one ``<testcase>`` per check (``failure`` / ``skipped`` for fail / inconclusive)."""
-    cert = result.certificate
-    checks = _check_rows(cert)
-    failures = sum(1 for c in checks if c.get("verdict") == "fail")
-    skipped = sum(1 for c in checks if c.get("verdict") not in ("pass", "fail"))
-    suite = ET.Element("testsuite", {"name": _x(suite_name), "tests": str(len(checks)), "failures": str(failures),
-                                     "errors": "0", "skipped": str(skipped), "time": "0"})
-    props = ET.SubElement(suite, "properties")
-    for key in ("verdict", "formula", "scenario_sha256", "log_sha256", "partial"):
-        if key in cert:
-            ET.SubElement(props, "property", {"name": key, "value": _x(cert[key])})
-    for check in checks:
-        case = ET.SubElement(suite, "testcase", {"classname": _x(suite_name), "name": _x(check.get("name", "?")),
-                                                 "time": "0"})
-        verdict = check.get("verdict")
-        summary = (f"verdict {_fmt(verdict)}, margin {_fmt(check.get('margin'))}, first violation at "
-                   f"{_fmt(check.get('first_violation_time'))} s")
-        details = _check_details(check)
-        if verdict == "fail":
-            node = ET.SubElement(case, "failure", {"message": _x(summary), "type": "violation"})
-            node.text = _x(details or summary)
-        elif verdict != "pass":
-            ET.SubElement(case, "skipped", {"message": _x(f"{summary}. {details}".strip(" ."))})
-    return suite
-
-
-def write_junit(suites: list[ET.Element], path: Path) -> Path:
-    """Write ``<testsuites>`` around the given suites (one per log in a batch)."""
-    root = ET.Element("testsuites", {
-        "tests": str(sum(int(s.get("tests", "0")) for s in suites)),
-        "failures": str(sum(int(s.get("failures", "0")) for s in suites)),
-        "errors": str(sum(int(s.get("errors", "0")) for s in suites)),
-        "skipped": str(sum(int(s.get("skipped", "0")) for s in suites))})
-    root.extend(suites)
-    ET.indent(root)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
-    return path
+def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify",
+              inconclusive: InconclusiveAs = "failure") -> ET.Element:
+    """``<testsuite>`` with one ``<testcase>`` per check (``verify.junit``: a failed check is a ``failure`` of type
+    ``violation``, an inconclusive one a ``failure`` of type ``inconclusive`` unless ``inconclusive="skipped"``)."""
+    return suite_element(certificate_suite(result.certificate, suite_name=suite_name, inconclusive=inconclusive))
 
 
 # ---- writing ------------------------------------------------------------------------------------------------------
 def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | Path, *,
-                  suite_name: str = "certify", sections: Sequence[ReportSection] = ()) -> dict[str, Path]:
+                  suite_name: str = "certify", sections: Sequence[ReportSection] = (),
+                  junit_inconclusive: InconclusiveAs = "failure") -> dict[str, Path]:
     """Write ``report.md``, ``report.html``, ``junit.xml`` and ``figures/*.png`` into ``out_dir`` (created).
 
     Returns the written paths keyed by their path relative to ``out_dir`` (``"report.html"``,
     ``"figures/workspace.png"``, ...). ``suite_name`` names the JUnit suite (a batch passes the log's name).
     ``sections`` are appended to both reports (the demo's comparison with the paper uses this).
+    ``junit_inconclusive``: how ``junit.xml`` reports an inconclusive check (``verify.junit``).
     """
     out = Path(out_dir)
     figures = render_figures(result.certificate, scenario, trajectory=result.trajectory, nominal=result.nominal,
@@ -324,7 +366,8 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
         page = out / "report.html"
         page.write_text(html_report(result, scenario, figures, sections=sections), encoding="utf-8")
         written["report.html"] = page
-        written["junit.xml"] = write_junit([junit_xml(result, suite_name=suite_name)], out / "junit.xml")
+        suite = certificate_suite(result.certificate, suite_name=suite_name, inconclusive=junit_inconclusive)
+        written["junit.xml"] = write_junit([suite], out / "junit.xml")
     except OSError as err:
         raise ReportWriteError(f"{out}: cannot write the reports ({err.__class__.__name__}: {err})") from err
     return written

@@ -36,6 +36,6 @@ def test_cache_and_process_pool_agree(tmp_path: Path) -> None:
 def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:
     s = builtin_scenario()
     build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
-    other = s.model_copy(update={"initial_region": "R2"})
+    other = s.model_copy(update={"initial_region_name": "R2"})
     build_wts(other, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
     assert len(list(tmp_path.glob("wts-*.json"))) == 2

@@ -21,6 +21,7 @@ from tubempc.regress import (
     read_baseline,
     write_baseline,
 )
+from verify.junit import suite_element
 
 BASE = {
     "verdict": "pass", "check.tube.verdict": "pass", "check.tube.margin": 0.004, "arrived": True,
@@ -97,9 +98,10 @@ def test_compare_directions_and_tolerances() -> None:
     assert "a  t_ij_s.0.R3: 16.7 -> 17.2 (+0.5, tolerance 0.3)" in text
     assert "a  check.tube.verdict: pass -> fail" in text
     assert text.splitlines()[-1].startswith("REGRESSION: 5 runs")
-    junit = comparison_junit(comp, current, suite_name="t")
+    junit = suite_element(comparison_junit(comp, current, suite_name="t"))
     failed = [c.get("name") for c in junit.iter("testcase") if c.find("failure") is not None]
-    assert failed == ["a", "b", "c", "brand-new", "broken"]
+    errored = [c.get("name") for c in junit.iter("testcase") if c.find("error") is not None]
+    assert failed == ["a", "b", "c", "brand-new"] and errored == ["broken"]
     assert ET.tostring(junit)
 
 

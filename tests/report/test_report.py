@@ -51,8 +51,9 @@ def failing_report(tmp_path_factory: pytest.TempPathFactory,
 
 def test_files_and_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
     tmp_path, written, _ = failing_report
-    expected = {"report.md", "report.html", "junit.xml", "figures/workspace.png", "figures/states.png",
-                "figures/tube.png", "figures/inputs.png", "figures/robustness.png", "figures/sampling.png"}
+    expected = {"report.md", "report.html", "junit.xml", "figures/workspace.png", "figures/obligations.png",
+                "figures/clearance.png", "figures/states.png", "figures/tube.png", "figures/inputs.png",
+                "figures/sampling.png"}
     assert set(written) == expected
     for rel, path in written.items():
         assert path == tmp_path / rel and path.stat().st_size > 0
@@ -60,16 +61,16 @@ def test_files_and_figures(failing_report: tuple[Path, dict[str, Path], Any]) ->
             assert path.read_bytes().startswith(PNG_MAGIC)
     md = (tmp_path / "report.md").read_text()
     assert md.startswith("# Certificate: FAIL")
-    for stem in ("workspace", "states", "tube", "inputs", "robustness", "sampling"):
+    for stem in ("workspace", "obligations", "clearance", "states", "tube", "inputs", "sampling"):
         assert f"(figures/{stem}.png)" in md
-    assert "| tube | fail |" in md and "12.5" in md
+    assert "| tube | fail |" in md and "12.50 s" in md
 
 
 def test_html_is_self_contained_with_embedded_figures(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
     tmp_path = failing_report[0]
     page = _parse(tmp_path / "report.html")
     imgs = [attrs for tag, attrs in page.tags if tag == "img"]
-    assert len(imgs) == 6
+    assert len(imgs) == 7
     for attrs in imgs:
         src = attrs["src"] or ""
         assert src.startswith("data:image/png;base64,")
@@ -90,7 +91,7 @@ def test_strings_from_log_and_scenario_are_escaped(tmp_path: Path, scenario: Sce
     page = _parse(tmp_path / "report.html")
     tags = [t for t, _ in page.tags]
     assert "script" not in tags
-    assert tags.count("img") == 6  # the injected <img> stayed text
+    assert tags.count("img") == 7  # the injected <img> stayed text
     text = "".join(page.text)
     assert '<script>alert("x")</script>' in text and '<script>alert("s")</script>' in text
     md = (tmp_path / "report.md").read_text()
@@ -106,24 +107,48 @@ def test_junit_one_case_per_check(failing_report: tuple[Path, dict[str, Path], A
     assert root.tag == "testsuites"
     (suite,) = root.findall("testsuite")
     assert suite.get("name") == "run.mcap"
-    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("4", "1", "1",
+    # the inconclusive check is a failure too (dashboards paint <skipped> green): 2 failures, nothing skipped
+    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("4", "2", "0",
                                                                                                       "0")
     cases = {c.get("name"): c for c in suite.findall("testcase")}
     assert list(cases) == [c["name"] for c in result.certificate["checks"]]
     failure = cases["tube"].find("failure")
     assert failure is not None and "12.5" in (failure.get("message") or "")
-    assert cases["inputs"].find("skipped") is not None and cases["inputs"].find("failure") is None
+    assert failure.get("type") == "violation"
+    undecided = cases["inputs"].find("failure")
+    assert undecided is not None and undecided.get("type") == "inconclusive" and cases["inputs"].find("skipped") is None
     assert list(cases["mitl_timed_run"]) == []  # a passing check has no child element
     props = {p.get("name"): p.get("value") for p in suite.iter("property")}
     assert props["verdict"] == "fail" and props["log_sha256"] == "cd" * 32
+
+
+def test_junit_inconclusive_can_stay_skipped(tmp_path: Path, scenario: Scenario,
+                                            make_result: Callable[..., Any]) -> None:
+    write_reports(make_result(verdict="inconclusive"), scenario, tmp_path, junit_inconclusive="skipped")
+    suite = ET.parse(tmp_path / "junit.xml").getroot().find("testsuite")
+    assert suite is not None and (suite.get("failures"), suite.get("skipped")) == ("0", "1")
+    write_reports(make_result(verdict="inconclusive"), scenario, tmp_path / "default")
+    suite = ET.parse(tmp_path / "default" / "junit.xml").getroot().find("testsuite")
+    assert suite is not None and (suite.get("failures"), suite.get("skipped")) == ("1", "0")
+
+
+def test_one_junit_writer_for_certify_batch_and_regress() -> None:
+    """certify, batch and regress all build ``verify.junit`` suites; no other module writes JUnit XML."""
+    import re as _re
+
+    root = Path(__file__).resolve().parents[2]
+    writers = [p for folder in ("verify", "tubempc") for p in (root / folder).rglob("*.py")
+               if _re.search(r"SubElement\([^)]*\"testcase\"|Element\(\"testsuites?\"", p.read_text(encoding="utf-8"))]
+    assert [p.relative_to(root).as_posix() for p in writers] == ["verify/junit.py"]
 
 
 def test_passing_run_and_missing_optional_data(tmp_path: Path, scenario: Scenario,
                                                make_result: Callable[..., Any]) -> None:
     written = write_reports(make_result(verdict="pass", with_optional=False), scenario, tmp_path)
     # without nominal/inputs/robustness the figures that need them are left out rather than drawn empty
-    assert {k for k in written if k.startswith("figures/")} == {"figures/workspace.png", "figures/states.png",
-                                                                  "figures/sampling.png"}
+    assert {k for k in written if k.startswith("figures/")} == {
+        "figures/workspace.png", "figures/obligations.png", "figures/clearance.png", "figures/states.png",
+        "figures/sampling.png"}
     suite = ET.parse(tmp_path / "junit.xml").getroot().find("testsuite")
     assert suite is not None and suite.get("failures") == "0" and suite.get("skipped") == "0"
     assert (tmp_path / "report.md").read_text().startswith("# Certificate: PASS")

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import pickle
+import re
 import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import blake3
 import numpy as np
 import pytest
 
@@ -19,9 +22,11 @@ from verify import (
     MissingTopicError,
     SpecError,
     TruncatedLogError,
+    UnusableInputError,
     certify_log,
     write_certificate,
 )
+from verify.ingest.digest import digest_path
 
 MakeLog = Callable[..., Path]
 TIME0_NS = 1_767_225_600 * 10**9  # the log contract's time 0 of simulated runs (conftest writes it)
@@ -50,7 +55,33 @@ def test_every_format_and_pose_type_passes(make_log: MakeLog, scenario: Scenario
     assert cert["data_quality"]["pose"]["fast_decode"] is (pose_type != "TF")
     assert list(res.trajectory.columns) == ["t_s", "x_m", "y_m", "theta_rad"]
     assert res.trajectory["x_m"].to_numpy() == pytest.approx(good.x, abs=1e-12)
-    assert cert["log_sha256"] and cert["scenario_sha256"] == sc.sha256()
+    assert cert["log_digest_algorithm"] == "blake3" and "log_sha256" not in cert
+    assert cert["log_digest"] == digest_path(log, "blake3").hex and cert["scenario_sha256"] == sc.sha256()
+
+
+@pytest.mark.parametrize("fmt", ["bag", "dir-mcap"])
+def test_log_digest_is_the_files_hash(make_log: MakeLog, scenario: Scenario, good: Any, fmt: str) -> None:
+    """The certificate's digest is the hash of the log's bytes, named: BLAKE3 by default (``b3sum``'s value for a
+    file), SHA-256 on request (``sha256sum``'s, also kept as ``log_sha256``); a bag directory hashes every file's
+    name and bytes."""
+    log = Path(make_log(fmt, good))
+    files = sorted(f for f in log.rglob("*") if f.is_file()) if log.is_dir() else [log]
+    b3, sha = blake3.blake3(), hashlib.sha256()
+    for f in files:
+        if log.is_dir():
+            b3.update(str(f.relative_to(log)).encode() + b"\0")
+            sha.update(str(f.relative_to(log)).encode() + b"\0")
+        b3.update(f.read_bytes())
+        sha.update(f.read_bytes())
+    cert = certify_log(log, scenario).certificate
+    assert (cert["log_digest_algorithm"], cert["log_digest"]) == ("blake3", b3.hexdigest())
+    cert256 = certify_log(log, scenario, digest="sha256").certificate
+    assert (cert256["log_digest_algorithm"], cert256["log_digest"]) == ("sha256", sha.hexdigest())
+    assert cert256["log_sha256"] == sha.hexdigest()
+    assert {k: v for k, v in cert256.items() if not k.startswith("log_")} == \
+        {k: v for k, v in cert.items() if not k.startswith("log_")}
+    with pytest.raises(UnusableInputError, match="digest"):
+        certify_log(log, scenario, digest="md5")
 
 
 def test_result_pickles_and_certificate_is_json(make_log: MakeLog, scenario: Scenario, good: Any,
@@ -221,3 +252,25 @@ def test_a_failed_formula_always_states_its_margin(make_log: MakeLog, scenario: 
     check = _check(cert, "spec_trajectory")
     assert check["verdict"] == "fail"
     assert isinstance(check["margin"], float) and check["margin"] < 0
+
+
+def test_cli_json_quiet_verbose_and_time_precision(make_log: MakeLog, good: Any) -> None:
+    ok = make_log("mcap", good)
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "tubempc", *args], capture_output=True, text=True, check=False,
+                              timeout=120)
+
+    one = run("certify", str(ok), "--scenario", "nexus-sml", "--json")
+    assert one.returncode == 0
+    assert json.loads(one.stdout)["verdict"] == "pass"  # stdout is the certificate alone
+    assert one.stderr.startswith(f"{ok}: pass")  # the summary went to stderr
+    many = run("-q", "certify", str(ok), str(ok.parent / "missing.mcap"), "--scenario", "nexus-sml", "--json")
+    entries = json.loads(many.stdout)
+    assert [e["verdict"] for e in entries] == ["pass", "unusable"] and many.stderr == ""
+    assert entries[1]["exit_code"] == 3 and "missing.mcap" in entries[1]["error"]
+    fail = run("certify", str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1", "-v")
+    assert fail.returncode == 1
+    assert re.search(r"spec_trajectory: fail at t=\d+\.\d\d s", fail.stdout), fail.stdout  # 2 decimals, not 9
+    assert "obstacle_clearance: pass, margin" in fail.stderr  # -v lists every check
+    assert run("certify", "-q", str(ok), "--scenario", "nexus-sml").stdout == ""

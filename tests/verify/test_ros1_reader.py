@@ -3,6 +3,8 @@ on uncompressed, bz2 and lz4 bags, and declines (falls back to rosbags) on anyth
 
 from __future__ import annotations
 
+import os
+import tracemalloc
 from pathlib import Path
 from typing import Any
 
@@ -130,3 +132,69 @@ def test_damaged_bags_fall_back_to_rosbags(tmp_path: Path, scenario: Scenario) -
     assert read_ros1_fast(un, {"/pose"}) is None
     with pytest.raises(TruncatedLogError):
         read_raw(un, ["/pose"])
+
+
+def _sparse_bag(path: Path, compression: str | None, chunks: int) -> Path:
+    """A bag of ``chunks`` chunks of about 1 MiB (a 256 KiB camera-like filler) where /pose has one message per
+    chunk: the shape of a lab recording whose slow topics are a tiny part of every chunk."""
+    writer = Writer(path)
+    if compression == "lz4":
+        writer.set_compression(Writer.CompressionFormat.LZ4)
+    writer.chunk_threshold = 1 << 20
+    filler = bytes(STORE.serialize_ros1(T[STRING](data="z" * (1 << 18)), STRING))
+    t0 = 1_700_000_000 * 10**9
+    with writer as w:
+        pose = w.add_connection("/pose", POSE, typestore=STORE)
+        camera = w.add_connection("/camera", STRING, typestore=STORE)
+        for k in range(chunks):
+            t = t0 + k * 10**8
+            w.write(pose, t, _pose(t, 0.01 * k, "world"))
+            for j in range(4):
+                w.write(camera, t + j + 1, filler)
+    return path
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_kept_payloads_do_not_hold_their_chunks(tmp_path: Path, compression: str | None) -> None:
+    """One wanted message per ~1 MiB chunk: what the reader returns holds the payloads (~40 chunks x 200 bytes),
+    not the chunks they came from (a view of a decompressed chunk keeps all of it alive: ~40 MiB here), and the
+    reading works chunk by chunk (peak: a few chunks, not the file)."""
+    chunks = 40
+    path = _sparse_bag(tmp_path / "sparse.bag", compression, chunks)
+    tracemalloc.start()
+    try:
+        fast = read_ros1_fast(path, {"/pose"})
+        kept_b, peak_b = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert fast is not None
+    assert len(fast.topics["/pose"][3]) == chunks
+    # bounds: the returned arrays are ~10 KiB; a chunk is ~1 MiB and at most a few are alive at once
+    assert kept_b < 1 << 20, f"the result holds {kept_b} bytes"
+    assert peak_b < 8 << 20, f"peak {peak_b} bytes while reading"
+    _same_as_rosbags(path, {"/pose"})
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                         compression: str | None) -> None:
+    """/pose is ~200 bytes of every ~1 MiB chunk: from an uncompressed chunk only its records (and the index) are
+    read; a compressed chunk has to be read whole."""
+    path = _sparse_bag(tmp_path / "sparse.bag", compression, 20)
+    real_pread = os.pread
+    read_b = [0]
+
+    def counting(fd: int, n: int, pos: int) -> bytes:
+        read_b[0] += n
+        return real_pread(fd, n, pos)
+
+    monkeypatch.setattr(os, "pread", counting)
+    fast = read_ros1_fast(path, {"/pose"})
+    monkeypatch.undo()
+    assert fast is not None and len(fast.topics["/pose"][3]) == 20
+    size_b = path.stat().st_size
+    if compression is None:
+        assert read_b[0] < size_b // 50, f"read {read_b[0]} of {size_b} bytes"
+    else:
+        assert read_b[0] > size_b // 2
+    _same_as_rosbags(path, {"/pose"})

@@ -4,6 +4,7 @@ of different lengths, several topics; and they decline (rosbags reads the file a
 
 from __future__ import annotations
 
+import os
 import shutil
 import sqlite3
 from pathlib import Path
@@ -149,20 +150,44 @@ def test_sqlite_quick_open_declines_on_damage(tmp_path: Path) -> None:
 
 def test_mcap_damaged_chunk_record_falls_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A message record's length field is made huge inside an uncompressed chunk: our walk declines and rosbags
-    reports the damage exactly as without the fast path."""
+    reports the damage exactly as without the fast path. Every topic is read, so the damaged record is one the
+    reader reads (records of unwanted topics in an uncompressed chunk are not read at all: message-level reads)."""
     bag = _write(tmp_path / "bag", StoragePlugin.MCAP)
     mcap = next(bag.glob("*.mcap"))
     raw = bytearray(mcap.read_bytes())
     with Reader(mcap) as r:
         chunk = r.storage.chunks[1]  # type: ignore[attr-defined]
         start = chunk.chunk_start_offset + 9 + 40 + len(chunk.compression)
-        conns = [c for c in r.connections if c.topic == "/pose"]
+        conns = list(r.connections)
         assert read_mcap_storage(r.storage, conns) is not None  # type: ignore[arg-type]
     assert raw[start] == 0x05  # the chunk starts with a message record
     raw[start + 1 : start + 9] = (2**40).to_bytes(8, "little")
     mcap.write_bytes(bytes(raw))
     with Reader(mcap) as r:
-        assert read_mcap_storage(r.storage, [c for c in r.connections if c.topic == "/pose"]) is None  # type: ignore[arg-type]
+        assert read_mcap_storage(r.storage, list(r.connections)) is None  # type: ignore[arg-type]
+    with pytest.raises(LogReadError) as fast_err:
+        read_raw(bag, TOPICS)
+    with pytest.raises(LogReadError) as ref_err:
+        _reference(bag, TOPICS, monkeypatch)
+    assert (type(fast_err.value), str(fast_err.value)) == (type(ref_err.value), str(ref_err.value))
+
+
+def test_mcap_message_level_reads_decline_on_a_damaged_wanted_record(tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Only /pose is wanted, so its records are read one by one; one of them is damaged (huge length): the
+    message-level read declines, the chunk is walked whole, and rosbags' error is reported as before."""
+    bag = _write(tmp_path / "bag", StoragePlugin.MCAP)
+    mcap = next(bag.glob("*.mcap"))
+    raw = bytearray(mcap.read_bytes())
+    with Reader(mcap) as r:
+        chunk = r.storage.chunks[1]  # type: ignore[attr-defined]
+        pose_id = next(c.id for c in r.connections if c.topic == "/pose")
+        index_at = chunk.message_index_offsets[pose_id]
+    first = int.from_bytes(raw[index_at + 15 + 8 : index_at + 15 + 16], "little")  # offset of the first entry
+    start = chunk.chunk_start_offset + 9 + 40 + first
+    assert raw[start] == 0x05
+    raw[start + 1 : start + 9] = (2**40).to_bytes(8, "little")
+    mcap.write_bytes(bytes(raw))
     with pytest.raises(LogReadError) as fast_err:
         read_raw(bag, ["/pose"])
     with pytest.raises(LogReadError) as ref_err:
@@ -189,3 +214,33 @@ def test_truncated_files_behave_as_before(tmp_path: Path, monkeypatch: pytest.Mo
         assert isinstance(fast_err.value, TruncatedLogError)
         salvaged = read_raw(bare, ["/pose"], salvage=True)
         assert salvaged.partial and len(salvaged.topics["/pose"].payloads) > 0
+
+
+def test_mcap_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """/pose is a few hundred bytes of every ~1 MiB chunk (a camera-like topic fills the rest): only its records and
+    index are read from the uncompressed chunks, and the result is rosbags'."""
+    filler = bytes(STORE.serialize_cdr(T[STRING](data="z" * (1 << 18)), STRING))
+    bag = tmp_path / "bag"
+    t0 = 1_700_000_000 * 10**9
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        pose = w.add_connection("/pose", POSE, typestore=STORE)
+        camera = w.add_connection("/camera", STRING, typestore=STORE)
+        for k in range(20):
+            t = t0 + k * 10**8
+            w.write(pose, t, _pose(t, float(k), "world"))
+            for j in range(4):
+                w.write(camera, t + j + 1, filler)
+    real_pread = os.pread
+    read_b = [0]
+
+    def counting(fd: int, n: int, pos: int) -> bytes:
+        read_b[0] += n
+        return real_pread(fd, n, pos)
+
+    mcap = next(bag.glob("*.mcap"))
+    with Reader(mcap) as r, monkeypatch.context() as m:
+        m.setattr(os, "pread", counting)
+        got = read_mcap_storage(r.storage, [c for c in r.connections if c.topic == "/pose"])  # type: ignore[arg-type]
+    assert got is not None and got["/pose"].log_ns.shape[0] == 20
+    assert read_b[0] < mcap.stat().st_size // 50, f"read {read_b[0]} of {mcap.stat().st_size} bytes"
+    _assert_same(bag, ("/pose",), monkeypatch)

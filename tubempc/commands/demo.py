@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from tubempc.commands.output import say
+
 __all__ = ["demo"]
 
 
@@ -31,9 +33,9 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
     prepare_output_dir(folder, force=force)
     started = time.perf_counter()
     result = run_demo(folder, seed=seed, disturbance=disturbance, use_cache=not no_cache,
-                      log=click.echo, replace=force)
-    click.echo(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
+                      log=say, replace=force)
+    say(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
     for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:
-            click.echo(f"  {key:12s} {result.files[key]}")
+            say(f"  {key:12s} {result.files[key]}")
     sys.exit(result.exit_code)

@@ -3,8 +3,9 @@
 ``--dwell silent`` (default): waits add no position, the run lists the arrivals a log will show and the targets carry
 the planned departure times; ``--dwell observed``: each dwell is a position; ``--no-wait``: no waiting at all.
 
-Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input;
-4 the controller (Algorithm 1) is not available.
+Exit codes: 0 a plan was found; 1 no accepting run (the message names the obligation); 3 unusable input (a scenario
+the planner cannot abstract: a missing controller field, a unicycle input model, polygon shapes, overlapping regions;
+or every transition failing the controller's design check); 4 the controller (Algorithm 1) is not available.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import math
 from pathlib import Path
 
 import click
+
+from tubempc.commands.output import say
 
 __all__ = ["plan"]
 
@@ -36,34 +39,48 @@ __all__ = ["plan"]
 def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str, json_out: str | None,
          no_cache: bool, workers: int | None, dask_address: str | None, dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
+    from tubempc.control.dynamics import model_for
+    from tubempc.control.tube import design_tube
+    from tubempc.errors import DesignError
     from tubempc.mitl import parse
     from tubempc.planning.plan import plan_from_wts
     from tubempc.planning.search import export_dot, find_run
-    from tubempc.planning.wts import build_wts
+    from tubempc.planning.wts import FAILED, build_wts
     from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
 
     scenario = builtin_scenario(scenario_name) if scenario_name in BUILTIN_SCENARIOS else load_scenario(
         scenario_name)
+    scenario.require_planning()  # exit 3 naming the field: missing controller data, unicycle, polygons, overlaps
     formula = parse(spec_text) if spec_text is not None else scenario.formula
+    try:  # an impossible design is unusable input (exit 3), not "no accepting run" over a WTS without edges
+        design_tube(scenario, model_for(scenario))
+    except DesignError as err:
+        raise DesignError(f"{scenario_name}: the tube MPC cannot be designed for this scenario: {err}") from err
     wts = build_wts(scenario, use_cache=not no_cache, workers=workers, dask=dask_address)
+    failed = wts.graph.get(FAILED) or {}
+    if wts.number_of_edges() == 0 and failed:
+        (src, dst), why = next(iter(sorted(failed.items())))
+        raise DesignError(f"scenario {scenario.name}: every transition between regions failed the controller's "
+                          f"design check ({len(failed)} of {len(failed)}), so there is nothing to plan on; "
+                          f"e.g. {src} -> {dst}: {why}")
     result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region)
-    click.echo(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
+    say(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
                f"transitions, weights from {wts.graph.get('oracle')}); formula {formula}")
-    click.echo(f"{'region':<8} {'time [s]':>10}  {'kind':<6} labels")
+    say(f"{'region':<8} {'time [s]':>10}  {'kind':<6} labels")
     for k, ((region, t), kind) in enumerate(zip(result.run, result.kinds, strict=True)):
         mark = "  <- repeats from here" if k == result.loop_start and result.period_s > 0 else ""
         labels = ",".join(result.labels.get(region, ())) or "-"
-        click.echo(f"{region:<8} {t:>10.3f}  {kind:<6} {labels}{mark}")
+        say(f"{region:<8} {t:>10.3f}  {kind:<6} {labels}{mark}")
     if result.period_s > 0:
-        click.echo(f"repeating part: from position {result.loop_start}, period {result.period_s:.3f} s")
+        say(f"repeating part: from position {result.loop_start}, period {result.period_s:.3f} s")
     else:
-        click.echo(f"the run ends in {result.run[-1][0]}: the robot stays there (no further position)")
-    click.echo(f"waits: {result.dwell}; controller targets (region, planned arrival, depart after):")
+        say(f"the run ends in {result.run[-1][0]}: the robot stays there (no further position)")
+    say(f"waits: {result.dwell}; controller targets (region, planned arrival, depart after):")
     for tg in result.targets:
         depart = "-" if tg.depart_after_s is None else f"{tg.depart_after_s:.3f}"
-        click.echo(f"  {tg.region:<8} {tg.arrival_s:>10.3f} {depart:>10}")
+        say(f"  {tg.region:<8} {tg.arrival_s:>10.3f} {depart:>10}")
     margin = "inf (no timing constraint)" if math.isinf(result.margin_s) else f"{result.margin_s:.3f} s"
-    click.echo(f"margin to interval endpoints: {margin}; search {result.search_s * 1000:.1f} ms, "
+    say(f"margin to interval endpoints: {margin}; search {result.search_s * 1000:.1f} ms, "
                f"{result.product_states} product states")
     if json_out is not None:
         Path(json_out).write_text(json.dumps(result.to_json(), indent=2) + "\n")

@@ -7,10 +7,11 @@ With ``--out DIR``: every run's log and certificate under ``DIR/<run>/``, plus `
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import click
+
+from tubempc.commands.output import progress_line, say
 
 __all__ = ["regress"]
 
@@ -45,6 +46,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_baseline,
     )
     from tubempc.regress.compare import BaselineError
+    from verify.junit import write_junit
 
     loaded = load_suite(suite_path)
     if baseline_path is None:
@@ -60,22 +62,21 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         prepare_output_dir(out_dir, force=force)
     cases = expand_suite(loaded)
     if update_baseline:
-        click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+        progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
         outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
         path = write_baseline(baseline_path, loaded.suite, outcomes)
-        click.echo(f"regress: baseline written to {path} ({len(outcomes)} runs)")
+        say(f"regress: baseline written to {path} ({len(outcomes)} runs)")
         return
     baseline = read_baseline(baseline_path)  # before the runs: a missing baseline fails fast
-    click.echo(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs", err=True)
+    progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
     outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
     comparison = compare(baseline, outcomes, loaded.suite.tolerances)
     text = format_diff(comparison)
-    click.echo(text)
+    say(text)
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         (out / "diff.txt").write_text(text + "\n", encoding="utf-8")
-        ET.ElementTree(comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)).write(
-            out / "junit.xml", encoding="utf-8", xml_declaration=True)
+        write_junit([comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)], out / "junit.xml")
     if comparison.regressed:
         raise click.exceptions.Exit(1)

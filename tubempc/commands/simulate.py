@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import click
 
+from tubempc.commands.output import say
+
 __all__ = ["simulate"]
 
 EXIT_NOT_REACHED = 1
@@ -42,6 +44,7 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
 
     prepare_output_log(out_path, force=force)
     scenario = load_scenario(scenario_path)
+    scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
     result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
                              t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
     if force:
@@ -52,15 +55,15 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     iters = np.array([r.iterations for r in result.solver])
     t_ij = "not reached" if arrival.t_ij_s is None else f"{arrival.t_ij_s:.1f} s"
     inside = "never" if arrival.inside_s is None else f"{arrival.inside_s:.2f} s"
-    click.echo(f"{result.start_region} -> {target}: t_ij = {t_ij} (Algorithm 1), robot inside {target} at {inside}")
-    click.echo(f"tube: max |x - x_hat| = {result.max_tube_error_m:.5f} m vs r_q = {result.tube_radius_m:.5f} m "
+    say(f"{result.start_region} -> {target}: t_ij = {t_ij} (Algorithm 1), robot inside {target} at {inside}")
+    say(f"tube: max |x - x_hat| = {result.max_tube_error_m:.5f} m vs r_q = {result.tube_radius_m:.5f} m "
                f"(sigma = {result.sigma:.4g}, disturbance {disturbance}, seed {seed})")
-    click.echo(f"input: max |u_body| per axis = {np.round(np.max(np.abs(result.u_body), axis=0), 4).tolist()}")
-    click.echo(f"solver: {len(result.solver)} solves, {sum(r.success for r in result.solver)} succeeded, "
+    say(f"input: max |u_body| per axis = {np.round(np.max(np.abs(result.u_body), axis=0), 4).tolist()}")
+    say(f"solver: {len(result.solver)} solves, {sum(r.success for r in result.solver)} succeeded, "
                f"{sum(r.backup for r in result.solver)} backups; solve time median {np.median(times_ms):.3f} ms, "
                f"p95 {np.percentile(times_ms, 95):.3f} ms, max {np.max(times_ms):.3f} ms; iterations median "
                f"{np.median(iters):.0f}, max {np.max(iters)}")
-    click.echo(f"log: {path}")
+    say(f"log: {path}")
     if not result.ok:
         click.echo(f"tubempc: {result.reason}", err=True)
         raise click.exceptions.Exit(EXIT_NOT_REACHED)

@@ -431,6 +431,11 @@ class TimedAutomaton:
         ticks into ``label_class`` after which the arrival lands on a goal of ``silent_goals``."""
         return [g - weight for g in self.silent_goals(state, label_class, direct=direct) if g > weight]
 
+    def triggers(self, node_id: int, label_class: int) -> bool:
+        """Whether the child of temporal node ``node_id`` can change value at a position of ``label_class`` (an
+        ``F``/``U`` obligation can be met there; a ``G``/``R`` one can fail there)."""
+        return self._triggers(node_id, label_class)
+
     def _triggers(self, node_id: int, cls: int) -> bool:
         key = (node_id, cls)
         out = self._trigger_memo.get(key)

@@ -29,63 +29,31 @@ If the pruned search finds nothing, it is repeated without pruning before report
 from __future__ import annotations
 
 import heapq
-import itertools
+import math
 import time
 from dataclasses import dataclass, field
 from fractions import Fraction
 
 import networkx as nx
 
-from tubempc.errors import NoAcceptingRunError, TubeMPCError
+from tubempc.errors import NoAcceptingRunError
 from tubempc.mitl import And, Formula, Interval, subformulas
 from tubempc.mitl.ast import Always, Eventually, Next, Until
 from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, tick_of
-from tubempc.planning.semantics import LassoRun
+from tubempc.planning.exact import SearchLimitError, exact_search
+from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
+from tubempc.planning.semantics import LassoRun, holds
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
 
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
            "find_run"]
 
 DEFAULT_MAX_STATES = 2_000_000
-MOVE, DWELL, STAY = "move", "dwell", "stay"
 SILENT, OBSERVED = "silent", "observed"
 DWELL_MODES = (SILENT, OBSERVED)
+FAST = "first attempt, proved optimal by the exact search"
+EXACT = "exact search"
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
-
-
-class SearchLimitError(TubeMPCError, RuntimeError):
-    """The product grew past ``max_states`` before the search could decide."""
-
-
-class _Product:
-    """Explored part of the product (real state of one search)."""
-
-    def __init__(self) -> None:
-        self.index: dict[tuple[int, State], int] = {}
-        self.region: list[int] = []
-        self.obl: list[State] = []
-        self.best: list[tuple[int, int]] = []
-        self.parent: list[tuple[int, int, str, int] | None] = []  # (state, delta, kind, silent wait)
-        self.settled: list[bool] = []
-        self.pruned: list[bool] = []
-        self.edges: list[list[tuple[int, int, str, int]]] = []  # (state, delta, kind, silent wait)
-        self.classes: list[int] = []  # label class of each region index
-
-    def get(self, region: int, obl: State) -> tuple[int, bool]:
-        key = (region, obl)
-        sid = self.index.get(key)
-        if sid is not None:
-            return sid, False
-        sid = len(self.region)
-        self.index[key] = sid
-        self.region.append(region)
-        self.obl.append(obl)
-        self.best.append((1 << 62, 1 << 62))
-        self.parent.append(None)
-        self.settled.append(False)
-        self.pruned.append(False)
-        self.edges.append([])
-        return sid, True
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,8 +74,9 @@ class SearchResult:
     waits_s: tuple[Fraction, ...]
     closing_wait_s: Fraction
     dwell: str
+    method: str
     automaton: TimedAutomaton = field(compare=False, repr=False)
-    product: _Product = field(compare=False, repr=False)
+    product: Product = field(compare=False, repr=False)
     region_names: tuple[str, ...] = field(compare=False, repr=False, default=())
 
     def explored(self) -> nx.DiGraph:
@@ -140,25 +109,62 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     tick = tick_of([Fraction(w) for w in weights] + consts, refine=2 if wait else 1)
     aut = compile_formula(formula, tick)
     silent = wait and dwell == SILENT
-    result = _search(wts, aut, init, wait=wait, silent=silent, prune=wait, max_states=max_states)
-    if result is None and wait:
-        result = _search(wts, aut, init, wait=wait, silent=silent, prune=False, max_states=max_states)
+    names = sorted(wts.nodes)
+    idx = {n: i for i, n in enumerate(names)}
+    cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
+    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in names}
+    states = 0
+    if not wait:
+        # without waiting the product is finite and explored completely: the event-driven search is exact
+        result = _search(wts, aut, init, wait=False, silent=False, prune=False, max_states=max_states)
+        method = EXACT
+        if result is not None:
+            states = len(result[4].region)
+    else:
+        # a fast first attempt (event-driven waits, pruning by dominance); it may miss runs or find a late one, so
+        # the exact search (delay transitions) runs below its cost: it finds a cheaper run or proves there is none
+        fast: Found | None
+        try:
+            fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
+        except SearchLimitError:
+            fast = None
+        if fast is not None:
+            states += len(fast[4].region)
+            if not holds(formula, fast[0], labels):
+                fast = None  # never trust the first attempt's answer unchecked
+        bound = math.inf if fast is None else float(_cost(fast[0]) / tick)
+        adj = _adjacency(wts, names, idx, tick)
+        exact, exact_states = exact_search(aut, names, cls, adj, idx[init], mode=SILENT if silent else OBSERVED,
+                                           bound=bound, max_states=max_states)
+        states += exact_states
+        method = FAST if exact is None and fast is not None else EXACT
+        result = exact if exact is not None else fast
     if result is None:
         if diagnose:
             raise _no_run_error(wts, formula, wait=wait, dwell=dwell, initial=init, max_states=max_states)
         raise NoAcceptingRunError(f"no timed run of the WTS satisfies {formula}", obligation=str(formula))
     run, kinds, waits, closing, prod, expanded = result
-    return SearchResult(run=run, kinds=kinds, tick_s=tick, states=len(prod.region), expanded=expanded,
+    return SearchResult(run=run, kinds=kinds, tick_s=tick, states=states, expanded=expanded,
                         seconds=time.perf_counter() - start, waits_s=tuple(w * tick for w in waits),
                         closing_wait_s=closing * tick, dwell=(dwell if wait else "none"), automaton=aut,
-                        product=prod, region_names=tuple(sorted(wts.nodes)))
+                        product=prod, region_names=tuple(names), method=method)
 
 
-_Found = tuple[LassoRun, tuple[str, ...], tuple[int, ...], int, _Product, int]
+def _cost(run: LassoRun) -> Fraction:
+    """The cost the search minimises: the first position of the repeating part, or the last of a finite run."""
+    return run.times[run.loop_start if run.loop_start is not None else run.size - 1]
+
+
+def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fraction) -> list[list[tuple[int, int]]]:
+    adj: list[list[tuple[int, int]]] = [[] for _ in names]
+    for a, b, d in wts.edges(data=True):
+        if a != b:
+            adj[idx[a]].append((idx[b], int(Fraction(d[WEIGHT]) / tick)))
+    return adj
 
 
 def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, silent: bool, prune: bool,
-            max_states: int) -> _Found | None:
+            max_states: int) -> Found | None:
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
     cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
@@ -169,7 +175,7 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
         q = Fraction(d[WEIGHT]) / aut.tick
         adj[idx[a]].append((idx[b], int(q)))
     arrivals = [[(w, cls[j]) for j, w in row] for row in adj]
-    prod = _Product()
+    prod = Product()
     prod.classes = cls
     heap: list[tuple[int, int, int]] = []
     r0 = idx[init]
@@ -237,8 +243,10 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                 prod.parent[v] = (sid, d, kind, waited)
                 heapq.heappush(heap, (cand[0], cand[1], v))
         if len(prod.region) > max_states:
-            raise SearchLimitError(f"the product grew past max_states={max_states} states while searching for "
-                                   f"{aut.formula}; raise the limit or simplify the formula")
+            raise SearchLimitError(f"the search reached its limit of {max_states} product states while searching "
+                                   f"for {aut.formula}, before it found a run or proved that none exists; raise the "
+                                   f"limit (tubempc plan --max-states N, or max_states=N in Python) or shorten the "
+                                   f"formula's windows", limit=max_states)
     return _best_lasso(prod, aut, nb=nb, names=names, tick=aut.tick, expanded=expanded)
 
 
@@ -247,7 +255,7 @@ def _stay_ticks(aut: TimedAutomaton) -> int:
     return max([n.cap for n in aut.nodes] + [1])
 
 
-def _dominated(aut: TimedAutomaton, prod: _Product, buckets: dict[tuple[int, tuple[int, ...]], list[int]], *,
+def _dominated(aut: TimedAutomaton, prod: Product, buckets: dict[tuple[int, tuple[int, ...]], list[int]], *,
                sid: int, t: int, cls: int, silent: bool) -> bool:
     r, obl = prod.region[sid], prod.obl[sid]
     key = (r, tuple(sorted({nid for nid, _ in obl})))
@@ -267,8 +275,8 @@ def _dominated(aut: TimedAutomaton, prod: _Product, buckets: dict[tuple[int, tup
     return False
 
 
-def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str], tick: Fraction,
-                expanded: int) -> _Found | None:
+def _best_lasso(prod: Product, aut: TimedAutomaton, *, nb: int, names: list[str], tick: Fraction,
+                expanded: int) -> Found | None:
     g = nx.DiGraph()
     live = [s for s in range(len(prod.region)) if prod.settled[s] and not prod.pruned[s]]
     alive = set(live)
@@ -293,7 +301,7 @@ def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str
         return None
     _, entry, comp = best
     sub = g.subgraph(comp)
-    cycle = _accepting_cycle(sub, entry, aut, prod, nb)
+    cycle = accepting_cycle(sub, entry, aut, prod, nb)
     if len(cycle) == 1 and cycle[0][2] == DWELL:
         # staying put: prefer one long dwell period (ages saturate at the caps) over a one-tick repetition
         slow = _stay_ticks(aut)
@@ -301,85 +309,11 @@ def _best_lasso(prod: _Product, aut: TimedAutomaton, *, nb: int, names: list[str
         cls = prod.classes[prod.region[entry]]
         if obl in aut.step(obl, slow, cls):
             cycle = [(entry, slow, DWELL, 0)]
-    prefix: list[tuple[int, int, str, int]] = []  # (state, delta, kind, wait) back to the initial state
-    cur = entry
-    while (p := prod.parent[cur]) is not None:
-        prefix.append((cur, p[1], p[2], p[3]))
-        cur = p[0]
-    prefix.reverse()
-    regions = [names[prod.region[cur]]]
-    times = [Fraction(0)]
-    kinds = ["start"]
-    waits = [0]
-    t = 0
-    for s, d, kind, waited in prefix:
-        t += d
-        regions.append(names[prod.region[s]])
-        times.append(t * tick)
-        kinds.append(kind)
-        waits.append(waited)
-    if len(cycle) == 1 and cycle[0][2] == STAY:
-        # a silent stay forever in the last region: a finite run (no further position)
-        run = LassoRun(tuple(regions), tuple(times))
-        return run, tuple(kinds), tuple(waits), 0, prod, expanded
-    loop_start = len(regions) - 1
-    period = 0
-    closing = 0
-    for k, (s, d, kind, waited) in enumerate(cycle):
-        period += d
-        if k == len(cycle) - 1:
-            closing = waited
-            break  # the last step returns to the loop's first position
-        t += d
-        regions.append(names[prod.region[s]])
-        times.append(t * tick)
-        kinds.append(kind)
-        waits.append(waited)
-    run = LassoRun(tuple(regions), tuple(times), loop_start=loop_start, period=period * tick)
-    return run, tuple(kinds), tuple(waits), closing, prod, expanded
+    start, prefix = prod.prefix(entry)
+    return assemble(prod, names, tick, start=start, prefix=prefix, cycle=cycle, expanded=expanded)
 
 
-def _accepting_cycle(sub: nx.DiGraph, entry: int, aut: TimedAutomaton, prod: _Product,
-                     nb: int) -> list[tuple[int, int, str, int]]:
-    """A cycle from ``entry`` back to it through one accepting state per Büchi set: [(state, delta, kind, wait)].
-
-    A silent stay (a ``stay`` self-loop of a final state) is preferred when the entry has one."""
-    if sub.has_edge(entry, entry) and sub.edges[entry, entry]["kind"] == STAY:
-        return [(entry, sub.edges[entry, entry]["d"], STAY, 0)]
-    steps: list[tuple[int, int, str, int]] = []
-    cur = entry
-    for b in range(nb):
-        if aut.accepting(prod.obl[cur])[b] or any(aut.accepting(prod.obl[s])[b] for s, _, _, _ in steps):
-            continue
-        dist, paths = nx.single_source_dijkstra(sub, cur, weight="d")
-        target = min((s for s in sub if aut.accepting(prod.obl[s])[b]), key=lambda s: (dist.get(s, 1 << 62), s))
-        steps.extend(_path_steps(sub, paths[target]))
-        cur = target
-    if cur != entry or not steps:
-        if not steps:
-            best: tuple[int, list[int]] | None = None
-            for v in sub.successors(entry):
-                if v == entry:
-                    cand = (sub.edges[entry, entry]["d"], [entry, entry])
-                else:
-                    d, back = nx.single_source_dijkstra(sub, v, entry, weight="d")
-                    cand = (sub.edges[entry, v]["d"] + d, [entry, *back])
-                if best is None or cand[0] < best[0]:
-                    best = cand
-            if best is None:
-                raise RuntimeError("an accepting component without a cycle")  # excluded by the caller
-            steps.extend(_path_steps(sub, best[1]))
-        else:
-            steps.extend(_path_steps(sub, nx.dijkstra_path(sub, cur, entry, weight="d")))
-    return steps
-
-
-def _path_steps(sub: nx.DiGraph, path: list[int]) -> list[tuple[int, int, str, int]]:
-    return [(b, sub.edges[a, b]["d"], sub.edges[a, b]["kind"], sub.edges[a, b]["wait"])
-            for a, b in itertools.pairwise(path)]
-
-
-def _explored_graph(prod: _Product, aut: TimedAutomaton, names: list[str], tick: Fraction) -> nx.DiGraph:
+def _explored_graph(prod: Product, aut: TimedAutomaton, names: list[str], tick: Fraction) -> nx.DiGraph:
     g = nx.DiGraph()
     for s in range(len(prod.region)):
         if not prod.settled[s]:
@@ -409,25 +343,28 @@ def export_dot(explored: nx.DiGraph) -> str:
 
 def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, dwell: str, initial: str,
                   max_states: int) -> NoAcceptingRunError:
-    """Name the conjunct that cannot be met (alone, or together with the ones before it)."""
+    """The proved 'no run' error; it names a conjunct (alone, or together with the ones before it) only when the
+    exact search proves that conjunct set unsatisfiable on its own."""
     conjuncts = list(formula.args) if isinstance(formula, And) else [formula]
     mode = f"with {dwell} waiting" if wait else "without waiting (--no-wait)"
 
-    def satisfiable(f: Formula) -> bool:
+    def unsatisfiable(f: Formula) -> bool:
         try:
             find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=max_states, diagnose=False)
         except NoAcceptingRunError:
-            return False
-        return True
+            return True
+        except SearchLimitError:
+            return False  # undecided: name nothing
+        return False
 
     if len(conjuncts) > 1:
         for c in conjuncts:
-            if not satisfiable(c):
+            if unsatisfiable(c):
                 return NoAcceptingRunError(f"no timed run of the WTS {mode} satisfies {formula}: the obligation "
                                            f"{c} cannot be met from {initial}", obligation=str(c))
         for k in range(2, len(conjuncts) + 1):
-            part = And(tuple(conjuncts[:k]))
-            if not satisfiable(part):
+            # the whole conjunction is already proved unsatisfiable by the caller's exact search
+            if k == len(conjuncts) or unsatisfiable(And(tuple(conjuncts[:k]))):
                 others = " & ".join(str(c) for c in conjuncts[: k - 1])
                 return NoAcceptingRunError(f"no timed run of the WTS {mode} satisfies {formula}: the obligation "
                                            f"{conjuncts[k - 1]} cannot be met together with {others}",

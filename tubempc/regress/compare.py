@@ -17,11 +17,14 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from tubempc.errors import TubeMPCError
 from tubempc.regress.runner import RunOutcome
 from tubempc.regress.suite import Suite, Tolerance, Tolerances
+
+if TYPE_CHECKING:
+    from verify.junit import JUnitSuite
 
 __all__ = [
     "BASELINE_FORMAT",
@@ -221,26 +224,26 @@ def write_baseline(path: str | Path, suite: Suite, outcomes: Iterable[RunOutcome
     return p
 
 
-def comparison_junit(comparison: Comparison, outcomes: Iterable[RunOutcome], *, suite_name: str) -> Any:
-    """``<testsuites>`` with one test case per run; a regressed or failing run carries a ``failure``."""
-    import xml.etree.ElementTree as ET
+def comparison_junit(comparison: Comparison, outcomes: Iterable[RunOutcome], *, suite_name: str) -> JUnitSuite:
+    """One test case per run (the shared writer ``verify.junit``): a regressed or new run carries a ``failure`` of
+    type ``regression``, a run that could not be run an ``error``."""
+    from verify.junit import JUnitCase, JUnitSuite
 
-    outcomes = list(outcomes)
     problems: dict[str, list[DiffRow]] = {}
     for row in comparison.rows:
         if row.status in ("regressed", "new", "error"):
             problems.setdefault(row.run_id, []).append(row)
-    failures = sum(1 for o in outcomes if o.run_id in problems)
-    root = ET.Element("testsuites", {"tests": str(len(outcomes)), "failures": str(failures), "errors": "0"})
-    suite = ET.SubElement(root, "testsuite", {"name": f"regress.{suite_name}", "tests": str(len(outcomes)),
-                                              "failures": str(failures), "errors": "0", "skipped": "0"})
+    name = f"regress.{suite_name}"
+    cases = []
     for out in outcomes:
-        case = ET.SubElement(suite, "testcase", {"classname": f"regress.{suite_name}", "name": out.run_id,
-                                                 "time": f"{out.elapsed_s:.3f}"})
         rows = problems.get(out.run_id)
-        if rows:
-            node = ET.SubElement(case, "failure", {"message": f"{len(rows)} metric(s) regressed",
-                                                   "type": "regression"})
-            node.text = "\n".join(r.describe() for r in rows)
-    ET.indent(root)
-    return root
+        text = "\n".join(r.describe() for r in rows or ())
+        if out.error is not None:
+            cases.append(JUnitCase(out.run_id, name, "error", "run", f"the run failed: {out.error}", text,
+                                   out.elapsed_s))
+        elif rows:
+            cases.append(JUnitCase(out.run_id, name, "failure", "regression", f"{len(rows)} metric(s) regressed",
+                                   text, out.elapsed_s))
+        else:
+            cases.append(JUnitCase(out.run_id, name, time_s=out.elapsed_s))
+    return JUnitSuite(name, tuple(cases), time_s=sum(c.time_s for c in cases))

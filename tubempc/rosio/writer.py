@@ -26,7 +26,7 @@ from rosbags.typesys import Stores, get_typestore
 from tubempc import __version__
 from tubempc.control.closed_loop import ClosedLoopResult
 from tubempc.errors import LogWriteError
-from tubempc.scenario import Scenario, dump_scenario
+from tubempc.scenario import DEFAULT_TOPICS, Scenario, dump_scenario
 
 __all__ = ["POSE_FRAME", "TIME0_NS", "metadata_document", "write_log"]
 
@@ -93,15 +93,19 @@ def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, seri
                                                   orientation=quat_t(x=0.0, y=0.0, z=math.sin(half),
                                                                      w=math.cos(half))))
 
+    # a simulated run always has a nominal state and commands: a scenario that names no topic for them gets the
+    # default names (certifying the log with that scenario then leaves the tube and input checks unselected)
+    nominal_topic = topics.nominal or DEFAULT_TOPICS.nominal or "/nexus/nominal_pose"
+    cmd_topic = topics.cmd_vel or DEFAULT_TOPICS.cmd_vel or "/nexus/cmd_vel"
     for i, stamp in enumerate(stamps.tolist()):
         out.append((topics.pose, "geometry_msgs/msg/PoseStamped", stamp,
                     serialize(pose(i, stamp, result.x_measured[i]), "geometry_msgs/msg/PoseStamped")))
-        out.append((topics.nominal, "geometry_msgs/msg/PoseStamped", stamp,
+        out.append((nominal_topic, "geometry_msgs/msg/PoseStamped", stamp,
                     serialize(pose(i, stamp, result.x_hat[i]), "geometry_msgs/msg/PoseStamped")))
         ub = result.u_body[i]
         twist = twist_t(linear=vec_t(x=float(ub[0]), y=float(ub[1]), z=0.0), angular=vec_t(x=0.0, y=0.0,
                                                                                               z=float(ub[2])))
-        out.append((topics.cmd_vel, "geometry_msgs/msg/Twist", stamp, serialize(twist, "geometry_msgs/msg/Twist")))
+        out.append((cmd_topic, "geometry_msgs/msg/Twist", stamp, serialize(twist, "geometry_msgs/msg/Twist")))
     for rec in result.solver:
         doc = {"t_s": rec.t_s, "status": rec.status, "success": rec.success, "iterations": rec.iterations,
                "solve_time_s": rec.solve_time_s, "backup": rec.backup, "target": rec.target}

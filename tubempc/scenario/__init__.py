@@ -10,6 +10,8 @@ from tubempc.scenario.loader import (
     scenario_from_dict,
 )
 from tubempc.scenario.model import (
+    CHECK_NAMES,
+    DEFAULT_TOPICS,
     DisturbanceSpec,
     DynamicsSpec,
     InputLimits,
@@ -18,6 +20,7 @@ from tubempc.scenario.model import (
     Region,
     RobotSpec,
     Scenario,
+    SignalSpec,
     Topics,
     TubeSpec,
     Workspace,
@@ -25,6 +28,8 @@ from tubempc.scenario.model import (
 
 __all__ = [
     "BUILTIN_SCENARIOS",
+    "CHECK_NAMES",
+    "DEFAULT_TOPICS",
     "DisturbanceSpec",
     "DynamicsSpec",
     "InputLimits",
@@ -34,6 +39,7 @@ __all__ = [
     "RobotSpec",
     "Scenario",
     "ScenarioError",
+    "SignalSpec",
     "Topics",
     "TubeSpec",
     "Workspace",

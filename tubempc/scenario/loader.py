@@ -79,7 +79,9 @@ def load_scenario(path: str | Path) -> Scenario:
             raise ScenarioError("not a regular file", source=str(p))
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ScenarioError("file not found", source=str(p)) from None
+        raise ScenarioError(f"file not found, and not a built-in scenario name (built-in: "
+                            f"{', '.join(sorted(BUILTIN_SCENARIOS))}; see `tubempc scenario list`)",
+                            source=str(p)) from None
     except (OSError, UnicodeDecodeError) as err:
         raise ScenarioError(f"cannot read the file ({err.__class__.__name__}: {err})", source=str(p)) from None
     return _from_text(text, source=str(p))

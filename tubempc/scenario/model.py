@@ -14,9 +14,13 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from tubempc.errors import ScenarioError
 from tubempc.mitl import Formula, atoms, parse
+from tubempc.scenario.polygon import polygon_bounds, polygon_problem
 
 __all__ = [
+    "CHECK_NAMES",
+    "DEFAULT_TOPICS",
     "DisturbanceSpec",
     "DynamicsSpec",
     "InputLimits",
@@ -25,6 +29,7 @@ __all__ = [
     "Region",
     "RobotSpec",
     "Scenario",
+    "SignalSpec",
     "Topics",
     "TubeSpec",
     "Workspace",
@@ -34,28 +39,65 @@ PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Triple = tuple[PositiveFloat, PositiveFloat, PositiveFloat]
+Point = tuple[FiniteFloat, FiniteFloat]
 
 _ATOM_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 
 
 class _Frozen(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=False)
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=False, populate_by_name=True)
 
 
 class Workspace(_Frozen):
-    """Axis-aligned box ``x in [x0, x1], y in [y0, y1]`` in metres."""
+    """Axis-aligned box ``x in [x0, x1], y in [y0, y1]`` in metres, or a simple polygon ``polygon: [[x, y], ...]``.
 
-    x: tuple[FiniteFloat, FiniteFloat]
-    y: tuple[FiniteFloat, FiniteFloat]
+    ``x`` and ``y`` always read as the bounding box (the box itself for a box workspace)."""
+
+    box_x: tuple[FiniteFloat, FiniteFloat] | None = Field(None, alias="x")
+    box_y: tuple[FiniteFloat, FiniteFloat] | None = Field(None, alias="y")
+    polygon: tuple[Point, ...] | None = None
 
     @model_validator(mode="after")
-    def _ordered(self) -> Workspace:
-        for axis, (lo, hi) in (("x", self.x), ("y", self.y)):
+    def _shape(self) -> Workspace:
+        if self.polygon is not None:
+            if self.box_x is not None or self.box_y is not None:
+                raise ValueError("give either a box (x, y) or a polygon, not both")
+            problem = polygon_problem(self.polygon)
+            if problem:
+                raise ValueError(f"polygon: {problem}")
+            return self
+        if self.box_x is None or self.box_y is None:
+            raise ValueError("give a box (both x: [x0, x1] and y: [y0, y1]) or a polygon: [[x, y], ...]")
+        for axis, (lo, hi) in (("x", self.box_x), ("y", self.box_y)):
             if not lo < hi:
                 raise ValueError(f"{axis}: lower bound {lo} must be below upper bound {hi}")
         return self
 
+    @property
+    def is_box(self) -> bool:
+        return self.polygon is None
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(x_min, y_min, x_max, y_max)``."""
+        if self.polygon is not None:
+            return polygon_bounds(self.polygon)
+        if self.box_x is None or self.box_y is None:  # excluded by the validator
+            raise ScenarioError("neither a box nor a polygon", field="workspace")
+        return self.box_x[0], self.box_y[0], self.box_x[1], self.box_y[1]
+
+    @property
+    def x(self) -> tuple[float, float]:
+        b = self.bounds
+        return b[0], b[2]
+
+    @property
+    def y(self) -> tuple[float, float]:
+        b = self.bounds
+        return b[1], b[3]
+
     def contains_disc(self, center: tuple[float, float], radius_m: float) -> bool:
+        """Box workspaces only (the planner's rule); a polygon workspace is refused by ``planning_problems``."""
         cx, cy = center
         return (self.x[0] + radius_m <= cx <= self.x[1] - radius_m) and (
             self.y[0] + radius_m <= cy <= self.y[1] - radius_m
@@ -63,17 +105,57 @@ class Workspace(_Frozen):
 
 
 class Region(_Frozen):
-    """A circular region of interest ``M(center, radius)``. ``unsafe`` marks an obstacle."""
+    """A region of interest: a disc ``M(center, radius)`` or a simple polygon. ``unsafe`` marks an obstacle."""
 
     name: Annotated[str, Field(pattern=_ATOM_PATTERN)]
-    center: tuple[FiniteFloat, FiniteFloat]
-    radius: PositiveFloat
+    disc_center: tuple[FiniteFloat, FiniteFloat] | None = Field(None, alias="center")
+    disc_radius: PositiveFloat | None = Field(None, alias="radius")
+    polygon: tuple[Point, ...] | None = None
     labels: tuple[Annotated[str, Field(pattern=_ATOM_PATTERN)], ...] = ()
     unsafe: bool = False
+
+    @model_validator(mode="after")
+    def _shape(self) -> Region:
+        if self.polygon is not None:
+            if self.disc_center is not None or self.disc_radius is not None:
+                raise ValueError("give either a disc (center, radius) or a polygon, not both")
+            problem = polygon_problem(self.polygon)
+            if problem:
+                raise ValueError(f"polygon: {problem}")
+        elif self.disc_center is None or self.disc_radius is None:
+            raise ValueError("give a disc (center: [x, y] and radius) or a polygon: [[x, y], ...]")
+        return self
+
+    @property
+    def is_disc(self) -> bool:
+        return self.polygon is None
+
+    @property
+    def center(self) -> tuple[float, float]:
+        """Centre of a disc region (the planner's regions are discs: ``Scenario.planning_problems``)."""
+        if self.disc_center is None:
+            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
+                                field=f"regions.{self.name}")
+        return self.disc_center
+
+    @property
+    def radius(self) -> float:
+        if self.disc_radius is None:
+            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
+                                field=f"regions.{self.name}")
+        return self.disc_radius
 
     @property
     def radius_m(self) -> float:
         return self.radius
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(x_min, y_min, x_max, y_max)`` of the region."""
+        if self.polygon is not None:
+            return polygon_bounds(self.polygon)
+        (cx, cy), r = self.center, self.radius
+        return cx - r, cy - r, cx + r, cy + r
 
 
 class RobotSpec(_Frozen):
@@ -84,9 +166,31 @@ class RobotSpec(_Frozen):
 
 
 class InputLimits(_Frozen):
-    """Box input set ``|u_i| <= max_abs[i]`` for (vx, vy, wz)."""
+    """The input model and its box.
 
-    max_abs: Triple
+    ``holonomic`` (default): ``|u_i| <= max_abs[i]`` for (vx, vy, wz) in the body frame (the paper's mecanum robot);
+    ``unicycle`` (differential drive): ``max_abs = [v, w]`` bounds linear.x and angular.z, and a linear.y beyond
+    ``lateral_tolerance`` (m/s) is a violation (a differential drive cannot move sideways).
+    """
+
+    model: Literal["holonomic", "unicycle"] = "holonomic"
+    max_abs: tuple[PositiveFloat, ...]
+    lateral_tolerance: NonNegFloat = 0.001
+
+    @model_validator(mode="after")
+    def _arity(self) -> InputLimits:
+        want = 3 if self.model == "holonomic" else 2
+        names = "[vx, vy, wz]" if want == 3 else "[v, w]"
+        if len(self.max_abs) != want:
+            raise ValueError(f"max_abs: the {self.model} model takes {want} bounds {names}, got {len(self.max_abs)}")
+        return self
+
+    @property
+    def linear_speed_mps(self) -> float:
+        """Largest speed of the robot's centre the input box allows."""
+        if self.model == "unicycle":
+            return self.max_abs[0]
+        return math.hypot(self.max_abs[0], self.max_abs[1])
 
 
 class DisturbanceSpec(_Frozen):
@@ -135,19 +239,56 @@ class DynamicsSpec(_Frozen):
 
 
 class Topics(_Frozen):
+    """Topic names. ``nominal`` and ``cmd_vel`` are optional: a check whose topic is not named is not selected.
+
+    A scenario without a ``topics`` block gets the Nexus defaults (``DEFAULT_TOPICS``); inside a ``topics`` block,
+    an omitted ``nominal`` or ``cmd_vel`` means "not logged"."""
+
     pose: str = "/qualisys/nexus/pose"
-    cmd_vel: str = "/nexus/cmd_vel"
-    nominal: str = "/nexus/nominal_pose"
+    cmd_vel: str | None = None
+    nominal: str | None = None
     solver: str = "/nexus/mpc_status"
     metadata: str = "/tubempc/metadata"
     tf_child_frame: str | None = None  # when the pose comes from /tf: the child frame of the robot
 
     @field_validator("pose", "cmd_vel", "nominal", "solver", "metadata")
     @classmethod
-    def _topic_name(cls, v: str) -> str:
-        if not v.startswith("/") or any(c.isspace() for c in v):
-            raise ValueError(f"topic {v!r} must start with '/' and contain no spaces")
+    def _topic_name(cls, v: str | None) -> str | None:
+        if v is not None:
+            _check_topic(v)
         return v
+
+
+def _check_topic(v: str) -> str:
+    if not v.startswith("/") or any(c.isspace() for c in v):
+        raise ValueError(f"topic {v!r} must start with '/' and contain no spaces")
+    return v
+
+
+DEFAULT_TOPICS = Topics(cmd_vel="/nexus/cmd_vel", nominal="/nexus/nominal_pose")
+
+#: checks the certifier can run; ``spec`` covers both semantics (timed run and trajectory)
+CHECK_NAMES = ("spec", "obstacle_clearance", "workspace", "tube", "input_box")
+CheckName = Literal["spec", "obstacle_clearance", "workspace", "tube", "input_box"]
+
+
+class SignalSpec(_Frozen):
+    """An atomic proposition over a message field: ``field op value`` on ``topic`` (sample-and-hold).
+
+    ``field``: a path into the message (``twist.twist.linear.x``, ``position[2]``); ``rate_hz``: the topic's
+    expected rate (default: its median rate in the log); a gap longer than 1.5 periods makes the atom unknown."""
+
+    topic: str
+    field: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*(\.[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*)*$")]
+    op: Literal["<", "<=", ">", ">="]
+    value: FiniteFloat
+    unit: str | None = None
+    rate_hz: PositiveFloat | None = None
+
+    @field_validator("topic")
+    @classmethod
+    def _topic_name(cls, v: str) -> str:
+        return _check_topic(v)
 
 
 class MocapSpec(_Frozen):
@@ -156,27 +297,50 @@ class MocapSpec(_Frozen):
 
 
 class Scenario(_Frozen):
-    """A whole mission: workspace, regions, robot, limits, tube and MPC parameters, the MITL spec, topics."""
+    """A whole mission: workspace, regions, robot, limits, tube and MPC parameters, the MITL spec, topics.
+
+    ``disturbance``, ``tube``, ``mpc`` and ``initial_region`` are needed by the planner and the controller only:
+    a scenario for certification may omit them (reading one that is absent raises ``ScenarioError`` naming it;
+    ``require_planning`` checks them all at once)."""
 
     name: str
     workspace: Workspace
     robot: RobotSpec
     inputs: InputLimits
-    disturbance: DisturbanceSpec
-    tube: TubeSpec
-    mpc: MpcSpec
+    disturbance_spec: DisturbanceSpec | None = Field(None, alias="disturbance")
+    tube_spec: TubeSpec | None = Field(None, alias="tube")
+    mpc_spec: MpcSpec | None = Field(None, alias="mpc")
     regions: tuple[Region, ...]
-    initial_region: str
+    initial_region_name: str | None = Field(None, alias="initial_region")
     spec: str
-    topics: Topics = Topics()
+    topics: Topics = DEFAULT_TOPICS
     dynamics: DynamicsSpec = DynamicsSpec()
     mocap: MocapSpec = MocapSpec()
     initial_heading: FiniteFloat = 0.0  # radians
+    checks: tuple[CheckName, ...] | None = None  # certifier checks to run (default: every check whose data is named)
+    signals: dict[Annotated[str, Field(pattern=_ATOM_PATTERN)], SignalSpec] = Field(default_factory=dict)
+    clock_offsets: dict[str, FiniteFloat] = Field(default_factory=dict)  # topic -> seconds added to its header
 
     @field_validator("spec")
     @classmethod
     def _spec_parses(cls, v: str) -> str:
         parse(v)  # SpecSyntaxError is a ValueError: pydantic reports it under the field "spec"
+        return v
+
+    @field_validator("clock_offsets")
+    @classmethod
+    def _offset_topics(cls, v: dict[str, float]) -> dict[str, float]:
+        for topic in v:
+            _check_topic(topic)
+        return v
+
+    @field_validator("checks")
+    @classmethod
+    def _checks_unique(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        if v is not None and not v:
+            raise ValueError("name at least one check (or leave checks out: every check whose data is named)")
+        if v is not None and len(set(v)) != len(v):
+            raise ValueError(f"a check is listed twice in {list(v)}")
         return v
 
     @model_validator(mode="after")
@@ -187,31 +351,125 @@ class Scenario(_Frozen):
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"regions: duplicate region name(s) {', '.join(dupes)}")
-        if self.initial_region not in names:
-            raise ValueError(f"initial_region: {self.initial_region!r} is not one of the regions {names}")
-        eta = self.robot.radius
-        for i, r in enumerate(self.regions):
-            cx, cy = r.center
-            ws = self.workspace
-            if not (ws.x[0] + r.radius <= cx <= ws.x[1] - r.radius and ws.y[0] + r.radius <= cy <= ws.y[1] - r.radius):
-                raise ValueError(f"regions[{i}] ({r.name}): the region does not fit inside the workspace")
-            if not r.unsafe and r.radius <= eta:
-                raise ValueError(
-                    f"regions[{i}] ({r.name}): radius {r.radius} m cannot contain the robot disc of radius {eta} m"
-                )
-        for i, a in enumerate(self.regions):
-            for b in self.regions[i + 1 :]:
-                d = math.dist(a.center, b.center)
-                if d < a.radius + b.radius:
-                    raise ValueError(f"regions: {a.name} and {b.name} overlap (centres {d:.3f} m apart)")
+        if self.initial_region_name is not None and self.initial_region_name not in names:
+            raise ValueError(f"initial_region: {self.initial_region_name!r} is not one of the regions {names}")
         known = {lab for r in self.regions for lab in r.labels}
+        clash = sorted(known & set(self.signals))
+        if clash:
+            raise ValueError(f"signals: {', '.join(clash)} is also a region label (an atom has one meaning)")
+        known |= set(self.signals)
         unknown = sorted(atoms(self.formula) - known)
         if unknown:
-            raise ValueError(f"spec: atomic proposition(s) {', '.join(unknown)} label no region (known: "
-                             f"{', '.join(sorted(known)) or 'none'})")
-        if self.initial.unsafe:
-            raise ValueError(f"initial_region: {self.initial_region} is unsafe")
+            raise ValueError(f"spec: atomic proposition(s) {', '.join(unknown)} label no region and name no signal "
+                             f"(known: {', '.join(sorted(known)) or 'none'})")
+        if self.initial_region_name is not None and self.region(self.initial_region_name).unsafe:
+            raise ValueError(f"initial_region: {self.initial_region_name} is unsafe")
         return self
+
+    # ---- fields only the planner and the controller need ------------------------------------------------------
+    def _required(self, field: str) -> ScenarioError:
+        return ScenarioError("required for planning and simulation but missing from the scenario "
+                             "(certification does not need it)", source=self.name, field=field)
+
+    @property
+    def disturbance(self) -> DisturbanceSpec:
+        if self.disturbance_spec is None:
+            raise self._required("disturbance")
+        return self.disturbance_spec
+
+    @property
+    def tube(self) -> TubeSpec:
+        if self.tube_spec is None:
+            raise self._required("tube")
+        return self.tube_spec
+
+    @property
+    def mpc(self) -> MpcSpec:
+        if self.mpc_spec is None:
+            raise self._required("mpc")
+        return self.mpc_spec
+
+    @property
+    def initial_region(self) -> str:
+        if self.initial_region_name is None:
+            raise self._required("initial_region")
+        return self.initial_region_name
+
+    def planning_problems(self) -> list[tuple[str, str]]:
+        """``(field, problem)`` for everything that keeps the planner and controller from using this scenario:
+        missing fields, a unicycle input model, polygon shapes, overlapping regions, regions that do not fit inside
+        the workspace or cannot contain the robot. Empty for a scenario the planner can abstract."""
+        out: list[tuple[str, str]] = []
+        for field, value in (("disturbance", self.disturbance_spec), ("tube", self.tube_spec),
+                             ("mpc", self.mpc_spec), ("initial_region", self.initial_region_name)):
+            if value is None:
+                out.append((field, "required for planning and simulation but missing from the scenario"))
+        if self.inputs.model != "holonomic":
+            out.append(("inputs.model", f"{self.inputs.model}: the paper's tube MPC needs a fully actuated "
+                                        "(holonomic) input model"))
+        used = sorted(atoms(self.formula) & set(self.signals))
+        if used:
+            out.append(("spec", f"signal atom(s) {', '.join(used)} can be certified but not planned for"))
+        if not self.workspace.is_box:
+            out.append(("workspace", "the planner needs a box workspace (x, y), not a polygon"))
+        eta = self.robot.radius
+        discs = [(i, r) for i, r in enumerate(self.regions) if r.disc_center is not None and r.disc_radius is not None]
+        for i, r in enumerate(self.regions):
+            if r.polygon is not None:
+                out.append((f"regions[{i}]", f"{r.name} is a polygon: the planner needs disc regions"))
+        if self.workspace.is_box:
+            for i, r in discs:
+                if not self.workspace.contains_disc(r.center, r.radius):
+                    out.append((f"regions[{i}]", f"{r.name} does not fit inside the workspace"))
+        for i, r in discs:
+            if not r.unsafe and r.radius <= eta:
+                out.append((f"regions[{i}]", f"{r.name}: radius {r.radius} m cannot contain the robot disc of "
+                                             f"radius {eta} m"))
+        for k, (_, a) in enumerate(discs):
+            for _, b in discs[k + 1 :]:
+                d = math.dist(a.center, b.center)
+                if d < a.radius + b.radius:
+                    out.append(("regions", f"{a.name} and {b.name} overlap (centres {d:.3f} m apart)"))
+        return out
+
+    def require_planning(self) -> None:
+        """Raise ``ScenarioError`` naming the first field that keeps the planner from using this scenario."""
+        problems = self.planning_problems()
+        if problems:
+            field, what = problems[0]
+            more = f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})" \
+                if len(problems) > 1 else ""
+            raise ScenarioError(f"cannot plan on this scenario: {what}{more}", source=self.name, field=field)
+
+    def certification_warnings(self) -> list[str]:
+        """Geometry the certifier accepts but a user may not mean, one line each naming the field: regions that
+        reach outside the workspace, overlap or nest, or cannot contain the robot disc."""
+        out: list[str] = []
+        ws = self.workspace
+        wx0, wy0, wx1, wy1 = ws.bounds
+        eta = self.robot.radius
+        for i, r in enumerate(self.regions):
+            x0, y0, x1, y1 = r.bounds
+            if ws.is_box and (x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1):
+                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace box")
+            elif not ws.is_box and (x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1):
+                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace polygon's bounding box")
+            if not r.unsafe:
+                w, h = x1 - x0, y1 - y0
+                if min(w, h) <= 2 * eta:
+                    out.append(f"regions[{i}] ({r.name}): too small to contain the robot disc of radius {eta} m "
+                               "(its labels can never hold under Definition 3)")
+        for i, a in enumerate(self.regions):
+            for j in range(i + 1, len(self.regions)):
+                b = self.regions[j]
+                ax0, ay0, ax1, ay1 = a.bounds
+                bx0, by0, bx1, by1 = b.bounds
+                if ax0 < bx1 and bx0 < ax1 and ay0 < by1 and by0 < ay1:
+                    if a.is_disc and b.is_disc and math.dist(a.center, b.center) >= a.radius + b.radius:
+                        continue
+                    out.append(f"regions[{i}] ({a.name}) and regions[{j}] ({b.name}) may overlap: where both "
+                               "contain the robot, both sets of labels hold")
+        return out
 
     # ---- derived, read-only views -------------------------------------------------------------------------
     @property
@@ -238,10 +496,11 @@ class Scenario(_Frozen):
 
     @property
     def max_speed_mps(self) -> float:
-        """Speed bound of the robot's centre (m/s): stated, or the norm of the linear input bounds."""
+        """Speed bound of the robot's centre (m/s): stated, or the one the input model allows (holonomic: the norm
+        of the (vx, vy) bounds; unicycle: the v bound)."""
         if self.robot.max_speed is not None:
             return self.robot.max_speed
-        return math.hypot(self.inputs.max_abs[0], self.inputs.max_abs[1])
+        return self.inputs.linear_speed_mps
 
     @property
     def g_min(self) -> float:
@@ -261,7 +520,28 @@ class Scenario(_Frozen):
         return {r.name: r.labels for r in self.regions}
 
     def to_dict(self) -> dict[str, Any]:
-        return self.model_dump(mode="json")
+        """The scenario as plain data with its file's field names. Optional fields at their defaults are left out,
+        so a scenario written before they existed keeps its form (and its ``sha256``)."""
+        data = self.model_dump(mode="json", by_alias=True)
+        for key in ("disturbance", "tube", "mpc", "initial_region", "checks"):
+            if data.get(key) is None:
+                data.pop(key, None)
+        for key in ("signals", "clock_offsets"):
+            if not data.get(key):
+                data.pop(key, None)
+        for key in ("nominal", "cmd_vel"):
+            if data["topics"].get(key) is None:
+                data["topics"].pop(key, None)
+        if data["inputs"]["model"] == "holonomic" and data["inputs"]["lateral_tolerance"] == 0.001:
+            del data["inputs"]["model"], data["inputs"]["lateral_tolerance"]
+        for shape in (data["workspace"], *data["regions"]):
+            for key in ("x", "y", "center", "radius", "polygon"):
+                if key in shape and shape[key] is None:
+                    del shape[key]
+        return data
+
+    def __hash__(self) -> int:  # the signals and clock_offsets mappings are not hashable: hash the canonical form
+        return hash(self.sha256())
 
     def sha256(self) -> str:
         """Hash of the canonical JSON form (key order and YAML formatting do not matter)."""

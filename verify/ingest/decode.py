@@ -1,7 +1,7 @@
 """Bulk decoding: raw payloads of one topic -> numpy columns, without one ``deserialize`` call per message.
 
 input: a ``RawTopic`` (message type, raw CDR or ROS1 payloads) -> output: ``PoseColumns`` (header stamp, x, y,
-quaternion) or ``TwistColumns`` (vx, vy, wz).
+quaternion) or ``TwistColumns`` (vx, vy, wz; and the header stamp of ``TwistStamped``).
 
 Fast path for fixed-layout types (geometry_msgs PoseStamped and Twist, nav_msgs Odometry): the payloads are joined
 into one buffer and the fields are read with ``np.frombuffer`` at per-message offsets computed from the frame-id
@@ -43,9 +43,10 @@ IntArray = npt.NDArray[np.int64]
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TWIST = "geometry_msgs/msg/Twist"
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 TF = "tf2_msgs/msg/TFMessage"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
-FAST_TYPES = frozenset({POSE_STAMPED, ODOMETRY, TWIST})
+FAST_TYPES = frozenset({POSE_STAMPED, ODOMETRY, TWIST, TWIST_STAMPED})
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,9 +63,12 @@ class PoseColumns:
 
 @dataclass(frozen=True, slots=True)
 class TwistColumns:
+    """Commands in reading order; ``stamp_ns`` is the header stamp of ``TwistStamped`` (None for ``Twist``)."""
+
     log_ns: IntArray
     u: FloatArray  # (n, 3): linear.x, linear.y, angular.z
     fast: bool
+    stamp_ns: IntArray | None = None
 
 
 @lru_cache(maxsize=2)
@@ -229,7 +233,35 @@ def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fa
                        arr[:, 1].copy(), arr[:, 2:6].copy(), False)
 
 
+def _twist_stamped_fast(raw: RawTopic, ros1: bool) -> TwistColumns | None:
+    """Vectorized TwistStamped decode for messages of one length (one frame id); None: use the slow path."""
+    u8, _offs, lens = _joined(raw.payloads)
+    n = len(raw.payloads)
+    size = int(lens[0])
+    if not (np.all(lens == size) and u8.shape[0] == n * size and size >= 16):
+        return None
+    mat = u8.reshape(n, size)
+    if not ros1 and not (np.all(mat[:, 0] == 0) and np.all(mat[:, 1] == 1)):
+        return None  # not little-endian CDR
+    str_len = np.ascontiguousarray(mat[:, 12:16]).view("<u4").ravel()
+    if not np.all(str_len == str_len[0]):
+        return None
+    start = 16 + int(str_len[0])
+    if not ros1:
+        start = 4 + (start - 4 + 7) // 8 * 8  # float64 alignment, relative to the encapsulation header
+    if start + 48 != size:
+        return None
+    stamps = np.ascontiguousarray(mat[:, 4:12]).view("<u4").reshape(n, 2).astype(np.int64)
+    sec = stamps[:, 0]
+    if not ros1:
+        sec = np.where(sec >= 2**31, sec - 2**32, sec)
+    block = _f64_block_uniform(u8, size, start, 6)
+    return TwistColumns(np.asarray(raw.log_ns, dtype=np.int64), block[:, [0, 1, 5]].copy(), True,
+                        sec * 10**9 + stamps[:, 1])
+
+
 def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool = True) -> TwistColumns:
+    """geometry_msgs Twist or TwistStamped (detected from the topic's type) -> (linear.x, linear.y, angular.z)."""
     log_ns = np.asarray(raw.log_ns, dtype=np.int64)
     size = 48 if ros1 else 52
     if fast and raw.msgtype == TWIST and raw.payloads:
@@ -241,16 +273,25 @@ def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool = True) -> TwistColumn
         if ok:
             block = _f64_block_uniform(u8, size, 0 if ros1 else 4, 6)
             return TwistColumns(log_ns, block[:, [0, 1, 5]].copy(), True)
-    if raw.msgtype != TWIST:
-        raise LogReadError(f"topic {raw.topic} has type {raw.msgtype}, expected geometry_msgs/msg/Twist")
+    if fast and raw.msgtype == TWIST_STAMPED and raw.payloads:
+        cols = _twist_stamped_fast(raw, ros1)
+        if cols is not None:
+            return cols
+    if raw.msgtype not in (TWIST, TWIST_STAMPED):
+        raise LogReadError(f"topic {raw.topic} has type {raw.msgtype}, expected geometry_msgs/msg/Twist or "
+                           "geometry_msgs/msg/TwistStamped")
     store = typestore(ros1)
     deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
     try:
         msgs = [deser(p, raw.msgtype) for p in raw.payloads]
     except (ValueError, KeyError, IndexError) as err:
-        raise LogReadError(f"topic {raw.topic}: cannot decode Twist ({err})") from err
+        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({err})") from err
+    stamps = None
+    if raw.msgtype == TWIST_STAMPED:
+        stamps = np.array([_stamp(m.header) for m in msgs], dtype=np.int64)
+        msgs = [m.twist for m in msgs]
     u = np.array([(m.linear.x, m.linear.y, m.angular.z) for m in msgs], dtype=np.float64).reshape(-1, 3)
-    return TwistColumns(log_ns, u, False)
+    return TwistColumns(log_ns, u, False, stamps)
 
 
 def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:

@@ -9,7 +9,6 @@ are unknown (NaN) to the formula; the counts are in ``samples``. Unusable input 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import stat
 from collections.abc import Callable
@@ -23,6 +22,7 @@ import numpy.typing as npt
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
+from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
@@ -51,7 +51,8 @@ class PoseStream:
 class LogData:
     path: str
     format: str
-    log_sha256: str
+    log_digest: str  # hex digest of the log's bytes (verify.ingest.digest)
+    digest_algorithm: str  # "blake3" or "sha256"
     time_base: str
     time0_ns: int
     pose: PoseStream
@@ -91,15 +92,10 @@ def _json_objects(raw: RawLog, topic: str) -> tuple[list[dict[str, Any]], int]:
 
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file, or of a bag directory (every file's relative name and bytes, in name order)."""
-    h = hashlib.sha256()
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-    for f in files:
-        if path.is_dir():
-            h.update(str(f.relative_to(path)).encode() + b"\0")
-        with f.open("rb") as fh:
-            while chunk := fh.read(1 << 20):
-                h.update(chunk)
-    return h.hexdigest()
+    got = digest_path(path, "sha256")
+    if got is None:  # only a cancelled digest has no value
+        raise RuntimeError(f"sha256 of {path} was not computed")
+    return got.hex
 
 
 def _pose_topic(raw: RawLog, scenario: Scenario, path: str) -> str:
@@ -148,20 +144,30 @@ def _check_path(p: Path) -> None:
 
 
 def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", salvage: bool = False,
-             time0_ns: int | None = None) -> LogData:
-    """Read and judge-ready the log at ``path``; any error of the readers on damaged bytes is a ``LogReadError``
-    (exit 3) naming the file and the problem in words, never an internal error."""
+             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
+    """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
+    a thread beside the reading. Any error of the readers on damaged bytes is a ``LogReadError`` (exit 3) naming
+    the file and the problem in words, never an internal error."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
     _check_path(p)
     try:
-        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns)
+        job = start_digest(p, digest)
+    except ValueError as err:
+        raise UnusableInputError(str(err)) from err
+    try:
+        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job)
     except VerifyError:
+        job.cancel()
         raise
     except READ_ERRORS as err:
+        job.cancel()
         fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
         raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
+    except BaseException:
+        job.cancel()
+        raise
 
 
 def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: dict[str, Any]) -> T | None:
@@ -175,9 +181,10 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
         return None
 
 
-def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None) -> LogData:
+def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
+              job: DigestJob) -> LogData:
     t = scenario.topics
-    wanted = {t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC}
+    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -231,10 +238,10 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
             problems["pose"] = base.note
 
     nominal = None
-    nraw = raw.topics.get(t.nominal)
+    nraw = raw.topics.get(t.nominal) if t.nominal is not None else None
     ncols = None
     if nraw is not None and nraw.payloads:
-        ncols = _decode_optional("nominal", t.nominal, lambda: decode_pose(nraw, raw.ros1), quality)
+        ncols = _decode_optional("nominal", nraw.topic, lambda: decode_pose(nraw, raw.ros1), quality)
     if ncols is not None:
         nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
         nst = nbase.t_ns
@@ -247,24 +254,29 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
             quality["notes"].append(f"{t.nominal}: {nbase.note}")
             problems["nominal"] = nbase.note
     elif "nominal" not in quality:
-        quality["nominal"] = {"count": 0, "missing": True}
+        quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
     cmd_t = cmd_u = None
-    craw = raw.topics.get(t.cmd_vel)
+    craw = raw.topics.get(t.cmd_vel) if t.cmd_vel is not None else None
     tw = None
     if craw is not None and craw.payloads:
-        tw = _decode_optional("cmd_vel", t.cmd_vel, lambda: decode_twist(craw, raw.ros1), quality)
-    if tw is not None:
-        corder = clean_order(tw.log_ns)
-        cjs = judged_samples(tw.log_ns, tw.u)
-        cmd_t, cmd_u = tw.log_ns[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
-        cq = stream_findings(tw.log_ns, None, corder, expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        tw = _decode_optional("cmd_vel", craw.topic, lambda: decode_twist(craw, raw.ros1), quality)
+    if tw is not None and craw is not None:
+        # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
+        cst = tw.stamp_ns if (tw.stamp_ns is not None and base.name == "header") else tw.log_ns
+        corder = clean_order(cst)
+        cjs = judged_samples(cst, tw.u)
+        cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
+        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
+                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         cq.update(cjs.counts())
+        cq["type"] = craw.msgtype
+        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
         quality["cmd_vel"] = cq
         samples["cmd_vel"] = cjs.counts()
     elif "cmd_vel" not in quality:
-        quality["cmd_vel"] = {"count": 0, "missing": True}
+        quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
     statuses, bad_status = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
@@ -277,7 +289,11 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         quality["notes"].append(f"{t.metadata}: {bad_meta} message(s) cannot be decoded as JSON text")
     if raw.partial:
         quality["partial"] = True
-    return LogData(str(p), raw.format, file_sha256(p), base.name, t0, pose,
+    try:
+        log_digest = job.result()
+    except OSError as err:
+        raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
+    return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, base.name, t0, pose,
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
                    nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
                    pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,

@@ -15,6 +15,10 @@ the wanted channels with ``message_start_time <= log time <= message_end_time`` 
 sorted stably by log time; the chunks are merged by (log time, chunk offset). Hence the order is (log time, chunk
 offset, record position).
 
+Uncompressed chunks whose records are not all wanted are read message by message instead (``_sparse``): the wanted
+channels' message index records give each message's offset; only those records are read and each must be a message
+of the channel and log time its index entry names (the chunk CRC, covering bytes not read, is then not checked).
+
 The record walk is vectorized: the message index records after each chunk give candidate record starts; at those
 candidates the opcode and length are read with numpy, and a run of candidates where each record ends exactly where
 the next candidate begins is taken in one step (by induction every candidate in the run is a true record start of
@@ -27,6 +31,8 @@ from __future__ import annotations
 
 import os
 import struct
+import sys
+import zlib
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +43,13 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
+
+from verify.ingest.records import MCAP, SpanError, read_records
+
+if sys.version_info >= (3, 14):
+    from compression import zstd
+else:
+    from backports import zstd  # a rosbags dependency
 
 __all__ = ["TopicMessages", "gather", "read_mcap_storage"]
 
@@ -118,20 +131,40 @@ def _pread(fd: int, size: int, pos: int, n: int) -> bytes:
     return data
 
 
+def _decompress(data: bytes, compression: str, usize: int, crc: int) -> bytes:
+    """``rosbags``' ``decompress`` (same output, same checks), with one-shot zstd decoding into a buffer of the
+    known size (``zstd.decompress`` without a size grows its output step by step: ~10x slower here); anything
+    unusual (several frames, a size mismatch) goes to ``rosbags``' own function."""
+    if compression == "zstd":
+        dec = zstd.ZstdDecompressor()
+        try:
+            raw = dec.decompress(data, max_length=usize)
+        except zstd.ZstdError:
+            raw = b""
+        if len(raw) == usize and dec.eof and not dec.unused_data and (not crc or zlib.crc32(raw) == crc):
+            return raw
+    return rosbags_decompress(data, compression, usize, crc)
+
+
 def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
     """The wanted messages of one chunk in rosbags' order: channel, log time, payload start and length in the
-    decompressed chunk, and the chunk."""
+    returned bytes (the decompressed chunk, or only its wanted records: ``_sparse``)."""
     start = int(chunk.chunk_start_offset)
-    (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
-    compressed = _pread(fd, size, start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size))
     usize = int(chunk.uncompressed_size)
-    raw = rosbags_decompress(compressed, chunk.compression, usize, crc)
-    u8 = np.frombuffer(raw, dtype=np.uint8)
-    hints = _index_hints(fd, size, chunk, usize)
-    pos, op, length = _walk(raw, u8, hints)
-    is_msg = op == _OP_MESSAGE
-    pos, length = pos[is_msg], length[is_msg]
+    got = _sparse(fd, chunk, wanted) if not chunk.compression else None
+    if got is not None:
+        pos, length, u8 = got
+    else:
+        (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
+        compressed = _pread(fd, size, start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size))
+        raw = _decompress(compressed, chunk.compression, usize, crc)
+        del compressed
+        u8 = np.frombuffer(raw, dtype=np.uint8)
+        hints = _index_hints(fd, size, chunk, usize)
+        pos, op, length = _walk(raw, u8, hints)
+        is_msg = op == _OP_MESSAGE
+        pos, length = pos[is_msg], length[is_msg]
     if np.any(length < _MSG_HEAD):
         raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
     channel = _read_u(u8, pos + 9, 2)
@@ -143,6 +176,60 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
         perm = np.argsort(log_ns, kind="stable")  # rosbags: sorted(..., key=timestamp), stable
         pos, length, channel, log_ns = pos[perm], length[perm], channel[perm], log_ns[perm]
     return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
+
+
+def _message_index(fd: int, pos: int) -> tuple[int, IntArray, IntArray]:
+    """The message index record at file position ``pos`` -> (channel, log times, record offsets)."""
+    head = os.pread(fd, 15, pos)
+    if len(head) != 15 or head[0] != _OP_MESSAGE_INDEX:
+        raise SpanError("not a message index record")
+    (rec_len, channel, arr_len) = struct.unpack_from("<QHI", head, 1)
+    if arr_len % 16 or arr_len + 6 > rec_len:
+        raise SpanError("message index record of a bad length")
+    body = os.pread(fd, arr_len, pos + 15)
+    if len(body) != arr_len:
+        raise SpanError("short read")
+    pairs = np.frombuffer(body, dtype="<u8").reshape(-1, 2)
+    if np.any(pairs >= np.uint64(2**63)):
+        raise SpanError("value beyond int64")
+    return int(channel), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+
+
+def _sparse(fd: int, chunk: ChunkInfo, wanted: set[int]) -> tuple[IntArray, IntArray, U8Array] | None:
+    """The wanted channels' message records of an uncompressed chunk, read one by one at the offsets of their
+    message index records (``verify.ingest.records``) -> (record starts, content lengths, compact bytes); None
+    when every record of the chunk is wanted (the whole chunk is read) or anything disagrees with the index (the
+    chunk is then walked whole). Each record read must be a message of the channel and log time its index entry
+    names. Not checked here, unlike a whole read: the chunk's CRC, which covers bytes that are not read; and
+    messages missing from the message index (writers index every message; the summary's counts come from it)."""
+    counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
+    mine = sorted(cid for cid in wanted if counts.get(cid, 0))
+    if sum(counts[cid] for cid in mine) >= sum(counts.values()):
+        return None
+    try:
+        chans: list[IntArray] = []
+        times: list[IntArray] = []
+        offs: list[IntArray] = []
+        for cid in mine:
+            channel, log_ns, offsets = _message_index(fd, int(chunk.message_index_offsets[cid]))
+            if channel != cid:
+                return None
+            chans.append(np.full(offsets.shape[0], cid, dtype=np.int64))
+            times.append(log_ns)
+            offs.append(offsets)
+        offsets = np.concatenate(offs)
+        order = np.argsort(offsets, kind="stable")
+        offsets, chan, log_ns = offsets[order], np.concatenate(chans)[order], np.concatenate(times)[order]
+        base = int(chunk.chunk_start_offset) + 9 + 40
+        u8, pos = read_records(fd, base, int(chunk.uncompressed_size), offsets, MCAP)
+        if pos.shape[0] and (np.any(u8[pos] != _OP_MESSAGE) or np.any(_read_u(u8, pos + 1, 8) < _MSG_HEAD)):
+            return None
+        length = _read_u(u8, pos + 1, 8)
+        if not (np.array_equal(_read_u(u8, pos + 9, 2), chan) and np.array_equal(_read_u(u8, pos + 15, 8), log_ns)):
+            return None
+    except (SpanError, _UnusualError, KeyError):
+        return None
+    return pos, length, u8
 
 
 def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:
@@ -267,7 +354,9 @@ def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
             if step >= d and np.all(np.diff(starts) == step):
                 view = np.lib.stride_tricks.as_strided(u8[int(starts[0]) :], shape=(n, d), strides=(step, 1),
                                                        writeable=False)
-                return np.ascontiguousarray(view).ravel()
+                packed = np.empty((n, d), dtype=np.uint8)  # a copy even when contiguous: never a view of the chunk
+                packed[...] = view
+                return packed.ravel()
         rows: U8Array = u8[starts[:, None] + np.arange(d)]
         return rows.ravel()
     out_off = np.zeros(n + 1, dtype=np.int64)

@@ -11,7 +11,10 @@ per connection listing ``(time, offset)`` of its messages inside the uncompresse
 the message data records are located at those offsets and checked with numpy (same header layout, ``op`` = 2, the
 right connection id, time equal to the index), and the payloads are copied out with strided views (no per-message
 Python object). Messages are ordered as ``rosbags`` yields them: by (time, chunk position, offset). The file is
-opened read-only and read with positioned reads; chunks without a wanted connection are not read.
+opened read-only and read with positioned reads; chunks without a wanted connection are not read, and from an
+uncompressed chunk whose records are not all wanted only the wanted records are read (``verify.ingest.records``,
+at the index offsets). Compressed chunks are decompressed whole, one at a time; what is kept is copied out of them,
+so the working set is one chunk plus the wanted payloads, whatever the file's size.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ import numpy as np
 import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
+
+from verify.ingest.records import ROS1, SpanError, read_records
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -189,16 +194,19 @@ def _chunk_infos(f: _File, pos: int, count: int) -> list[tuple[int, int, frozens
     return out
 
 
-def _chunk_data(f: _File, pos: int, *, read: bool) -> tuple[U8Array | None, int]:
-    """Uncompressed content of the chunk record at ``pos`` (None unless ``read``) and the position after it."""
+def _chunk_head(f: _File, pos: int) -> tuple[str, int, int, int, int]:
+    """The chunk record at ``pos``: (compression, uncompressed size, data start, data length, next position)."""
     header, start, dlen, nxt = f.record(pos)
     _op(header, _OP_CHUNK)
     compression = header.get("compression", b"").decode()
     size = _u32(header.get("size", b""), "size")
     if compression not in ("none", "bz2", "lz4"):
         raise _UnusualError(f"compression {compression!r}")
-    if not read:
-        return None, nxt
+    return compression, size, start, dlen, nxt
+
+
+def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) -> U8Array:
+    """Uncompressed content of a chunk (read and decompressed whole)."""
     raw = f.read(start, dlen)
     if compression == "none":
         inner = raw
@@ -209,7 +217,30 @@ def _chunk_data(f: _File, pos: int, *, read: bool) -> tuple[U8Array | None, int]
             raise _UnusualError(f"chunk does not decompress ({err})") from err
     if len(inner) != size:
         raise _UnusualError("chunk size differs from its header")
-    return np.frombuffer(inner, dtype=np.uint8), nxt
+    return np.frombuffer(inner, dtype=np.uint8)
+
+
+def _wanted_records(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
+                    ) -> tuple[U8Array, dict[int, npt.NDArray[np.void]]]:
+    """The bytes holding the wanted connections' records of one chunk, and their index entries with offsets into
+    those bytes. An uncompressed chunk whose wanted records are not all of its records is read message by message
+    (``verify.ingest.records``); otherwise (or when those reads find anything odd) the chunk is read whole.
+    ``head``: compression, uncompressed size, data start and data length of the chunk record."""
+    compression, size, start, dlen = head
+    if compression == "none" and dlen == size and sum(len(x) for x in mine.values()) < total:
+        offsets = np.unique(np.concatenate([x["offset"] for x in mine.values()]).astype(np.int64))
+        try:
+            compact, at = read_records(f.fd, start, size, offsets, ROS1)
+        except SpanError:
+            pass
+        else:
+            moved: dict[int, npt.NDArray[np.void]] = {}
+            for cid, index in mine.items():
+                entry = index.copy()
+                entry["offset"] = at[np.searchsorted(offsets, index["offset"].astype(np.int64))]
+                moved[cid] = entry
+            return compact, moved
+    return _chunk_body(f, compression, size, start, dlen), mine
 
 
 @dataclass(slots=True)
@@ -262,7 +293,10 @@ def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) ->
     stamp = np.ascontiguousarray(rec[:, time_at : time_at + 8]).view("<u4").reshape(k, 2).astype(np.int64)
     if np.any(conn != cid) or not np.array_equal(stamp[:, 0] * 1_000_000_000 + stamp[:, 1], times):
         raise _UnusualError("index and message records disagree")
-    return times, np.ascontiguousarray(rec[:, 8 + h :]).ravel(), np.full(k, d, dtype=np.int64)
+    # a copy, never a view: a view (e.g. of a single record) would keep the whole decompressed chunk alive
+    payloads = np.empty((k, d), dtype=np.uint8)
+    payloads[...] = rec[:, 8 + h :]
+    return times, payloads.ravel(), np.full(k, d, dtype=np.int64)
 
 
 def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) -> tuple[IntArray, U8Array,
@@ -340,20 +374,25 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         parts.setdefault(c.topic, _Parts([], [], []))
     for chunk_pos, n_conns, ids in chunks:
         # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
-        chunk, after = _chunk_data(f, chunk_pos, read=not ids.isdisjoint(selected))
+        compression, size, start, dlen, after = _chunk_head(f, chunk_pos)
         indexes, _ = _index_records(f, after, n_conns)
         if set(indexes) != ids:
             raise _UnusualError("chunk info and index records disagree")
-        for cid, index in indexes.items():
-            if cid not in selected or chunk is None:
-                continue
+        mine = {cid: index for cid, index in indexes.items() if cid in selected}
+        if not mine:
+            continue
+        for cid, index in mine.items():
             offsets = index["offset"].astype(np.int64)
-            idx = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
+            mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
+        chunk, mine = _wanted_records(f, (compression, size, start, dlen), mine,
+                                      sum(len(x) for x in indexes.values()))
+        for cid, idx in mine.items():
             times, packed, lens = _messages_in_chunk(chunk, cid, idx)
             p = parts[selected[cid].topic]
             p.times.append(times)
             p.blocks.append(packed)
             p.lengths.append(lens)
+        del chunk  # one chunk's bytes alive at a time
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
         tconns = [c for c in selected.values() if c.topic == topic]

@@ -1,0 +1,274 @@
+"""Benchmark: certifying a lab-sized recording (camera + lidar + the robot's topics) vs a plain rosbags loop.
+
+    python3 benchmarks/bench_bigbag.py [--size-gb 1] [--dir $TMPDIR/bench_bigbag] [--formats ros1-none,...]
+
+Writes (once; reused when present) one log per format under ``--dir``: ~36.7 s per GB of the demo's topics (MoCap
+pose, nominal pose and command at 100 Hz, solver status at 10 Hz, the run's metadata) interleaved in time, as a
+recorder writes them, with ``/camera/image_raw`` (sensor_msgs/Image 640x480 rgb8, 30 Hz) and ``/scan``
+(sensor_msgs/LaserScan, 1081 beams, 40 Hz): ROS1 (uncompressed, lz4 chunks), ROS2 MCAP (uncompressed, zstd chunks)
+and ROS2 sqlite3, written by rosbags' writers. Then, per format, in one run on a warm page cache:
+
+* rosbags: ``AnyReader`` over the pose, nominal pose and command topics + ``deserialize`` per message, keeping
+  stamp, x, y (pose topics) and the three velocities (command): the plain loop a user writes first;
+* ours: ``verify.certify.certify_log`` on the built-in scenario (every check, the certificate and the log digest).
+
+Each measurement runs in its own child process; its wall time is measured inside the child (imports excluded) and
+its peak RSS is the child's ``ru_maxrss`` as the parent reaps it (``os.wait4``: the per-child form of
+``getrusage(RUSAGE_CHILDREN)``), never the benchmark's own. (Linux carries a parent's peak RSS into a forked child,
+so the logs are written by children too and this process stays at ~30 MB.) Prints one row per format (rosbags
+s / MB, ours s / MB, ratio = rosbags time / ours), and last
+``worst_ratio_vs_rosbags=<min ratio> max_rss_mb=<max over ours> formats=<n>``. Targets: ratio >= 2 everywhere,
+ours' RSS <= 250 MB and within 10 % between --size-gb 1 and 3.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FORMATS = ("ros1-none", "ros1-lz4", "mcap-none", "mcap-zstd", "sqlite3")
+POSE, NOMINAL, CMD = "/qualisys/nexus/pose", "/nexus/nominal_pose", "/nexus/cmd_vel"
+STATUS, META = "/nexus/mpc_status", "/tubempc/metadata"
+CAMERA, SCAN = "/camera/image_raw", "/scan"
+T0_NS = 1_767_225_600 * 10**9
+SECONDS_PER_GB = 110.0 / 3.0  # 30 Hz of 640x480 rgb8 is 27.6 MB/s
+PERIOD_NS = {POSE: 10_000_000, NOMINAL: 10_000_000, CMD: 10_000_000, STATUS: 100_000_000,
+             CAMERA: 33_333_333, SCAN: 25_000_000}
+
+
+def _trajectory(t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The built-in scenario's mission at walking pace: R1 -> R3 -> R1 around the obstacles (as the certifier's
+    tests drive it), truncated at the log's end."""
+    from tubempc.scenario import builtin_scenario
+
+    sc = builtin_scenario()
+    r1, r3 = sc.region("R1").center, sc.region("R3").center
+    legs = [r1, (-0.6, -0.5), r3, r3, (-0.6, -0.5), r1, r1]
+    knots = [0.0, 18.0, 36.0, 55.0, 70.0, 88.0, 110.0]
+    tt = np.minimum(t_s, 110.0)
+    return np.interp(tt, knots, [p[0] for p in legs]), np.interp(tt, knots, [p[1] for p in legs])
+
+
+def _messages(ros1: bool, seconds: float) -> list[tuple[int, str, str, bytes]]:
+    """(log time, topic, type, payload) of the whole recording, sorted by log time (stable per topic)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    T = store.types
+
+    def ser(msg: Any, typ: str) -> bytes:
+        return bytes(store.serialize_ros1(msg, typ) if ros1 else store.serialize_cdr(msg, typ))
+
+    def header(t_ns: int, frame: str) -> Any:
+        stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+        return T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=stamp, frame_id=frame)
+
+    def with_stamp(tmpl: bytes, t_ns: int) -> bytes:  # header stamp at bytes 4..12 in both encodings
+        return tmpl[:4] + int(t_ns // 10**9).to_bytes(4, "little") + int(t_ns % 10**9).to_bytes(4, "little") + \
+            tmpl[12:]
+
+    out: list[tuple[int, str, str, bytes]] = []
+    n = int(seconds * 100)
+    t_ns = T0_NS + np.arange(n, dtype=np.int64) * PERIOD_NS[POSE]
+    x, y = _trajectory((t_ns - T0_NS) * 1e-9)
+    vx, vy = np.gradient(x, 0.01), np.gradient(y, 0.01)
+    pose_t, point_t = T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/Point"]
+    quat_t, vec_t = T["geometry_msgs/msg/Quaternion"], T["geometry_msgs/msg/Vector3"]
+    for i, t in enumerate(t_ns.tolist()):
+        for topic, dx in ((POSE, 0.002 * math.sin(0.7 * i)), (NOMINAL, 0.0)):
+            msg = T["geometry_msgs/msg/PoseStamped"](header=header(t, "world"), pose=pose_t(
+                position=point_t(x=float(x[i]) + dx, y=float(y[i]), z=0.0),
+                orientation=quat_t(x=0.0, y=0.0, z=0.0, w=1.0)))
+            out.append((t, topic, "geometry_msgs/msg/PoseStamped", ser(msg, "geometry_msgs/msg/PoseStamped")))
+        twist = T["geometry_msgs/msg/Twist"](linear=vec_t(x=float(vx[i]), y=float(vy[i]), z=0.0),
+                                             angular=vec_t(x=0.0, y=0.0, z=0.0))
+        out.append((t, CMD, "geometry_msgs/msg/Twist", ser(twist, "geometry_msgs/msg/Twist")))
+        if i % 10 == 0:
+            doc = {"t_s": i * 0.01, "status": "Solve_Succeeded", "success": True, "iterations": 12,
+                   "solve_time_s": 0.004, "backup": False, "target": "R3"}
+            out.append((t, STATUS, "std_msgs/msg/String", ser(T["std_msgs/msg/String"](data=json.dumps(doc)),
+                                                             "std_msgs/msg/String")))
+    meta = json.dumps({"generator": "bench_bigbag", "time0_ns": T0_NS})
+    out.append((T0_NS, META, "std_msgs/msg/String", ser(T["std_msgs/msg/String"](data=meta), "std_msgs/msg/String")))
+    rng = np.random.default_rng(7)
+    # camera frames: runs of 4 equal bytes (a compressor finds something, not everything), a small pool
+    frames = [np.repeat(rng.integers(0, 256, 640 * 480 * 3 // 4, dtype=np.uint8), 4).tobytes() for _ in range(8)]
+    img = T["sensor_msgs/msg/Image"](header=header(T0_NS, "camera"), height=480, width=640, encoding="rgb8",
+                                     is_bigendian=0, step=640 * 3, data=np.frombuffer(frames[0], dtype=np.uint8))
+    img_t = ser(img, "sensor_msgs/msg/Image")
+    head_len = len(img_t) - len(frames[0])
+    for k, t in enumerate(range(T0_NS, T0_NS + int(seconds * 1e9), PERIOD_NS[CAMERA])):
+        out.append((t, CAMERA, "sensor_msgs/msg/Image", with_stamp(img_t[:head_len], t) + frames[k % 8]))
+    scan = T["sensor_msgs/msg/LaserScan"](
+        header=header(T0_NS, "laser"), angle_min=-2.35, angle_max=2.35, angle_increment=4.7 / 1080,
+        time_increment=0.0, scan_time=0.025, range_min=0.05, range_max=30.0,
+        ranges=rng.uniform(0.5, 8.0, 1081).astype(np.float32), intensities=rng.uniform(0, 1, 1081).astype(np.float32))
+    scan_t = ser(scan, "sensor_msgs/msg/LaserScan")
+    for t in range(T0_NS, T0_NS + int(seconds * 1e9), PERIOD_NS[SCAN]):
+        out.append((t, SCAN, "sensor_msgs/msg/LaserScan", with_stamp(scan_t, t)))
+    out.sort(key=lambda m: m[0])
+    return out
+
+
+def write(path: Path, fmt: str, size_gb: float) -> None:
+    """Write one recording (into a temporary name, renamed when complete)."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1 = fmt.startswith("ros1")
+    msgs = _messages(ros1, size_gb * SECONDS_PER_GB)
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    tmp = path.with_name(path.name + ".part")
+    if tmp.exists():
+        subprocess.run(["rm", "-rf", str(tmp)], check=True)
+    w: Any
+    if ros1:
+        w = Writer1(tmp)
+        if fmt == "ros1-lz4":
+            w.set_compression(Writer1.CompressionFormat.LZ4)
+    else:
+        plugin = StoragePlugin.SQLITE3 if fmt == "sqlite3" else StoragePlugin.MCAP
+        w = Writer2(tmp, version=9, storage_plugin=plugin)
+        if fmt == "mcap-zstd":
+            w.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with w:
+        conns: dict[str, Any] = {}
+        for _t, topic, typ, _d in msgs:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, typ, typestore=store)
+        for t, topic, _typ, data in msgs:
+            w.write(conns[topic], t, data)
+    if not ros1:  # the bag directory was written under the temporary name: its storage file carries that name
+        for f in tmp.iterdir():
+            if f.name.startswith(tmp.name):
+                f.rename(tmp / (path.name + f.name[len(tmp.name):]))
+        meta = tmp / "metadata.yaml"
+        meta.write_text(meta.read_text().replace(tmp.name, path.name))
+    tmp.rename(path)
+
+
+def _size_mb(path: Path) -> float:
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    return sum(f.stat().st_size for f in files) / 1e6
+
+
+def _warm(path: Path) -> None:
+    """Read every byte once so that both sides start on a warm page cache."""
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    for f in files:
+        with f.open("rb") as fh:
+            while fh.read(1 << 20):
+                pass
+
+
+# ---- the measured work, run in a child process ----
+
+def _child_rosbags(path: Path) -> dict[str, Any]:
+    from rosbags.highlevel import AnyReader
+
+    t0 = time.perf_counter()
+    kept: dict[str, list[tuple[float, ...]]] = {POSE: [], NOMINAL: [], CMD: []}
+    with AnyReader([path]) as reader:
+        conns = [c for c in reader.connections if c.topic in kept]
+        for conn, _t, data in reader.messages(connections=conns):
+            m: Any = reader.deserialize(data, conn.msgtype)
+            if conn.topic == CMD:
+                kept[CMD].append((m.linear.x, m.linear.y, m.angular.z))
+            else:
+                kept[conn.topic].append((m.header.stamp.sec * 1e9 + m.header.stamp.nanosec, m.pose.position.x,
+                                         m.pose.position.y))
+    wall = time.perf_counter() - t0
+    return {"wall_s": wall, "counts": {k: len(v) for k, v in kept.items()}}
+
+
+def _child_ours(path: Path) -> dict[str, Any]:
+    from tubempc.scenario import builtin_scenario
+    from verify.certify import certify_log
+
+    sc = builtin_scenario()
+    t0 = time.perf_counter()
+    result = certify_log(path, sc)
+    wall = time.perf_counter() - t0
+    cert = result.certificate
+    dq = cert["data_quality"]
+    counts = {POSE: dq["pose"].get("count"), NOMINAL: dq["nominal"].get("count"), CMD: dq["cmd_vel"].get("count")}
+    digest = cert.get("log_digest") or cert.get("log_sha256")
+    return {"wall_s": wall, "counts": counts, "verdict": cert["verdict"], "digest": digest}
+
+
+def measure(kind: str, path: Path) -> dict[str, Any]:
+    """One measurement in a fresh child process: its JSON result plus its peak RSS (MB)."""
+    with tempfile.TemporaryFile() as out:
+        proc = subprocess.Popen([sys.executable, __file__, "--child", kind, str(path)], stdout=out)
+        _pid, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        out.seek(0)
+        text = out.read().decode()
+    if proc.returncode != 0:
+        raise SystemExit(f"{kind} on {path} failed (exit {proc.returncode}): {text[-400:]}")
+    got: dict[str, Any] = json.loads(text.strip().splitlines()[-1])
+    got["rss_mb"] = usage.ru_maxrss / 1024.0  # Linux: KiB
+    return got
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size-gb", type=float, default=1.0)
+    ap.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()) / "bench_bigbag")
+    ap.add_argument("--formats", default=",".join(FORMATS))
+    ap.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
+    ap.add_argument("--write", nargs=3, metavar=("FORMAT", "PATH", "SIZE_GB"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.write:
+        write(Path(args.write[1]), args.write[0], float(args.write[2]))
+        return
+    if args.child:
+        kind, p = args.child
+        res = _child_rosbags(Path(p)) if kind == "rosbags" else _child_ours(Path(p))
+        print(json.dumps(res))
+        return
+    formats = [f for f in args.formats.split(",") if f]
+    unknown = sorted(set(formats) - set(FORMATS))
+    if unknown:
+        raise SystemExit(f"--formats: unknown {', '.join(unknown)} (choose from {', '.join(FORMATS)})")
+    args.dir.mkdir(parents=True, exist_ok=True)
+    print(f"load average (shared machine): {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    rows: list[tuple[str, float, dict[str, Any], dict[str, Any]]] = []
+    for fmt in formats:
+        path = args.dir / f"bigbag_{args.size_gb:g}gb_{fmt.replace('-', '_')}{'.bag' if fmt.startswith('ros1') else ''}"
+        if not path.exists():  # written by a child: this process stays small (a child's peak RSS starts at ours)
+            t_w = time.perf_counter()
+            subprocess.run([sys.executable, __file__, "--write", fmt, str(path), str(args.size_gb)], check=True)
+            print(f"wrote {path} ({_size_mb(path):.0f} MB) in {time.perf_counter() - t_w:.0f} s", flush=True)
+        _warm(path)
+        base = measure("rosbags", path)
+        ours = measure("ours", path)
+        if base["counts"] != ours["counts"]:
+            print(f"  {fmt}: message counts differ: rosbags {base['counts']}, ours {ours['counts']}")
+        rows.append((fmt, _size_mb(path), base, ours))
+        print(f"  {fmt}: rosbags {base['wall_s']:.2f} s, ours {ours['wall_s']:.2f} s", flush=True)
+    print(f"| log ({args.size_gb:g} GB) | size MB | rosbags loop s / max RSS MB | certify_log s / max RSS MB | "
+          f"ratio | verdict |")
+    print("|---|---|---|---|---|---|")
+    for fmt, size, base, ours in rows:
+        print(f"| {fmt} | {size:.0f} | {base['wall_s']:.2f} / {base['rss_mb']:.0f} | {ours['wall_s']:.2f} / "
+              f"{ours['rss_mb']:.0f} | {base['wall_s'] / ours['wall_s']:.2f}x | {ours['verdict']} |")
+    worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o in rows)
+    print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o in rows):.0f} "
+          f"formats={len(rows)}")
+
+
+if __name__ == "__main__":
+    main()

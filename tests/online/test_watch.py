@@ -1,0 +1,207 @@
+"""``tubempc watch`` on logs that grow while it reads: a writer thread appends a recorded log's bytes in pieces
+(as a recorder flushes), for an MCAP file, a ROS2 bag folder and a ROS1 bag; the result equals ``certify_log`` on
+the file as it ends, and a recorder killed mid-chunk is judged as ``--salvage`` judges the cut file."""
+
+from __future__ import annotations
+
+import shutil
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Reader as Reader1
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import Reader as Reader2
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_typestore
+
+from tubempc.scenario import builtin_scenario
+from verify import certify_log
+from verify.ingest import read_log
+from verify.ingest.salvage import walk_mcap, walk_ros1
+from verify.online import OnlineMonitor
+from verify.online.watch import watch_log
+
+LOGS = Path(__file__).resolve().parents[2] / "logs"
+ROS1_HEADER_AT = len(b"#ROSBAG V2.0\n")
+
+
+def _ros1_small_chunks(src: Path, dst: Path, chunk_bytes: int = 16 * 1024) -> Path:
+    """The same messages as ``src`` in a bag of many small chunks (a recorder's default is far larger)."""
+    with Reader1(src) as r, Writer1(dst) as w:
+        w.chunk_threshold = chunk_bytes
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                 for c in r.connections}
+        for c, t, data in r.messages():
+            w.write(conns[c.id], t, data)
+    return dst
+
+
+def _ros2_folder(src: Path, dst: Path) -> Path:
+    """An MCAP file rewritten as a ROS2 bag folder (metadata.yaml + storage file), message bytes unchanged."""
+    with Reader2(src) as r, Writer2(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store) for c in r.connections}
+        for c, t, data in r.messages():
+            w.write(conns[c.id], t, data)
+    return dst
+
+
+def _zero_index_pos(data: bytes) -> bytes:
+    """The bag header as rosbag writes it while recording: index_pos 0 (set when the bag is closed)."""
+    out = bytearray(data)
+    key = out.find(b"index_pos=", ROS1_HEADER_AT)
+    out[key + 10 : key + 18] = struct.pack("<Q", 0)
+    return bytes(out)
+
+
+class Recorder(threading.Thread):
+    """Appends ``data`` to ``target`` in pieces of random size with short pauses; ``cut``: stop there and never
+    close the log (killed); otherwise finish as a recorder does (ROS1: rewrite the header; folder: metadata.yaml)."""
+
+    def __init__(self, data: bytes, target: Path, *, cut: int | None = None, final_header: bytes | None = None,
+                 metadata: bytes | None = None, seed: int = 0) -> None:
+        super().__init__(daemon=True)
+        self.data, self.target, self.cut = data, target, cut
+        self.final_header, self.metadata = final_header, metadata
+        self.rng = np.random.default_rng(seed)
+        self.sizes: list[int] = []
+
+    def run(self) -> None:
+        end = len(self.data) if self.cut is None else self.cut
+        pos = 0
+        with self.target.open("ab") as fh:
+            while pos < end:
+                n = int(self.rng.integers(4_000, 120_000))
+                fh.write(self.data[pos : min(end, pos + n)])
+                fh.flush()
+                pos = min(end, pos + n)
+                self.sizes.append(pos)
+                time.sleep(0.004)
+        if self.cut is not None:
+            return
+        if self.final_header is not None:
+            with self.target.open("r+b") as fh:
+                fh.write(self.final_header)
+        if self.metadata is not None:
+            (self.target.parent / "metadata.yaml").write_bytes(self.metadata)
+
+
+def _watch_while_recording(source: Path, kind: str, tmp_path: Path, *, cut_fraction: float | None
+                           ) -> tuple[Path, Path, object, list[tuple[str, int]]]:
+    """Start the recorder thread, watch with --follow semantics; returns (certify path, watched path, result,
+    decisions with the file size when each was reported)."""
+    data = b"" if source.is_dir() else source.read_bytes()
+    final_header = None
+    metadata = None
+    if kind == "ros1":
+        final_header = data[:4096 + ROS1_HEADER_AT]
+        data = _zero_index_pos(data)
+        target = tmp_path / "live.bag"
+        watched = certified = target
+    elif kind == "folder":
+        folder = tmp_path / "live_bag"
+        folder.mkdir()
+        (inner,) = [p for p in source.iterdir() if p.suffix == ".mcap"]
+        data = inner.read_bytes()
+        metadata = (source / "metadata.yaml").read_bytes()
+        target = folder / inner.name
+        watched, certified = folder, (folder if cut_fraction is None else target)
+    else:
+        target = tmp_path / "live.mcap"
+        watched = certified = target
+    target.write_bytes(b"")
+    cut = None if cut_fraction is None else int(len(data) * cut_fraction)
+    rec = Recorder(data, target, cut=cut, final_header=final_header, metadata=metadata)
+    sizes: list[tuple[str, int]] = []
+    mon = OnlineMonitor(builtin_scenario())
+    rec.start()
+    res = watch_log(watched, mon, follow=True, idle_timeout_s=1.0, poll_s=0.02,
+                    on_decision=lambda d: sizes.append((d.name, target.stat().st_size)))
+    rec.join()
+    return certified, watched, res, sizes
+
+
+def _assert_same_as_certify(path: Path, res: object, *, salvage: bool) -> None:
+    from verify.online.watch import WatchResult
+
+    assert isinstance(res, WatchResult)
+    cert = certify_log(path, builtin_scenario(), salvage=salvage).certificate
+    assert res.result.verdict == cert["verdict"]
+    assert [c.verdict for c in res.result.checks] == [c["verdict"] for c in cert["checks"]]
+    assert res.partial == salvage
+
+
+@pytest.mark.parametrize(("kind", "name"), [("mcap", "demo.mcap"), ("ros1", "obstacle_touch.bag"),
+                                            ("folder", "late_mission.mcap")])
+def test_watch_a_growing_log_equals_certify(kind: str, name: str, tmp_path: Path) -> None:
+    src = LOGS / name
+    if kind == "ros1":
+        src = _ros1_small_chunks(src, tmp_path / "src.bag")
+    elif kind == "folder":
+        src = _ros2_folder(src, tmp_path / "src_bag")
+    certified, _watched, res, sizes = _watch_while_recording(src, kind, tmp_path, cut_fraction=None)
+    _assert_same_as_certify(certified, res, salvage=False)
+    final = certified.stat().st_size if certified.is_file() else None
+    if kind == "ros1":  # the obstacle is touched at 6.7 s of 26 s: reported long before the recorder stops
+        when = dict(sizes)["obstacle_clearance"]
+        assert final is not None and when < 0.6 * final
+    if kind == "folder":  # F[30,50] mission_2 fails at 50 s of 60 s, while the folder has no metadata.yaml yet
+        assert "F[30,50] mission_2" in dict(sizes)
+
+
+@pytest.mark.parametrize(("kind", "name"), [("mcap", "demo.mcap"), ("ros1", "obstacle_touch.bag"),
+                                            ("folder", "demo.mcap")])
+def test_recorder_killed_mid_chunk_is_judged_as_salvage(kind: str, name: str, tmp_path: Path) -> None:
+    src = LOGS / name
+    if kind == "ros1":
+        src = _ros1_small_chunks(src, tmp_path / "src.bag")
+    elif kind == "folder":
+        src = _ros2_folder(src, tmp_path / "src_bag")
+    certified, _watched, res, _ = _watch_while_recording(src, kind, tmp_path, cut_fraction=0.55)
+    walk = walk_ros1(certified) if kind == "ros1" else walk_mcap(certified)
+    for _ in walk.messages:
+        pass
+    assert "incomplete" in walk.stop_reason()  # really cut inside a record
+    _assert_same_as_certify(certified, res, salvage=True)
+    from verify.online.watch import WatchResult
+
+    assert isinstance(res, WatchResult)
+    offline = read_log(certified, builtin_scenario(), salvage=True)
+    assert res.result.state.samples["pose"] == offline.pose.t_ns.size
+    assert res.result.verdict != "pass"
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-c", "from tubempc.cli import main; main()", *args],
+                          capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_watch_cli_lines_and_exit_codes(tmp_path: Path) -> None:
+    run = _cli("watch", str(LOGS / "obstacle_touch.bag"), "--scenario", "nexus-sml", "--out", str(tmp_path / "o"))
+    assert run.returncode == 1, run.stderr
+    lines = run.stdout.splitlines()
+    assert any(line.split()[:3] == ["6.69", "s", "obstacle_clearance"] and "FAIL" in line for line in lines)
+    assert (tmp_path / "o" / "certificate.json").is_file()
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    run = _cli("watch", str(bad), "--scenario", "nexus-sml")
+    assert run.returncode == 3
+    assert len(run.stderr.strip().splitlines()) == 1 and str(bad) in run.stderr
+    run = _cli("watch", str(tmp_path / "missing.bag"), "--scenario", "nexus-sml")
+    assert run.returncode == 3 and "missing.bag" in run.stderr
+
+
+def test_watch_copy_of_input_is_not_modified(tmp_path: Path) -> None:
+    src = tmp_path / "t.bag"
+    shutil.copy(LOGS / "truncated.bag", src)
+    before = src.read_bytes()
+    res = watch_log(src, OnlineMonitor(builtin_scenario()))
+    assert src.read_bytes() == before
+    assert res.partial and res.result.verdict == "inconclusive"

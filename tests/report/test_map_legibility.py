@@ -1,0 +1,137 @@
+"""The map reads at any scale: no two text annotations overlap (matplotlib text extents), names are printed once,
+every violation is named beside its marker, and a large map gets zoomed panels; the obligations and the report's
+page order tell the story."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+from tubempc.scenario import Scenario, builtin_scenario, load_scenario
+from verify.figures import render_figures
+from verify.obligations import obligations_of
+from verify.report import write_reports
+from verify.workspace_map import map_texts, text_box, workspace_map
+
+OUTDOOR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "outdoor-150m.yaml"
+
+
+def _patrol(points: list[tuple[float, float]], speed_mps: float, rate_hz: float = 10.0) -> pd.DataFrame:
+    xy = np.asarray(points, dtype=float)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+    t = np.arange(0.0, arc[-1] / speed_mps, 1.0 / rate_hz)
+    return pd.DataFrame({"t_s": t, "x_m": np.interp(t * speed_mps, arc, xy[:, 0]),
+                         "y_m": np.interp(t * speed_mps, arc, xy[:, 1]), "theta_rad": 0.05 * t})
+
+
+def _crowded_certificate(scenario: Scenario, trajectory: pd.DataFrame, n_violations: int) -> dict[str, Any]:
+    """Several failed checks with violations close together in time (their labels compete for the same space),
+    and a long timed run (numbered markers everywhere)."""
+    t_end = float(trajectory["t_s"].iloc[-1])
+    checks: list[dict[str, Any]] = []
+    for k in range(n_violations):
+        checks.append({"name": f"check_{k}", "verdict": "fail", "margin": -0.1, "margin_unit": "m",
+                       "first_violation_time": t_end * (0.3 + 0.04 * k), "subformula": f"F[{k},{k + 5}] mission_x"})
+    run = [{"region": r.name, "time": t_end * i / (2 * len(scenario.regions))} for i, r in enumerate(scenario.regions)]
+    return {"verdict": "fail", "formula": scenario.spec, "checks": checks, "timed_run": run,
+            "duration_s": t_end}
+
+
+def _assert_no_overlap(fig: Any) -> None:
+    renderer = FigureCanvasAgg(fig).get_renderer() if not isinstance(fig.canvas, FigureCanvasAgg) else \
+        fig.canvas.get_renderer()
+    texts = [t for t in map_texts(fig) if t.axes is fig.axes[0]]
+    boxes = [(t.get_text(), text_box(t, renderer)) for t in texts]
+    assert len(boxes) >= 8  # the map has something to place
+    for (a, box_a), (b, box_b) in itertools.combinations(boxes, 2):
+        assert not box_a.overlaps(box_b), f"{a!r} overlaps {b!r}"
+
+
+@pytest.mark.parametrize("scale", ["lab-5m", "field-150m"])
+def test_map_annotations_never_overlap(scale: str) -> None:
+    if scale == "lab-5m":
+        scenario = builtin_scenario()
+        trajectory = _patrol([(-1.99, -1.78), (-0.6, -0.5), (0.16, 0.40), (1.3, -0.4), (2.02, -1.63)], 0.15)
+    else:
+        scenario = load_scenario(OUTDOOR)
+        trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
+    cert = _crowded_certificate(scenario, trajectory, n_violations=4)
+    rendered = workspace_map(cert, scenario, trajectory, None)
+    _assert_no_overlap(rendered.figure)
+    shown = [t.get_text() for t in map_texts(rendered.figure) if t.axes is rendered.figure.axes[0]]
+    # every violation names what failed beside its marker, even where labels crowd
+    for k in range(4):
+        assert any(f"F[{k},{k + 5}] mission_x violated" in text for text in shown), shown
+    # names once: the outdoor regions' labels equal their names and are not repeated ("pond", never "pond: pond")
+    for region in scenario.regions:
+        assert sum(text.startswith(region.name) for text in shown) <= 1
+    if scale == "field-150m":
+        assert "pond" in shown and not any("pond:" in text for text in shown)
+        assert len(rendered.figure.axes) >= 3  # map, colour bar, and zoomed panels around the violations
+
+
+def test_labels_without_placement_would_overlap() -> None:
+    """The crowded field map is a real test of the placement: the same texts all at offset 0 do overlap."""
+    scenario = load_scenario(OUTDOOR)
+    trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
+    fig = workspace_map(_crowded_certificate(scenario, trajectory, 4), scenario, trajectory, None).figure
+    for text in map_texts(fig):
+        text.set_position((0.0, 0.0))
+    with pytest.raises(AssertionError, match="overlaps"):
+        _assert_no_overlap(fig)
+
+
+def test_missed_window_reads_as_a_failed_obligation() -> None:
+    """F[30,50] mission_2 reached at ~56 s: its own panel fails at 50 s although the target's margin turns positive
+    afterwards; the unbounded safety obligation is judged on its own (not hidden as undecided)."""
+    scenario = builtin_scenario()
+    r1, r3 = scenario.region("R1").center, scenario.region("R3").center
+    t = np.arange(0.0, 60.0, 0.05)
+    s = np.clip((t - 40.0) / 16.0, 0.0, 1.0)
+    traj = pd.DataFrame({"t_s": t, "x_m": r1[0] + s * (r3[0] - r1[0]), "y_m": r1[1] + s * (r3[1] - r1[1])})
+    obs = {o.formula: o for o in obligations_of(scenario.spec, traj, scenario, max_speed_mps=scenario.max_speed_mps)}
+    late = obs["F[30,50] mission_2"]
+    assert late.verdict == "fail" and late.violation_s == pytest.approx(50.0)
+    assert late.window_s == (30.0, 50.0)
+    assert float(late.body_margin_m[-1]) > 0  # reached, but after the window
+    assert obs["G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"].verdict == "pass"
+
+
+def test_page_order_and_readable_formula(tmp_path: Path, make_result: Callable[..., Any]) -> None:
+    result = make_result(verdict="fail")
+    cert = {**result.certificate, "formula": "G[0,inf) !obs_1 & F[30,50] mission_2",
+            "data_quality": {"zeros": {"a": 0, "b": 0}, "dropouts": {"count": 3}}}
+    written = write_reports(type(result)(cert, 1, result.trajectory, result.nominal, result.inputs), builtin_scenario(),
+                            tmp_path)
+    page = written["report.html"].read_text()
+    order = [page.index(h) for h in ("<h2>Checks</h2>", "<h2>Map and obligations</h2>", "<h2>States and inputs</h2>",
+                                     "<h2>Data quality</h2>", "<h2>Certificate details</h2>")]
+    assert order == sorted(order)
+    assert page.index('id="fig-workspace"') < page.index('id="fig-obligations"') < page.index('id="fig-states"')
+    assert "<details><summary><h2>Data quality</h2>" in page
+    assert page.index("dropouts.count") < page.index("zeros.a")  # the finding that reports something comes first
+    md = written["report.md"].read_text()
+    assert "!obs_1 & F[30,50]" in md.replace("\\[", "[").replace("\\]", "]") and "&amp;" not in md
+
+
+def test_theta_is_unwrapped_and_times_have_sensible_precision(tmp_path: Path,
+                                                             make_result: Callable[..., Any]) -> None:
+    result = make_result(verdict="fail")
+    theta = np.mod(np.linspace(0, 12 * np.pi, len(result.trajectory)) + np.pi, 2 * np.pi) - np.pi  # a sawtooth
+    traj = result.trajectory.assign(theta_rad=theta)
+    figs = {f.stem: f for f in render_figures(result.certificate, builtin_scenario(), trajectory=traj, nominal=None,
+                                              inputs=None, robustness=None)}
+    assert "states" in figs
+    from verify.figures import _unwrapped
+
+    unwrapped = _unwrapped(traj)["theta_rad"].to_numpy()
+    assert np.max(np.abs(np.diff(unwrapped))) < 1.0 and unwrapped[-1] > 30.0
+    md = write_reports(result, builtin_scenario(), tmp_path)["report.md"].read_text()
+    assert "| 12.50 s |" in md and "| R3 | 19.20 s |" in md

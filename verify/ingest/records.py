@@ -1,0 +1,112 @@
+"""Message-level reads: the records an index points at inside an uncompressed chunk -> one compact byte buffer.
+
+input: an open file descriptor, the file position where a chunk's records start, their length, and the offsets (from
+the chunk's index) of the wanted records -> output: a compact ``uint8`` buffer holding just those records and each
+record's position in it. The callers (``verify.ingest.ros1``, ``verify.ingest.mcap``) then parse the records from
+the compact buffer exactly as from the whole chunk.
+
+Offsets closer than ``gap_b`` are read together (one ``pread`` per cluster: the bytes between two wanted records of a
+cluster are read too, the bytes of a camera frame between two clusters are not). Every record must end inside the
+chunk and before the next wanted record begins (checked for all of them, vectorized); anything else raises
+``SpanError`` and the caller falls back to reading the whole chunk.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from itertools import pairwise
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["MCAP", "ROS1", "SpanError", "read_records"]
+
+U8Array = npt.NDArray[np.uint8]
+IntArray = npt.NDArray[np.int64]
+
+ROS1 = "ros1"  # record: header length u32, header, data length u32, data
+MCAP = "mcap"  # record: opcode u8, content length u64, content
+
+
+class SpanError(Exception):
+    """The index points at something that is not a well-formed record of the chunk."""
+
+
+def _pread(fd: int, pos: int, n: int) -> bytes:
+    data = os.pread(fd, n, pos)
+    if len(data) != n:
+        raise SpanError("short read")
+    return data
+
+
+def _record_size(fd: int, kind: str, pos: int, room: int) -> int:
+    """Size of the record at file position ``pos`` that has at most ``room`` bytes before the chunk ends."""
+    if kind == ROS1:
+        if room < 8:
+            raise SpanError("record header outside its chunk")
+        (hlen,) = struct.unpack("<I", _pread(fd, pos, 4))
+        if 8 + hlen > room:
+            raise SpanError("record header outside its chunk")
+        (dlen,) = struct.unpack("<I", _pread(fd, pos + 4 + hlen, 4))
+        size = 8 + int(hlen) + int(dlen)
+    else:
+        if room < 9:
+            raise SpanError("record header outside its chunk")
+        (clen,) = struct.unpack("<Q", _pread(fd, pos + 1, 8))
+        size = 9 + int(clen)
+    if size > room:
+        raise SpanError("record runs past the end of its chunk")
+    return size
+
+
+def _u32_at(u8: U8Array, at: IntArray) -> IntArray:
+    return np.ascontiguousarray(u8[at[:, None] + np.arange(4)]).view("<u4").ravel().astype(np.int64)
+
+
+def _ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
+    """End (exclusive) of each record starting at ``rel`` in ``u8``; -1 where its header is not in ``u8``."""
+    n = u8.shape[0]
+    ends = np.full(rel.shape[0], -1, dtype=np.int64)
+    if kind == ROS1:
+        ok = rel + 4 <= n
+        hlen = np.zeros(rel.shape[0], dtype=np.int64)
+        hlen[ok] = _u32_at(u8, rel[ok])
+        ok &= rel + 8 + hlen <= n
+        ends[ok] = rel[ok] + 8 + hlen[ok] + _u32_at(u8, rel[ok] + 4 + hlen[ok])
+    else:
+        ok = rel + 9 <= n
+        at = rel[ok] + 1
+        clen = np.ascontiguousarray(u8[at[:, None] + np.arange(8)]).view("<u8").ravel()
+        if np.any(clen >= np.uint64(2**62)):
+            raise SpanError("record length beyond the file")
+        ends[ok] = rel[ok] + 9 + clen.astype(np.int64)
+    return ends
+
+
+def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16
+                 ) -> tuple[U8Array, IntArray]:
+    """The records at ``offsets`` (relative to file position ``base``; sorted, unique, each < ``limit``, the length
+    of the chunk's records) -> (compact buffer, position of each record in it)."""
+    k = offsets.shape[0]
+    if k == 0:
+        return np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.int64)
+    if np.any(np.diff(offsets) <= 0) or int(offsets[0]) < 0 or int(offsets[-1]) >= limit:
+        raise SpanError("index offsets not sorted or outside their chunk")
+    cuts = [0, *(np.flatnonzero(np.diff(offsets) > gap_b) + 1).tolist(), k]
+    pieces: list[bytes] = []
+    pos = np.empty(k, dtype=np.int64)
+    filled = 0
+    for a, b in pairwise(cuts):
+        lo, last = int(offsets[a]), int(offsets[b - 1])
+        hi = last + _record_size(fd, kind, base + last, limit - last)
+        piece = _pread(fd, base + lo, hi - lo)
+        rel = offsets[a:b] - lo
+        ends = _ends(np.frombuffer(piece, dtype=np.uint8), kind, rel)
+        bound = np.append(rel[1:], hi - lo)  # each record ends before the next one starts; the last at hi
+        if np.any(ends < 0) or np.any(ends > bound) or int(ends[-1]) != hi - lo:
+            raise SpanError("records overlap or run past their chunk")
+        pos[a:b] = rel + filled
+        filled += hi - lo
+        pieces.append(piece)
+    return np.frombuffer(b"".join(pieces), dtype=np.uint8), pos

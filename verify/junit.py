@@ -1,0 +1,132 @@
+"""Test outcomes -> ``junit.xml``: the one JUnit writer of ``certify``, batch certification and ``regress``.
+
+input: ``JUnitSuite`` values (one per log, or one per regression suite) -> output: ``<testsuites>`` XML on disk.
+
+An *inconclusive* check is not a pass, and CI dashboards paint ``<skipped>`` green or grey: by default it is written
+as ``<failure type="inconclusive">`` (counted in ``failures``), so a run that could not be decided turns the
+pipeline red like a violation does (``type="violation"``). ``inconclusive="skipped"`` keeps the older form for a
+CI that must stay green on undecided runs. Every string is made XML 1.0-safe (characters XML cannot carry become
+U+FFFD; ElementTree escapes the rest).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+__all__ = ["INCONCLUSIVE_AS", "InconclusiveAs", "JUnitCase", "JUnitSuite", "certificate_suite", "suite_element",
+           "write_junit"]
+
+Outcome = Literal["passed", "failure", "error", "skipped"]
+InconclusiveAs = Literal["failure", "skipped"]
+INCONCLUSIVE_AS: tuple[InconclusiveAs, ...] = ("failure", "skipped")
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def _x(value: object) -> str:
+    return _XML_INVALID.sub("\ufffd", str(value))
+
+
+@dataclass(frozen=True, slots=True)
+class JUnitCase:
+    """One ``<testcase>``: ``outcome`` picks the child element (none for ``passed``)."""
+
+    name: str
+    classname: str
+    outcome: Outcome = "passed"
+    type: str = ""
+    message: str = ""
+    text: str = ""
+    time_s: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class JUnitSuite:
+    """One ``<testsuite>`` with its cases and ``<properties>`` (name, value pairs)."""
+
+    name: str
+    cases: tuple[JUnitCase, ...]
+    properties: tuple[tuple[str, str], ...] = ()
+    time_s: float = 0.0
+
+    def count(self, outcome: Outcome) -> int:
+        return sum(1 for c in self.cases if c.outcome == outcome)
+
+
+def suite_element(suite: JUnitSuite) -> ET.Element:
+    """The ``<testsuite>`` element of ``suite``."""
+    node = ET.Element("testsuite", {
+        "name": _x(suite.name), "tests": str(len(suite.cases)), "failures": str(suite.count("failure")),
+        "errors": str(suite.count("error")), "skipped": str(suite.count("skipped")), "time": f"{suite.time_s:.3f}"})
+    if suite.properties:
+        props = ET.SubElement(node, "properties")
+        for key, value in suite.properties:
+            ET.SubElement(props, "property", {"name": _x(key), "value": _x(value)})
+    for case in suite.cases:
+        elem = ET.SubElement(node, "testcase", {"classname": _x(case.classname), "name": _x(case.name),
+                                                "time": f"{case.time_s:.3f}"})
+        if case.outcome == "skipped":
+            ET.SubElement(elem, "skipped", {"message": _x(case.message)})
+        elif case.outcome in ("failure", "error"):
+            child = ET.SubElement(elem, case.outcome, {"message": _x(case.message), "type": _x(case.type)})
+            if case.text:
+                child.text = _x(case.text)
+    return node
+
+
+def write_junit(suites: Sequence[JUnitSuite], path: str | Path) -> Path:
+    """Write ``<testsuites>`` around the given suites (one per log in a batch, one per regression suite)."""
+    root = ET.Element("testsuites", {
+        "tests": str(sum(len(s.cases) for s in suites)),
+        "failures": str(sum(s.count("failure") for s in suites)),
+        "errors": str(sum(s.count("error") for s in suites)),
+        "skipped": str(sum(s.count("skipped") for s in suites)),
+        "time": f"{sum(s.time_s for s in suites):.3f}"})
+    root.extend(suite_element(s) for s in suites)
+    ET.indent(root)
+    target = Path(path)
+    ET.ElementTree(root).write(target, encoding="utf-8", xml_declaration=True)
+    return target
+
+
+def _num(value: Any, unit: str = "") -> str:
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return f"{value:.4g}{unit}"
+    return "-"
+
+
+def certificate_suite(certificate: Mapping[str, Any], *, suite_name: str,
+                      inconclusive: InconclusiveAs = "failure") -> JUnitSuite:
+    """One test case per check of a certificate: a failed check is a ``failure`` of type ``violation``; an
+    inconclusive one a ``failure`` of type ``inconclusive`` (or ``skipped``); properties carry the verdict, the
+    formula and the hashes."""
+    if inconclusive not in INCONCLUSIVE_AS:
+        raise ValueError(f"inconclusive={inconclusive!r} is not one of {INCONCLUSIVE_AS}")
+    cases = []
+    for check in certificate.get("checks", []) or []:
+        if not isinstance(check, Mapping):
+            continue
+        verdict = str(check.get("verdict"))
+        unit = check.get("margin_unit")
+        summary = (f"{verdict}: margin {_num(check.get('margin'), f' {unit}' if unit else '')}, first violation at "
+                   f"{_num(check.get('first_violation_time'), ' s')}")
+        details = "; ".join(f"{k}: {v}" for k, v in check.items()
+                            if k not in ("name", "verdict", "margin", "margin_unit", "first_violation_time"))
+        name = str(check.get("name", "?"))
+        if verdict == "pass":
+            cases.append(JUnitCase(name, suite_name))
+        elif verdict == "fail":
+            cases.append(JUnitCase(name, suite_name, "failure", "violation", summary, details or summary))
+        elif inconclusive == "skipped":
+            cases.append(JUnitCase(name, suite_name, "skipped", message=f"{summary}. {details}".strip(" .")))
+        else:
+            cases.append(JUnitCase(name, suite_name, "failure", "inconclusive",
+                                   f"{summary} (the check could not be decided: not a pass)", details or summary))
+    keys = ("verdict", "formula", "scenario_sha256", "log_digest", "log_digest_algorithm", "log_sha256", "partial")
+    props = tuple((key, str(certificate[key])) for key in keys if key in certificate)
+    return JUnitSuite(suite_name, tuple(cases), props)

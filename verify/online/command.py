@@ -1,0 +1,76 @@
+"""The ``tubempc watch`` subcommand: a log that is still being written + scenario -> decisions as lines, exit code.
+
+Prints one line per decision (``12.34 s  obstacle_clearance FAIL margin -0.030 m``), then a summary line, and exits
+with certify's codes (0 pass, 1 violation, 2 inconclusive, 3 unusable input). With ``--out DIR`` the certificate and
+reports that ``tubempc certify`` (with ``--salvage`` for a log its recorder did not close) writes for the log as
+read at the end go into DIR.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+__all__ = ["watch"]
+
+
+def _certified_path(path: Path, finished: bool) -> Path:
+    """A ROS2 bag folder without its metadata.yaml (the recorder was stopped) is certified through its one storage
+    file, as ``--salvage`` reads it."""
+    if finished or not path.is_dir() or (path / "metadata.yaml").is_file():
+        return path
+    files = sorted(p for p in path.iterdir() if p.suffix == ".mcap")
+    return files[0] if len(files) == 1 else path
+
+
+@click.command()
+@click.argument("log", type=click.Path(path_type=Path))
+@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
+@click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
+@click.option("--follow", is_flag=True, help="Keep reading as the log grows (until it is closed or idle).")
+@click.option("--idle-timeout", "idle_timeout", type=click.FloatRange(min=0.0), default=10.0, show_default=True,
+              help="With --follow: stop when the log has not grown for this many seconds.")
+@click.option("--poll", "poll_s", type=click.FloatRange(min=0.01), default=0.2, show_default=True,
+              help="Seconds between two reads of the log.")
+@click.option("--time-base", type=click.Choice(["header", "log"]), default="header", show_default=True,
+              help="Header stamps or log (receive) time.")
+@click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
+              help="Write certificate.json and reports here at the end, as certify does.")
+@click.option("--no-report", is_flag=True, help="With --out: write only certificate.json.")
+def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout: float,  # noqa: PLR0917
+          poll_s: float, time_base: str, out_dir: Path | None, no_report: bool) -> None:
+    """Certify a log while it is being recorded: one line per decision, as soon as it is decided.
+
+    Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
+    """
+    from verify.certify import resolve_scenario
+    from verify.online.monitor import OnlineMonitor
+    from verify.online.watch import watch_log
+
+    sc = resolve_scenario(scenario)
+    monitor = OnlineMonitor(sc, spec=spec)
+
+    def show(d: object) -> None:
+        click.echo(d.line())  # type: ignore[attr-defined]
+        sys.stdout.flush()
+
+    res = watch_log(log, monitor, follow=follow, idle_timeout_s=idle_timeout, poll_s=poll_s, time_base=time_base,
+                    on_decision=show)
+    for note in res.notes:
+        click.echo(f"note: {note}")
+    line = f"{log}: {res.result.verdict} ({res.stop_reason}; {monitor.counts['pose']} pose samples)"
+    if out_dir is not None:
+        from verify.certify import certify_log, write_certificate
+
+        result = certify_log(_certified_path(log, res.finished), sc, spec=spec, time_base=time_base,
+                             salvage=not res.finished)
+        line += f" -> {write_certificate(result, out_dir)}"
+        if not no_report:
+            from verify.report import write_reports
+
+            write_reports(result, sc, out_dir, suite_name=log.name)
+    click.echo(line)
+    sys.stdout.flush()
+    sys.exit(res.result.exit_code)

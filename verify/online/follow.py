@@ -1,0 +1,313 @@
+"""Logs that are still being written: a path -> the messages of the records completed since the last poll.
+
+input: an MCAP file, a ROS2 bag folder (MCAP or sqlite3 storage, ``metadata.yaml`` written when the recorder
+stops) or a ROS1 ``.bag`` that a recorder is appending to -> output: a ``Follower`` whose ``poll`` returns the
+``SalvagedMessage`` values of every record completed since the previous poll, in file order, and whose ``finished``
+says that the recorder closed the log (MCAP footer, ROS1 header pointing to its index, ROS2 ``metadata.yaml``).
+
+A record (an MCAP chunk, a ROS1 chunk) that is not complete yet is left for a later poll: only its bytes are
+re-read, never what was consumed. Files are opened read-only. ``rest`` reads, after the last poll, what
+``--salvage`` reads from a file that will not be completed (the complete records of a cut uncompressed chunk).
+"""
+
+from __future__ import annotations
+
+import bz2
+import sqlite3
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Protocol
+
+from verify.errors import LogReadError
+from verify.ingest.salvage import (
+    SalvagedMessage,
+    _add_ros1_conn,
+    _IncompleteError,
+    _lz4,
+    _mcap_decompress,
+    _mcap_records,
+    _mcap_string,
+    _ros1_header,
+    _ros1_records,
+    _take,
+    walk_mcap,
+    walk_ros1,
+)
+
+__all__ = ["Follower", "open_follower"]
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+
+
+class Follower(Protocol):
+    path: Path
+    format: str  # "mcap" | "ros1" | "sqlite3"
+    finished: bool
+    delivered: int
+
+    def poll(self) -> list[SalvagedMessage]: ...
+
+    def rest(self) -> list[SalvagedMessage]: ...
+
+
+def _read_from(path: Path, pos: int) -> bytes:
+    try:
+        with path.open("rb") as fh:
+            fh.seek(pos)
+            return fh.read()
+    except OSError as err:
+        raise LogReadError(f"cannot read ({err.strerror or err})", path=str(path)) from err
+
+
+class McapFollower:
+    """Top-level MCAP records from a byte offset; a chunk is read once it is complete."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.format = "mcap"
+        self.finished = False
+        self.delivered = 0
+        self.pos = 0
+        self.schemas: dict[int, tuple[str, bool]] = {}
+        self.channels: dict[int, tuple[str, str, bool]] = {}
+
+    def _handle(self, op: int, rec: bytes, out: list[SalvagedMessage]) -> None:
+        if op == 0x03:
+            (sid,) = struct.unpack_from("<H", rec, 0)
+            name, p = _mcap_string(rec, 2)
+            _enc, p = _mcap_string(rec, p)
+            (dlen,) = struct.unpack_from("<I", rec, p)
+            self.schemas[sid] = (name, dlen > 0)
+        elif op == 0x04:
+            cid, sid = struct.unpack_from("<HH", rec, 0)
+            topic, _ = _mcap_string(rec, 4)
+            name, has_def = self.schemas.get(sid, ("", False))
+            self.channels[cid] = (topic, name, has_def)
+        elif op == 0x05:
+            cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", rec, 0)
+            if cid in self.channels:
+                topic, name, has_def = self.channels[cid]
+                out.append(SalvagedMessage(topic, name, has_def, log_time, bytes(rec[22:])))
+
+    def poll(self) -> list[SalvagedMessage]:
+        out: list[SalvagedMessage] = []
+        if self.finished:
+            return out
+        buf = _read_from(self.path, self.pos)
+        pos = 0
+        if self.pos == 0:
+            if len(buf) < len(_MCAP_MAGIC):
+                return out
+            if not buf.startswith(_MCAP_MAGIC):
+                raise LogReadError("not an MCAP file (bad magic)", path=str(self.path))
+            pos = len(_MCAP_MAGIC)
+        try:
+            while pos < len(buf):
+                op = _take(buf, pos, 1)[0]
+                (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
+                rec = _take(buf, pos + 9, size)
+                got: list[SalvagedMessage] = []
+                if op == 0x06:
+                    _start, _end, usize, _crc = struct.unpack_from("<QQQI", rec, 0)
+                    comp, p = _mcap_string(rec, 28)
+                    (clen,) = struct.unpack_from("<Q", rec, p)
+                    inner = _mcap_decompress(_take(rec, p + 8, clen), comp, usize)
+                    for iop, irec, _ in _mcap_records(inner, 0, len(inner)):
+                        self._handle(iop, irec, got)
+                elif op in (0x02, 0x0F):  # footer / data end: the recorder closed the file
+                    self.finished = True
+                else:
+                    self._handle(op, rec, got)
+                out.extend(got)
+                pos += 9 + size
+                if self.finished:
+                    break
+        except _IncompleteError:
+            pass  # a record still being written: read it again next time
+        except (struct.error, ValueError, ImportError) as err:
+            raise LogReadError(f"malformed MCAP record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
+        self.pos += pos
+        self.delivered += len(out)
+        return out
+
+    def rest(self) -> list[SalvagedMessage]:
+        return _rest_of_walk(walk_mcap(self.path).messages, self.delivered)
+
+
+def _rest_of_walk(messages: Iterator[SalvagedMessage], delivered: int) -> list[SalvagedMessage]:
+    """The salvage walk yields the messages of the complete records in file order, as the follower did; what it
+    yields beyond them are the complete records of a cut uncompressed chunk."""
+    return [m for k, m in enumerate(messages) if k >= delivered]
+
+
+class Ros1Follower:
+    """ROS1 records from a byte offset; chunks are read once complete; the file is finished when the bag header
+    points to the index (rosbag writes it last)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.format = "ros1"
+        self.finished = False
+        self.delivered = 0
+        self.pos = 0
+        self.index_pos = 0
+        self.conns: dict[int, tuple[str, str, bool]] = {}
+
+    def _chunk(self, inner: bytes, out: list[SalvagedMessage]) -> None:
+        for iop, ih, idata, _ in _ros1_records(inner, 0):
+            if iop == 0x07:
+                _add_ros1_conn(self.conns, ih, idata)
+            elif iop == 0x02:
+                cid = struct.unpack("<I", ih["conn"])[0]
+                sec, nsec = struct.unpack("<II", ih["time"])
+                if cid in self.conns:
+                    topic, typ, has_def = self.conns[cid]
+                    out.append(SalvagedMessage(topic, typ, has_def, sec * 10**9 + nsec, idata))
+
+    def poll(self) -> list[SalvagedMessage]:
+        out: list[SalvagedMessage] = []
+        if self.finished:
+            return out
+        buf = _read_from(self.path, self.pos)
+        pos = 0
+        if self.pos == 0:
+            if len(buf) < len(_ROS1_MAGIC):
+                return out
+            if not buf.startswith(_ROS1_MAGIC):
+                raise LogReadError("not a ROS1 bag (bad magic)", path=str(self.path))
+            pos = len(_ROS1_MAGIC)
+        try:
+            while pos < len(buf):
+                if self.index_pos and self.pos + pos >= self.index_pos:
+                    self.finished = True
+                    break
+                (hlen,) = struct.unpack_from("<I", _take(buf, pos, 4))
+                header = _ros1_header(_take(buf, pos + 4, hlen))
+                (dlen,) = struct.unpack_from("<I", _take(buf, pos + 4 + hlen, 4))
+                data = _take(buf, pos + 8 + hlen, dlen)
+                op = header.get("op", b"\x00")[0]
+                got: list[SalvagedMessage] = []
+                if op == 0x03:  # bag header: index_pos is 0 until the recorder closes the bag
+                    self.index_pos = struct.unpack("<Q", header.get("index_pos", b"\0" * 8))[0]
+                elif op == 0x05:
+                    compression = header.get("compression", b"none").decode()
+                    inner = bz2.decompress(data) if compression == "bz2" else (
+                        _lz4(data) if compression == "lz4" else data)
+                    self._chunk(inner, got)
+                elif op == 0x07:
+                    _add_ros1_conn(self.conns, header, data)
+                out.extend(got)
+                pos += 8 + hlen + dlen
+        except _IncompleteError:
+            pass
+        except (struct.error, KeyError, ValueError, OSError, EOFError) as err:
+            raise LogReadError(f"malformed ROS1 record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
+        self.pos += pos
+        if not self.finished and self.pos > 0:
+            self._recheck_header()
+        self.delivered += len(out)
+        return out
+
+    def _recheck_header(self) -> None:
+        """The recorder rewrites the bag header's index_pos when it closes the bag."""
+        head = _read_from(self.path, 0)[: 8192]
+        try:
+            pos = len(_ROS1_MAGIC)
+            (hlen,) = struct.unpack_from("<I", _take(head, pos, 4))
+            header = _ros1_header(_take(head, pos + 4, hlen))
+            self.index_pos = struct.unpack("<Q", header.get("index_pos", b"\0" * 8))[0]
+        except (_IncompleteError, struct.error):
+            return
+        if self.index_pos and self.pos >= self.index_pos:
+            self.finished = True
+
+    def rest(self) -> list[SalvagedMessage]:
+        return _rest_of_walk(walk_ros1(self.path).messages, self.delivered)
+
+
+class SqliteFollower:
+    """rosbag2 sqlite3 storage: the rows of ``messages`` with an id above the last one read (read-only)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.format = "sqlite3"
+        self.finished = False
+        self.delivered = 0
+        self.last_id = 0
+
+    def poll(self) -> list[SalvagedMessage]:
+        try:
+            con = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=1.0)
+            try:
+                topics = {int(i): (str(n), str(t)) for i, n, t in con.execute("SELECT id, name, type FROM topics")}
+                rows = con.execute("SELECT id, topic_id, timestamp, data FROM messages WHERE id > ? ORDER BY id",
+                                   (self.last_id,)).fetchall()
+            finally:
+                con.close()
+        except sqlite3.OperationalError as err:
+            if "no such table" in str(err) or "locked" in str(err):
+                return []  # the recorder has not created its tables yet, or holds the lock: next poll
+            raise LogReadError(f"cannot read the sqlite3 storage ({err})", path=str(self.path)) from err
+        except sqlite3.DatabaseError as err:
+            raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
+        out = []
+        for mid, tid, stamp, data in rows:
+            if tid in topics:
+                name, typ = topics[tid]
+                out.append(SalvagedMessage(name, typ, False, int(stamp), bytes(data)))
+            self.last_id = max(self.last_id, int(mid))
+        self.delivered += len(out)
+        return out
+
+    def rest(self) -> list[SalvagedMessage]:
+        return []
+
+
+class FolderFollower:
+    """A ROS2 bag folder: its storage files in name order (a split starts a new file); finished when the recorder
+    has written ``metadata.yaml``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.format = "mcap"
+        self.finished = False
+        self.delivered = 0
+        self.files: dict[Path, McapFollower | SqliteFollower] = {}
+
+    def _storage(self) -> list[Path]:
+        try:
+            return sorted(p for p in self.path.iterdir() if p.suffix in (".mcap", ".db3"))
+        except OSError as err:
+            raise LogReadError(f"cannot list the bag folder ({err.strerror or err})", path=str(self.path)) from err
+
+    def poll(self) -> list[SalvagedMessage]:
+        done = (self.path / "metadata.yaml").is_file()
+        out: list[SalvagedMessage] = []
+        for f in self._storage():
+            if f not in self.files:
+                self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f)
+                self.format = self.files[f].format
+            out.extend(self.files[f].poll())
+        self.finished = done and all(f.finished or f.format == "sqlite3" for f in self.files.values())
+        self.delivered += len(out)
+        return out
+
+    def rest(self) -> list[SalvagedMessage]:
+        return [m for f in self.files.values() for m in f.rest()]
+
+
+def open_follower(path: Path) -> McapFollower | Ros1Follower | SqliteFollower | FolderFollower:
+    """The follower for ``path`` by its kind (a folder is a ROS2 bag; files by extension)."""
+    if path.is_dir():
+        return FolderFollower(path)
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        return McapFollower(path)
+    if suffix == ".bag":
+        return Ros1Follower(path)
+    if suffix == ".db3":
+        return SqliteFollower(path)
+    raise LogReadError(f"unrecognized log type {suffix or '(no extension)'!r}: expected .bag, .mcap, .db3 or a ROS2 "
+                       f"bag folder", path=str(path))

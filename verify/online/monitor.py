@@ -1,0 +1,631 @@
+"""Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
+
+input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer
+ns) -> output: ``Decision`` events (``update``), the current ``MonitorState`` (``state``) and, at ``close``, the
+same checks and overall verdict as ``verify.certify.certify_log`` on a log holding the same samples.
+
+Verdicts are final once given: a check that fails never passes later, and a formula obligation is reported decided
+only when no continuation of the run can change its verdict. The obligations are the top-level conjuncts of the
+formula under the trajectory semantics; ``spec_trajectory`` and ``spec_timed_run`` are the whole formula under each
+semantics. Until ``close`` a check that can only pass at the end of the run (``G`` over the whole run, the
+workspace, the tube) is "inconclusive so far".
+
+``push_*`` only buffers (O(1)); the buffered samples are judged together (vectorised, with the offline code) when
+``update``/``state`` is called or when ``max_pending`` samples wait. The time a verdict is reported with is the time
+of the sample that decided it, whatever the batching.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tubempc.mitl import And, Formula, atoms
+from tubempc.scenario import Scenario
+from verify.certify import resolve_scenario
+from verify.checks import CheckResult, check_input_box, check_tube
+from verify.errors import SpecError, VerifyError
+from verify.geometry import gap_bounds, step_bound_m, workspace_margin
+from verify.ingest import LogData
+from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
+from verify.timedrun import parse_spec
+from verify.trajectory import trajectory_positions
+
+__all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
+           "feed_log_data"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+CHECK_NAMES = ("spec_trajectory", "spec_timed_run", "tube", "input_box", "workspace", "obstacle_clearance")
+
+
+class MonitorClosedError(VerifyError, RuntimeError):
+    """A sample was pushed after ``close``."""
+
+
+@dataclass(frozen=True, slots=True)
+class CheckState:
+    """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
+    margin so far (m; guaranteed lower bound for formulas) and the first violation (s)."""
+
+    name: str
+    verdict: str
+    decided: bool
+    decided_at_s: float | None
+    margin: float | None
+    first_violation_s: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """A check or obligation became final."""
+
+    name: str
+    verdict: str
+    time_s: float
+    margin: float | None
+    first_violation_s: float | None
+
+    def line(self) -> str:
+        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.3f}"
+        unit = "" if not margin or self.name in ("input_box",) else " m"
+        at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
+        return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
+
+
+@dataclass(frozen=True, slots=True)
+class MonitorState:
+    verdict: str  # "fail" as soon as one check fails; "pass" only after close
+    checks: tuple[CheckState, ...]
+    obligations: tuple[CheckState, ...]
+    samples: dict[str, int]
+    closed: bool
+
+    @property
+    def all_decided(self) -> bool:
+        return all(c.decided for c in (*self.checks, *self.obligations))
+
+
+@dataclass(frozen=True, slots=True)
+class OnlineResult:
+    """What ``close`` returns: the checks (as ``verify.checks.CheckResult``), the overall verdict and exit code."""
+
+    verdict: str
+    verdict_reason: str | None
+    checks: tuple[CheckResult, ...]
+    state: MonitorState
+
+    @property
+    def exit_code(self) -> int:
+        return {"pass": 0, "fail": 1, "inconclusive": 2}[self.verdict]
+
+
+def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
+    return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
+
+
+def _finite_min(a: FloatArray) -> float | None:
+    finite = a[np.isfinite(a)]
+    return float(finite.min()) if finite.size else None
+
+
+def _min(a: float | None, b: float | None) -> float | None:
+    return b if a is None else (a if b is None else min(a, b))
+
+
+# ---- per-sample checks -----------------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class _MarginRun:
+    """``verify.checks.margin_check`` accumulated over batches (workspace, obstacle clearance)."""
+
+    name: str
+    samples: int = 0
+    fail_ns: int | None = None
+    fail_detail: dict[str, Any] = field(default_factory=dict)
+    sample_min: float | None = None
+    nan: int = 0
+    worst_gap: float = math.inf
+    worst_gap_at: tuple[int, int] | None = None
+
+    def feed(self, t_ns: IntArray, margin: FloatArray, step_m: FloatArray, new_from: int) -> int | None:
+        """``t_ns``/``margin``: the previous sample (if ``new_from`` = 1) and the new ones; returns the index of a
+        first violation found in this batch."""
+        new = margin[new_from:]
+        self.samples += new.shape[0]
+        self.sample_min = _min(self.sample_min, _finite_min(new))
+        self.nan += int(np.isnan(new).sum())
+        hit = None
+        if self.fail_ns is None:
+            bad = np.flatnonzero(new < 0)
+            if bad.size:
+                hit = int(bad[0]) + new_from
+                self.fail_ns = int(t_ns[hit])
+        if margin.shape[0] >= 2:
+            lo = gap_bounds(margin, step_m).lo
+            k = int(np.argmin(lo))
+            if lo[k] < self.worst_gap:
+                self.worst_gap, self.worst_gap_at = float(lo[k]), (int(t_ns[k]), int(t_ns[k + 1]))
+        return hit
+
+    def result(self) -> CheckResult:
+        if self.samples == 0:
+            return CheckResult(self.name, "inconclusive", None, None, {"reason": "no samples"})
+        if self.fail_ns is not None:
+            return CheckResult(self.name, "fail", self.sample_min, self.fail_ns, dict(self.fail_detail))
+        if self.nan or self.worst_gap < 0:
+            why = []
+            if self.nan:
+                why.append(f"{self.nan} NaN sample(s)")
+            if self.worst_gap < 0 and self.worst_gap_at is not None:
+                a, b = self.worst_gap_at
+                why.append(f"the robot may have crossed the limit between samples at {a} ns and {b} ns "
+                           f"(bound {self.worst_gap:.4f} m)")
+            return CheckResult(self.name, "inconclusive", self.sample_min, None,
+                               {"reason": "; ".join(why), "guaranteed_margin_m": None})
+        guaranteed = min(self.sample_min if self.sample_min is not None else -math.inf, self.worst_gap)
+        return CheckResult(self.name, "pass", guaranteed, None, {"sample_margin_m": self.sample_min})
+
+
+@dataclass(slots=True)
+class _MergedRun:
+    """Batch results of an offline check (tube, input box) merged: first failure, smallest margin, any undecided."""
+
+    name: str
+    samples: int = 0
+    fail: CheckResult | None = None
+    margin: float | None = None
+    undecided: list[str] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+    max_dev: float | None = None
+    missing_reason: str = "no samples"
+
+    def feed(self, res: CheckResult, n: int) -> bool:
+        self.samples += n
+        self.margin = _min(self.margin, res.margin)
+        for key in ("matched_samples", "unmatched_samples"):
+            if key in res.details:
+                self.counts[key] = self.counts.get(key, 0) + int(res.details[key])
+        dev = res.details.get("max_deviation_m")
+        if dev is not None and math.isfinite(dev):
+            self.max_dev = dev if self.max_dev is None else max(self.max_dev, dev)
+        if res.verdict == "fail" and self.fail is None:
+            self.fail = res
+            return True
+        if res.verdict == "inconclusive":
+            self.undecided.append(str(res.details.get("reason", "undecided samples")))
+        return False
+
+    def result(self, details: dict[str, Any]) -> CheckResult:
+        d = {**details, **self.counts}
+        if self.max_dev is not None:
+            d["max_deviation_m"] = self.max_dev
+        if self.fail is not None:
+            extra = {k: v for k, v in self.fail.details.items() if k == "component"}
+            return CheckResult(self.name, "fail", self.margin, self.fail.first_violation_ns, {**d, **extra})
+        if self.samples == 0:
+            return CheckResult(self.name, "inconclusive", None, None, {**d, "reason": self.missing_reason})
+        if self.undecided:
+            return CheckResult(self.name, "inconclusive", self.margin, None, {**d, "reason": "; ".join(self.undecided)})
+        return CheckResult(self.name, "pass", self.margin, None, d)
+
+
+class _Semantics:
+    """One semantics of the formula: its track, atom nodes, heads and evaluation."""
+
+    def __init__(self, formula: Formula) -> None:
+        self.track = Track()
+        self.atoms: dict[str, AtomNode] = {}
+        self.head = build_head(formula, lambda name: self.atoms.setdefault(name, AtomNode()))
+        is_conj = isinstance(self.head, BoolHead) and self.head.kind == "and" and isinstance(formula, And)
+        self.obligations: list[Head] = list(self.head.children()) if is_conj else [self.head]
+        self.evaluation = Evaluation(self.track, [self.head])
+        for name in atoms(formula):
+            self.atoms.setdefault(name, AtomNode())
+
+
+class OnlineMonitor:
+    """Incremental certifier of one run. ``push_pose`` / ``push_nominal`` / ``push_cmd`` in time order (per stream),
+    ``update`` for the new decisions, ``state`` for everything so far, ``close`` for the final verdicts."""
+
+    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100) -> None:
+        if max_pending < 1:
+            raise ValueError(f"max_pending={max_pending!r} must be >= 1")
+        sc = resolve_scenario(scenario)
+        self.scenario = sc
+        self.formula = parse_spec(spec if spec is not None else sc.spec)
+        known = {lab for r in sc.regions for lab in r.labels}
+        unknown = sorted(atoms(self.formula) - known)
+        if unknown:
+            raise SpecError(f"formula {self.formula}: proposition(s) {', '.join(unknown)} label no region of "
+                            f"scenario {sc.name!r}")
+        self.max_pending = max_pending
+        self._names = sorted(atoms(self.formula))
+        self._traj = _Semantics(self.formula)
+        self._run = _Semantics(self.formula)
+        self._obligation_names = [str(h.formula) for h in self._traj.obligations]
+        eta = sc.robot.radius
+        self._cx = np.array([r.center[0] for r in sc.regions], dtype=np.float64)
+        self._cy = np.array([r.center[1] for r in sc.regions], dtype=np.float64)
+        self._radius = np.array([r.radius for r in sc.regions], dtype=np.float64)
+        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in sc.regions])
+        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels] for name in self._names]
+        self._labels = [frozenset(r.labels) for r in sc.regions]
+        self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
+        self._period_ns = round(1e9 / sc.mocap.rate_hz)
+        self._tol_m = 3.0 * sc.mocap.noise_std
+        # pending input
+        # pending input: one list per column (cheap appends; one numpy conversion per batch)
+        self._pose_t: list[int] = []
+        self._pose_x: list[float] = []
+        self._pose_y: list[float] = []
+        self._nom_t: list[int] = []
+        self._nom_x: list[float] = []
+        self._nom_y: list[float] = []
+        self._cmd_t: list[int] = []
+        self._cmd_u: list[tuple[float, float, float]] = []
+        self._last_pose = self._last_nom = self._last_cmd = -(2**63)
+        self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
+        self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
+        self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
+        # judged state
+        self.t0_ns: int | None = None
+        self._prev: tuple[int, float, float] | None = None
+        self._prev_region = -2  # "before the first sample"
+        self._ws = _MarginRun("workspace")
+        self._clear = _MarginRun("obstacle_clearance")
+        self._tube = _MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
+        self._input = _MergedRun("input_box", missing_reason="no cmd_vel logged")
+        self._tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []
+        self._nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+        self._nominal_seen = 0
+        self._reported: set[str] = set()
+        self._closed = False
+        self._result: OnlineResult | None = None
+        self._final: list[CheckResult] | None = None
+        self._unreturned: list[Decision] = []
+        self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+
+    # ---- input ----------------------------------------------------------------------------------------------------
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples accepted per stream."""
+        return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
+                len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
+
+    def _reject(self, stream: str, t_ns: int, last: int) -> None:
+        """A sample at or before the stream's last one: counted (equal stamps as duplicates), never judged."""
+        if self._closed:
+            raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
+        (self.duplicates if t_ns == last else self.out_of_order)[stream] += 1
+
+    def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
+        """A pose sample (absolute ns; ``yaw_rad`` is accepted for the caller's convenience, no check uses it)."""
+        if t_ns > self._last_pose and not self._closed:
+            self._last_pose = t_ns
+            self._pose_t.append(t_ns)
+            self._pose_x.append(x_m)
+            self._pose_y.append(y_m)
+            if len(self._pose_t) >= self.max_pending:
+                self._process()
+        else:
+            self._reject("pose", t_ns, self._last_pose)
+
+    def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
+        """A sample of the MPC's nominal state (absolute ns)."""
+        if t_ns > self._last_nom and not self._closed:
+            self._last_nom = t_ns
+            self._nom_t.append(t_ns)
+            self._nom_x.append(x_m)
+            self._nom_y.append(y_m)
+            if len(self._nom_t) >= self.max_pending:
+                self._process()
+        else:
+            self._reject("nominal", t_ns, self._last_nom)
+
+    def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
+        """An applied input (absolute ns; body frame as logged: vx, vy, wz)."""
+        if t_ns > self._last_cmd and not self._closed:
+            self._last_cmd = t_ns
+            self._cmd_t.append(t_ns)
+            self._cmd_u.append((u1, u2, u3))
+            if len(self._cmd_t) >= self.max_pending:
+                self._process()
+        else:
+            self._reject("cmd", t_ns, self._last_cmd)
+
+    # ---- judging --------------------------------------------------------------------------------------------------
+    def update(self) -> list[Decision]:
+        """Judge the buffered samples; the checks and obligations decided since the last call (including those
+        decided when ``max_pending`` samples made a push judge the buffer)."""
+        self._process()
+        out, self._unreturned = self._unreturned, []
+        return out
+
+    def _process(self) -> None:
+        if self._nom_t:
+            self._judged["nominal"] += len(self._nom_t)
+            self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
+                               np.array(self._nom_y, dtype=np.float64))
+            self._nom_t, self._nom_x, self._nom_y = [], [], []
+        if self._pose_t:
+            self._judged["pose"] += len(self._pose_t)
+            t = np.array(self._pose_t, dtype=np.int64)
+            x = np.array(self._pose_x, dtype=np.float64)
+            y = np.array(self._pose_y, dtype=np.float64)
+            self._pose_t, self._pose_x, self._pose_y = [], [], []
+            self._feed_pose(t, x, y)
+        if self._cmd_t:
+            self._judged["cmd"] += len(self._cmd_t)
+            t = np.array(self._cmd_t, dtype=np.int64)
+            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
+            self._cmd_t, self._cmd_u = [], []
+            self._feed_cmd(t, u)
+        self._resolve_tube(closing=False)
+        self._unreturned.extend(self._new_decisions())
+
+    def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray) -> None:
+        sc = self.scenario
+        if self.t0_ns is None:
+            self.t0_ns = int(t_abs[0])
+        t0 = self.t0_ns
+        prev = self._prev
+        k0 = 0 if prev is None else 1
+        if prev is not None:
+            t_abs = np.concatenate(([prev[0]], t_abs))
+            x = np.concatenate(([prev[1]], x))
+            y = np.concatenate(([prev[2]], y))
+        self._prev = (int(t_abs[-1]), float(x[-1]), float(y[-1]))
+        t_rel = t_abs - t0
+        step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
+        # trajectory semantics: sample points and the gaps between them
+        pos, point_at, gap_at = trajectory_positions(t_rel)
+        first = int(point_at[k0])
+        tr = self._traj
+        start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
+        known = np.where(is_point, start, stop + 1)
+        # every region's margin in one pass (the arithmetic of verify.geometry, bit for bit)
+        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        region_m = self._offset[:, None] - dist
+        atom_m = np.empty((len(self._names), x.shape[0]))
+        for k, rows in enumerate(self._atom_rows):
+            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        nan = np.isnan(atom_m)
+        p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
+                                                                                                      atom_m)
+        mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
+        half = 0.5 * step
+        g_lo, g_hi = mid - half, mid + half
+        g_lo[np.isnan(g_lo)] = -np.inf
+        g_hi[np.isnan(g_hi)] = np.inf
+        lo = np.empty((len(self._names), pos.size))
+        hi = np.empty_like(lo)
+        lo[:, point_at], hi[:, point_at] = p_lo, p_hi
+        ok = gap_at >= 0
+        lo[:, gap_at[ok]], hi[:, gap_at[ok]] = g_lo[:, ok], g_hi[:, ok]
+        for k, name in enumerate(self._names):
+            tr.atoms[name].push(lo[k, first:], hi[k, first:], known)
+        tr.track.append(start, stop, is_point)
+        tr.track.tick(t_rel[k0:])
+        tr.evaluation.step()
+        # timed-run semantics (paper, Definition 3): an entry where the containing region changes
+        inside = dist[:, k0:] + sc.robot.radius <= self._radius[:, None]  # geometry.containing_region
+        region = np.full(inside.shape[1], -1, dtype=np.int64)
+        for k in range(inside.shape[0]):
+            region[inside[k]] = k
+        before = np.concatenate(([self._prev_region], region[:-1]))
+        self._prev_region = int(region[-1])
+        entry = np.flatnonzero((region != before) & (region >= 0))
+        run = self._run
+        conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
+        if entry.size:
+            t_e = conv[entry]
+            run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
+            for name in self._names:
+                holds = np.array([name in self._labels[int(r)] for r in region[entry]], dtype=bool)
+                v1 = np.where(holds, 1.0, -1.0)
+                run.atoms[name].push(v1, v1.copy(), t_e)
+        run.track.tick(conv)
+        run.evaluation.step()
+        # checks: workspace, obstacle clearance, tube (pending until a nominal sample at or after them)
+        ws_hit = self._ws.feed(t_abs, workspace_margin(x, y, sc), step, k0)
+        del ws_hit
+        if self._unsafe:
+            margins = region_m[self._unsafe]
+            hit = self._clear.feed(t_abs, -np.max(margins, axis=0), step, k0)
+            if hit is not None:
+                self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
+        self._tube_pending.append((t_abs[k0:], x[k0:], y[k0:]))
+        self._tube_last_t = int(t_abs[-1])
+
+    def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
+        nt, nx, ny = self._nominal
+        self._nominal = (np.concatenate((nt, t)), np.concatenate((nx, x)), np.concatenate((ny, y)))
+        self._nominal_seen += t.shape[0]
+
+    def _feed_cmd(self, t: IntArray, u: FloatArray) -> None:
+        res = check_input_box(t, u, self.scenario.inputs)
+        self._input.feed(res, t.shape[0])
+
+    def _resolve_tube(self, closing: bool) -> None:
+        """Judge the pose samples whose nearest nominal sample is known (a nominal sample at or after them)."""
+        if not self._tube_pending:
+            return
+        t = np.concatenate([p[0] for p in self._tube_pending])
+        x = np.concatenate([p[1] for p in self._tube_pending])
+        y = np.concatenate([p[2] for p in self._tube_pending])
+        nt, nx, ny = self._nominal
+        if nt.size == 0:
+            self._tube_pending = [(t, x, y)] if not closing else []
+            return
+        nt, nx, ny = self._nominal
+        k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
+        if k:
+            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self.scenario.tube_radius_m,
+                             tolerance_m=self._tol_m, match_ns=self._period_ns // 2)
+            self._tube.feed(res, k)
+        self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
+        # keep the nominal samples a later pose sample can still match: from the last one before it
+        keep_from = int(t[k]) if k < t.shape[0] else self._tube_last_t + 1
+        j = max(int(np.searchsorted(nt, keep_from, side="left")) - 1, 0)
+        self._nominal = (nt[j:], nx[j:], ny[j:])
+
+    # ---- state -------------------------------------------------------------------------------------------------------
+    def _head_state(self, name: str, h: Head, *, margin: bool) -> CheckState:
+        """Margin so far: the guaranteed robustness (lower bound) unless false, then its upper bound (how far
+        from being satisfied it is at best)."""
+        verdict = h.verdict
+        t0 = self.t0_ns or 0
+        m: float | None = None
+        if margin:
+            m = h.hi if verdict == "fail" else h.lo
+            m = m if math.isfinite(m) else None
+        decided_at = _rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
+        first = _rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        return CheckState(name, verdict, h.decided, decided_at, m, first)
+
+    def _check_states(self) -> list[CheckState]:
+        t0 = self.t0_ns
+        if self._final is not None:
+            end = self._traj.track.end_ns
+            return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
+                               c.margin if c.margin is None or math.isfinite(c.margin) else None,
+                               _rel_s(c.first_violation_ns, t0)) for c in self._final]
+        out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
+               self._head_state("spec_timed_run", self._run.head, margin=False)]
+        runs: list[_MergedRun | _MarginRun] = [self._tube, self._input, self._ws, self._clear]
+        for run in runs:
+            if isinstance(run, _MarginRun):
+                failed, when, m = run.fail_ns is not None, run.fail_ns, run.sample_min
+            else:
+                failed = run.fail is not None
+                when = run.fail.first_violation_ns if run.fail is not None else None
+                m = run.margin
+            if run.name == "obstacle_clearance" and not self._unsafe:
+                out.append(CheckState(run.name, "pass", True, 0.0, None, None))
+                continue
+            out.append(CheckState(run.name, "fail" if failed else "inconclusive", failed,
+                                  _rel_s(when, t0), m, _rel_s(when, t0)))
+        return out
+
+    def state(self) -> MonitorState:
+        """The current state of every check and obligation (judges the buffered samples first)."""
+        if not self._closed:
+            self._process()
+        if self._result is not None:
+            return self._result.state
+        return self._state(closed=False)
+
+    def _state(self, closed: bool) -> MonitorState:
+        checks = self._check_states()
+        obligations = [self._head_state(name, h, margin=True)
+                       for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)]
+        verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
+        return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
+
+    def _new_decisions(self) -> list[Decision]:
+        out: list[Decision] = []
+        st = self._state(closed=self._closed)
+        for c in (*st.obligations, *st.checks):
+            if c.decided and c.name not in self._reported:
+                self._reported.add(c.name)
+                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin, c.first_violation_s))
+        out.sort(key=lambda d: d.time_s)
+        return out
+
+    @property
+    def retained_positions(self) -> int:
+        """Positions and values held by the formula's evaluation (bounded by the windows times the rate)."""
+        return self._traj.evaluation.retained() + self._run.evaluation.retained()
+
+    # ---- end of the run --------------------------------------------------------------------------------------------
+    def close(self, *, partial: bool = False) -> OnlineResult:
+        """End of observation at the last pose sample: the final verdict of every check, as ``certify_log`` gives
+        for a log with the same samples (``partial``: the log was salvaged, never a pass)."""
+        if self._result is not None:
+            return self._result
+        self._process()
+        self._closed = True
+        for sem in (self._traj, self._run):
+            sem.evaluation.step(closing=True)
+        self._resolve_tube(closing=True)
+        checks = self._final_checks()
+        self._final = checks
+        self._final_decisions = self._unreturned + self._new_decisions()
+        self._unreturned = []
+        verdicts = [c.verdict for c in checks]
+        why: str | None = None
+        if "fail" in verdicts:
+            verdict = "fail"
+        elif "inconclusive" in verdicts:
+            verdict = "inconclusive"
+            why = "check(s) not decided: " + ", ".join(c.name for c in checks if c.verdict == "inconclusive")
+        elif partial:
+            verdict, why = "inconclusive", "the log is partial (salvaged): a partial log is never certified as pass"
+        elif self.out_of_order["pose"]:
+            verdict = "inconclusive"
+            why = f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not judged"
+        else:
+            verdict = "pass"
+        self._result = OnlineResult(verdict, why, tuple(checks), self._state(closed=True))
+        return self._result
+
+    @property
+    def final_decisions(self) -> list[Decision]:
+        """The decisions made by ``close`` (every check still open at the end)."""
+        return list(getattr(self, "_final_decisions", []))
+
+    def _final_checks(self) -> list[CheckResult]:
+        t0 = self.t0_ns
+        traj, run = self._traj.head, self._run.head
+        if t0 is None:
+            spec_traj = CheckResult("spec_trajectory", "inconclusive", None, None, {"reason": "no pose samples"})
+            spec_run = CheckResult("spec_timed_run", "inconclusive", None, None, {"reason": "no pose samples"})
+        else:
+            v = traj.verdict
+            spec_traj = CheckResult("spec_trajectory", v, traj.lo if v != "inconclusive" else None,
+                                    traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
+                                    {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
+            rv = run.verdict if self._run.track.count else "inconclusive"
+            spec_run = CheckResult("spec_timed_run", rv, None,
+                                   run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
+                                   {} if self._run.track.count else {"reason": "the timed run is empty"})
+        tube = self._tube.result({"radius_m": self.scenario.tube_radius_m, "noise_tolerance_m": self._tol_m})
+        if self._nominal_seen == 0:
+            tube = CheckResult("tube", "inconclusive", None, None,
+                               {"reason": "no nominal state logged: tube containment cannot be checked"})
+        clear = self._clear.result() if self._unsafe else CheckResult(
+            "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
+        return [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
+                self._ws.result(), clear]
+
+
+def feed_log_data(monitor: OnlineMonitor, log: LogData, *, update_every: int = 0) -> list[Decision]:
+    """Push every sample of a read log in time order (the three streams merged), as a recorder would deliver
+    them; ``update_every`` > 0: call ``update`` after that many pose samples. Returns the decisions made."""
+    streams: list[tuple[str, IntArray, FloatArray]] = [
+        ("pose", log.pose.t_ns, np.column_stack((log.pose.x_m, log.pose.y_m)))]
+    if log.nominal is not None:
+        streams.append(("nominal", log.nominal.t_ns, np.column_stack((log.nominal.x_m, log.nominal.y_m))))
+    if log.cmd_t_ns is not None and log.cmd_u is not None:
+        streams.append(("cmd", log.cmd_t_ns, log.cmd_u))
+    kinds = np.concatenate([np.full(t.shape[0], k, dtype=np.int64) for k, (_, t, _) in enumerate(streams)])
+    index = np.concatenate([np.arange(t.shape[0], dtype=np.int64) for _, t, _ in streams])
+    order = np.argsort(np.concatenate([t for _, t, _ in streams]), kind="stable")
+    push = {"pose": monitor.push_pose, "nominal": monitor.push_nominal, "cmd": monitor.push_cmd}
+    columns = [(push[name], t.tolist(), values.tolist()) for name, t, values in streams]
+    out: list[Decision] = []
+    poses = 0
+    for k, i in zip(kinds[order].tolist(), index[order].tolist(), strict=True):
+        fn, t, values = columns[k]
+        fn(t[i], *values[i])
+        if k == 0:
+            poses += 1
+            if update_every and poses % update_every == 0:
+                out.extend(monitor.update())
+    out.extend(monitor.update())
+    return out
