@@ -30,7 +30,7 @@ from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.selection import Selection, select_checks
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of
-from verify.trajectory import TrajectoryVerdict, check_trajectory
+from verify.trajectory import check_trajectory, reported_margin
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
            "resolve_scenario", "verdict_line", "write_certificate"]
@@ -118,20 +118,6 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
         return _judge(log, sc, formula_text=str(formula), selection=selection)
 
 
-def _spec_margin(traj: TrajectoryVerdict) -> float | None:
-    """The margin (m) of the formula: the guaranteed one; for a fail whose guaranteed margin is unbounded (a window
-    with no sample), the optimistic one, or the worst finite value of the robustness signal, so that a failed check
-    always states by how much (None only when no spatial margin exists: a formula failing on constants)."""
-    if traj.verdict == "inconclusive":
-        return None
-    if math.isfinite(traj.margin_m) or traj.verdict == "pass":
-        return traj.margin_m
-    if math.isfinite(traj.margin_hi_m):
-        return traj.margin_hi_m
-    finite = traj.signal_rho_m[np.isfinite(traj.signal_rho_m)]
-    return float(finite.min()) if finite.size and float(finite.min()) < 0 else None
-
-
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
            selection: Selection | None = None) -> CertifyResult:
     if selection is None:
@@ -144,7 +130,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
 
     traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max)
     spec_traj = CheckResult(
-        "spec_trajectory", traj.verdict, _spec_margin(traj),
+        "spec_trajectory", traj.verdict, reported_margin(traj.verdict, traj.margin_m, traj.margin_hi_m),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",

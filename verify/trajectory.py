@@ -11,6 +11,7 @@ undecided, never true, and a sample inside an obstacle makes it false with that 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +23,8 @@ from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_
 from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
 from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 
-__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
+__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "reported_margin",
+           "trajectory_positions"]
 
 #: the fast path computes distances with sqrt(dx*dx + dy*dy) (a few ulps from hypot); a root margin closer to 0
 #: than this is recomputed with hypot, so the verdict is the one of the exact margins
@@ -44,6 +46,17 @@ class TrajectoryVerdict:
     reason: str | None
     signal_t_ns: IntArray
     signal_rho_m: FloatArray
+
+
+def reported_margin(verdict: str, lo_m: float, hi_m: float) -> float | None:
+    """The margin a certificate states for the formula: the guaranteed one (``lo_m``); for a fail whose guaranteed
+    margin is unbounded (a window with no sample in it), the optimistic one, so a failed formula always states by how
+    much; None when undecided, or when no spatial margin exists (a formula failing on constants)."""
+    if verdict == "inconclusive":
+        return None
+    if math.isfinite(lo_m) or verdict == "pass":
+        return lo_m
+    return hi_m if math.isfinite(hi_m) else None
 
 
 def trajectory_positions(t_ns: IntArray) -> tuple[Positions, IntArray, IntArray]:

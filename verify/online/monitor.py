@@ -34,7 +34,7 @@ from verify.geometry import gap_bounds, step_bound_m, workspace_margin
 from verify.ingest import LogData
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.timedrun import parse_spec
-from verify.trajectory import trajectory_positions
+from verify.trajectory import reported_margin, trajectory_positions
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
@@ -587,7 +587,7 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", "inconclusive", None, None, {"reason": "no pose samples"})
         else:
             v = traj.verdict
-            spec_traj = CheckResult("spec_trajectory", v, traj.lo if v != "inconclusive" else None,
+            spec_traj = CheckResult("spec_trajectory", v, reported_margin(v, traj.lo, traj.hi),
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
