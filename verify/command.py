@@ -69,9 +69,12 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
                    "or <skipped> (shown green or grey by most dashboards).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the certificate as JSON on stdout (a list for several logs); the summary goes to stderr.")
+@click.option("--digest", type=click.Choice(["blake3", "sha256"]), default="blake3", show_default=True,
+              help="Hash of the log's bytes in the certificate (b3sum's / sha256sum's value for a file).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
-            progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool) -> None:
+            progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool,
+            digest: str) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
@@ -87,7 +90,8 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     if out_dir is not None:
         prepare_output_dir(out_dir, force=force, inputs=logs)
     if _single_log(logs) and dask is None:
-        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks)
+        result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks,
+                             digest=digest)
         line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
             try:
@@ -114,7 +118,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
-                         progress=progress, checks=checks)
+                         progress=progress, checks=checks, digest=digest)
     if as_json:
         click.echo(json.dumps([_json_entry(item) for item in batch.items], indent=2))
     if level >= 0:

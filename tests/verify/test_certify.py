@@ -230,9 +230,11 @@ def test_cli_exit_codes_and_out_folders(traj_cls: Any, make_log: MakeLog, scenar
     r = run(str(ok), "--scenario", "nexus-sml", "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert json.loads((out / "certificate.json").read_text())["verdict"] == "pass"
-    r = run(str(ok), str(nonom), "--scenario", "nexus-sml", "--out", str(out / "many"))
+    r = run(str(ok), str(nonom), "--scenario", "nexus-sml", "--out", str(out / "many"), "--digest", "sha256")
     assert r.returncode == 2, r.stdout + r.stderr
-    assert len(list((out / "many").glob("*/certificate.json"))) == 2
+    many = sorted((out / "many").glob("*/certificate.json"))
+    assert len(many) == 2
+    assert {json.loads(c.read_text())["log_digest_algorithm"] for c in many} == {"sha256"}
     r = run(str(tmp_path / "missing.mcap"), "--scenario", "nexus-sml")
     assert r.returncode == 3 and r.stderr.count("\n") == 1 and "missing.mcap" in r.stderr
     r = run(str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1")

@@ -181,14 +181,20 @@ def test_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, monkeyp
     """/pose is ~200 bytes of every ~1 MiB chunk: from an uncompressed chunk only its records (and the index) are
     read; a compressed chunk has to be read whole."""
     path = _sparse_bag(tmp_path / "sparse.bag", compression, 20)
-    real_pread = os.pread
+    real_pread, real_preadv = os.pread, os.preadv
     read_b = [0]
 
     def counting(fd: int, n: int, pos: int) -> bytes:
         read_b[0] += n
         return real_pread(fd, n, pos)
 
+    def counting_v(fd: int, buffers: list[memoryview], pos: int) -> int:
+        got = real_preadv(fd, buffers, pos)
+        read_b[0] += got
+        return got
+
     monkeypatch.setattr(os, "pread", counting)
+    monkeypatch.setattr(os, "preadv", counting_v)
     fast = read_ros1_fast(path, {"/pose"})
     monkeypatch.undo()
     assert fast is not None and len(fast.topics["/pose"][3]) == 20

@@ -44,7 +44,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
-from verify.ingest.records import MCAP, SpanError, read_records
+from verify.ingest.records import MCAP, WORKERS, SpanError, in_order, read_records, read_scratch
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -90,7 +90,7 @@ def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) 
     ``storage.messages(connections)`` yields them; None when unusual."""
     try:
         return _read(storage, connections)
-    except (_UnusualError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
+    except (_UnusualError, SpanError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
             AttributeError, TypeError, MemoryError):
         return None
 
@@ -114,8 +114,10 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
     with storage.path.open("rb") as fh:
         fd = fh.fileno()
         size = os.fstat(fd).st_size
-        for chunk in selected:
-            channel, log_ns, starts, lens, u8 = _chunk_messages(fd, size, chunk, wanted)
+        # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
+        workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
+        for channel, log_ns, starts, lens, u8 in in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected,
+                                                          workers=workers):
             for t in topics:
                 mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
                 parts[t].append(_Part(log_ns[mine], gather(u8, starts[mine], lens[mine]), lens[mine]))
@@ -131,7 +133,7 @@ def _pread(fd: int, size: int, pos: int, n: int) -> bytes:
     return data
 
 
-def _decompress(data: bytes, compression: str, usize: int, crc: int) -> bytes:
+def _decompress(data: bytes | memoryview, compression: str, usize: int, crc: int) -> bytes:
     """``rosbags``' ``decompress`` (same output, same checks), with one-shot zstd decoding into a buffer of the
     known size (``zstd.decompress`` without a size grows its output step by step: ~10x slower here); anything
     unusual (several frames, a size mismatch) goes to ``rosbags``' own function."""
@@ -143,7 +145,7 @@ def _decompress(data: bytes, compression: str, usize: int, crc: int) -> bytes:
             raw = b""
         if len(raw) == usize and dec.eof and not dec.unused_data and (not crc or zlib.crc32(raw) == crc):
             return raw
-    return rosbags_decompress(data, compression, usize, crc)
+    return rosbags_decompress(bytes(data), compression, usize, crc)
 
 
 def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
@@ -157,7 +159,11 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
         pos, length, u8 = got
     else:
         (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
-        compressed = _pread(fd, size, start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size))
+        at, csize = start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size)
+        if at + csize > size:
+            raise _UnusualError("read past the end of the file")
+        # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer, then decompressed
+        compressed = _pread(fd, size, at, csize) if not chunk.compression else read_scratch(fd, at, csize)
         raw = _decompress(compressed, chunk.compression, usize, crc)
         del compressed
         u8 = np.frombuffer(raw, dtype=np.uint8)

@@ -32,7 +32,7 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
-from verify.ingest.records import ROS1, SpanError, read_records
+from verify.ingest.records import ROS1, WORKERS, SpanError, in_order, read_records, read_scratch
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -207,13 +207,15 @@ def _chunk_head(f: _File, pos: int) -> tuple[str, int, int, int, int]:
 
 def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) -> U8Array:
     """Uncompressed content of a chunk (read and decompressed whole)."""
-    raw = f.read(start, dlen)
+    if start + dlen > f.size:
+        raise _UnusualError("read past the end of the file")
     if compression == "none":
-        inner = raw
+        inner = f.read(start, dlen)
     else:
         try:
+            raw = read_scratch(f.fd, start, dlen)
             inner = bz2.decompress(raw) if compression == "bz2" else lz4_decompress(raw)
-        except (OSError, ValueError, RuntimeError, EOFError) as err:
+        except (OSError, ValueError, RuntimeError, EOFError, SpanError) as err:
             raise _UnusualError(f"chunk does not decompress ({err})") from err
     if len(inner) != size:
         raise _UnusualError("chunk size differs from its header")
@@ -301,9 +303,10 @@ def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) ->
 
 def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) -> tuple[IntArray, U8Array,
                                                                                              IntArray]:
-    """Records of different lengths (e.g. frame ids of different lengths): parsed one by one."""
-    buf = chunk.tobytes()
-    pieces: list[bytes] = []
+    """Records of different lengths (e.g. frame ids of different lengths): parsed one by one (through a memoryview:
+    no copy of the chunk)."""
+    buf = chunk.data
+    pieces: list[memoryview] = []
     lengths = np.empty(offs.shape[0], dtype=np.int64)
     for i, o in enumerate(offs.tolist()):
         (hlen,) = struct.unpack_from("<I", buf, o)
@@ -372,6 +375,7 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
     parts: dict[str, _Parts] = {}
     for c in selected.values():
         parts.setdefault(c.topic, _Parts([], [], []))
+    plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]] = []
     for chunk_pos, n_conns, ids in chunks:
         # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
         compression, size, start, dlen, after = _chunk_head(f, chunk_pos)
@@ -384,15 +388,17 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         for cid, index in mine.items():
             offsets = index["offset"].astype(np.int64)
             mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
-        chunk, mine = _wanted_records(f, (compression, size, start, dlen), mine,
-                                      sum(len(x) for x in indexes.values()))
+        plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
+    # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
+    workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads only for decompression
+    for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
         for cid, idx in mine.items():
             times, packed, lens = _messages_in_chunk(chunk, cid, idx)
             p = parts[selected[cid].topic]
             p.times.append(times)
             p.blocks.append(packed)
             p.lengths.append(lens)
-        del chunk  # one chunk's bytes alive at a time
+        del chunk  # only the chunks in flight are alive
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
         tconns = [c for c in selected.values() if c.topic == topic]
