@@ -384,7 +384,9 @@ class OnlineMonitor:
         step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
         # trajectory semantics: sample points and the gaps between them
         pos, point_at, gap_at = trajectory_positions(t_rel)
-        first = int(point_at[k0])
+        # the new positions start right after the previous batch's last sample: the gap between the batches too
+        # (starting at the first new sample would skip the motion between two batches: never judged)
+        first = 1 if prev is not None else 0
         tr = self._traj
         start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
         known = np.where(is_point, start, stop + 1)
