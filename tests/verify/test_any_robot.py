@@ -344,6 +344,10 @@ def test_signal_atom_on_a_nested_field_passes_and_fails(tmp_path: Path) -> None:
     s = ok["signals"]["slow"]
     assert s["worst_margin"] == pytest.approx(0.1) and s["relative_worst_margin"] == pytest.approx(0.2)
     assert s["unit"] == "m/s" and s["time_base"] == "header" and s["unknown_stretches"] == []
+    atom = _check(ok, "spec_trajectory")["atom_margins"]
+    assert atom["slow"]["min"] == pytest.approx(0.1) and atom["slow"]["relative_min"] == pytest.approx(0.2)
+    assert atom["slow"]["max"] == pytest.approx(0.5) and atom["slow"]["unit"] == "m/s"
+    assert atom["dock"]["unit"] == "m" and atom["dock"]["max"] == pytest.approx(0.45 - 0.25)  # at its centre
     strict = dict(SLOW, value=0.3)
     bad = certify_log(log, lab(signals={"slow": strict}, spec="G[0,inf) slow")).certificate
     spec = _check(bad, "spec_trajectory")
