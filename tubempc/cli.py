@@ -8,6 +8,8 @@ topic, malformed formula or scenario, impossible controller design); 4 feature n
 from __future__ import annotations
 
 import sys
+import traceback
+import warnings
 from typing import NoReturn
 
 import click
@@ -115,13 +117,26 @@ def _exit_code(err: BaseException) -> int:
     return EXIT_INTERNAL
 
 
+def _one_line(text: str, limit: int = 600) -> str:
+    """An error message as one stderr line: lines joined with '; ', long messages cut at ``limit`` characters."""
+    line = "; ".join(part.strip() for part in text.splitlines() if part.strip())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
 def main(argv: list[str] | None = None) -> NoReturn:
-    """Console entry point: run the CLI, turning expected errors into one stderr line and an exit code."""
+    """Console entry point: run the CLI, turning expected errors into one stderr line and an exit code.
+
+    ``--debug`` prints the traceback before that line; it never changes the exit code."""
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
-        # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
-        code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
+        with warnings.catch_warnings():
+            # numeric edge cases of damaged data and matplotlib's degenerate axes are handled by the code; their
+            # library warnings are not the user's business (one stderr line per error is the contract)
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|verify|pandas)(\..*)?")
+            warnings.filterwarnings("ignore", category=UserWarning, module=r"(matplotlib|verify)(\..*)?")
+            # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
+            code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
     except click.exceptions.Exit as err:
         sys.exit(err.exit_code)
     except click.Abort:
@@ -132,16 +147,16 @@ def main(argv: list[str] | None = None) -> NoReturn:
         sys.exit(EXIT_UNUSABLE if err.exit_code == 2 else err.exit_code)
     except (TubeMPCError, VerifyError) as err:
         if debug:
-            raise
-        click.echo(f"tubempc: error: {err}", err=True)
+            traceback.print_exc()
+        click.echo(f"tubempc: error: {_one_line(str(err))}", err=True)
         sys.exit(_exit_code(err))
     except KeyboardInterrupt:
         click.echo("tubempc: interrupted", err=True)
         sys.exit(130)
     except Exception as err:
         if debug:
-            raise
-        click.echo(f"tubempc: internal error: {err.__class__.__name__}: {err} (rerun with --debug for the "
-                   f"traceback)", err=True)
+            traceback.print_exc()
+        hint = "" if debug else " (rerun with --debug for the traceback)"
+        click.echo(f"tubempc: internal error: {err.__class__.__name__}: {_one_line(str(err))}{hint}", err=True)
         sys.exit(EXIT_INTERNAL)
     sys.exit(code if isinstance(code, int) else EXIT_OK)

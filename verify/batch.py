@@ -164,7 +164,9 @@ class BatchResult:
             failed = [str(c.get("name")) for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"]
             unknown = [str(c.get("name")) for c in checks
                        if isinstance(c, dict) and c.get("verdict") not in ("pass", "fail")]
-            margins = [float(c["margin"]) for c in checks
+            # a failed log's worst margin is its most negative failed check's, never a passing check's
+            judged = [c for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"] or checks
+            margins = [float(c["margin"]) for c in judged
                        if isinstance(c, dict) and isinstance(c.get("margin"), int | float)]
             first = [float(c["first_violation_time"]) for c in checks if isinstance(c, dict)
                      and c.get("verdict") == "fail" and isinstance(c.get("first_violation_time"), int | float)]
@@ -219,6 +221,12 @@ def _certify_one(job: _Job) -> BatchItem:
                      None, time.perf_counter() - start, result)
 
 
+def _worker_died(job: _Job) -> BatchItem:
+    return BatchItem(job.path, job.name, EXIT_INTERNAL, "error",
+                     "internal error: the certifier's worker process died twice on this log, alone (a crash or an "
+                     "out-of-memory kill in native code)", 0.0, None)
+
+
 # ---- executors ----------------------------------------------------------------------------------------------------
 def _show_progress(progress: bool | None) -> bool:
     return sys.stderr.isatty() if progress is None else progress
@@ -235,8 +243,8 @@ def _process_context(preload: Sequence[str]) -> multiprocessing.context.BaseCont
 
 
 def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: str | None = None,
-                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",)
-                 ) -> list[R]:
+                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",),
+                 on_crash: Callable[[T], R] | None = None) -> list[R]:
     """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
 
     ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"`` or a scheduler address.
@@ -244,6 +252,10 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
     process server imports once for all workers. Exceptions raised by ``fn`` propagate; callers that must not stop
     (``certify_many``) catch inside ``fn``. Worker processes re-import the caller's ``__main__`` module: scripts
     must guard their top level with ``if __name__ == "__main__":``.
+
+    A worker that dies (a segfault or out-of-memory kill in native code) breaks the pool: every item not finished
+    then is rerun alone in a fresh process, so one bad item cannot take the others down. With ``on_crash``, an item
+    whose lone rerun dies too gets ``on_crash(item)`` as its result (without it: ``RuntimeError``).
     """
     if workers is not None and workers < 1:
         raise ValueError(f"workers={workers!r} must be at least 1")
@@ -260,18 +272,36 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
                 bar.update()
             return out
         results: dict[int, R] = {}
-        with ProcessPoolExecutor(max_workers=n, mp_context=_process_context(preload)) as pool:
+        context = _process_context(preload)
+        broken: list[int] = []
+        with ProcessPoolExecutor(max_workers=n, mp_context=context) as pool:
             futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
-            try:
-                for fut in as_completed(futures):
+            for fut in as_completed(futures):
+                try:
                     results[futures[fut]] = fut.result()
-                    bar.update()
-            except BrokenProcessPool as err:
-                raise RuntimeError("a worker process died; a script that starts workers must guard its top level "
-                                   "with `if __name__ == \"__main__\":`") from err
+                except BrokenProcessPool:
+                    broken.append(futures[fut])
+                    continue
+                bar.update()
+        for i in sorted(broken):  # rerun alone: an item that was only a bystander of the crash now finishes
+            results[i] = _run_alone(fn, items[i], context, on_crash)
+            bar.update()
         return [results[i] for i in range(len(items))]
     finally:
         bar.close()
+
+
+def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.BaseContext,
+               on_crash: Callable[[T], R] | None) -> R:
+    with ProcessPoolExecutor(max_workers=1, mp_context=context) as solo:
+        try:
+            return solo.submit(fn, item).result()
+        except BrokenProcessPool as err:
+            if on_crash is not None:
+                return on_crash(item)
+            raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
+                               "native code; or a script that starts workers without an `if __name__ == "
+                               "\"__main__\":` guard)") from err
 
 
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, address: str, bar: Any) -> list[R]:
@@ -349,7 +379,8 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     chosen = tuple(checks) if checks is not None else None
     offsets = tuple(sorted((clock_offsets or {}).items()))
     jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest, offsets) for p in logs]
-    done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
+    done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify",
+                        on_crash=_worker_died)
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)
 
@@ -450,11 +481,9 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UnusableInputError(f"cannot create the output folder ({err})", path=str(out)) from err
+    from verify.outputs import prepare_output_dir
+
+    out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
             for item in batch.items]
     suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports")

@@ -32,7 +32,7 @@ from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
 from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
-from verify.trajectory import check_trajectory
+from verify.trajectory import TrajectoryVerdict, check_trajectory
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
            "resolve_scenario", "verdict_line", "write_certificate"]
@@ -118,7 +118,22 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
                         f"signal of scenario {sc.name!r}")
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
                    clock_offsets=clock_offsets)
-    return _judge(log, sc, formula_text=str(formula), selection=selection)
+    with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
+        return _judge(log, sc, formula_text=str(formula), selection=selection)
+
+
+def _spec_margin(traj: TrajectoryVerdict) -> float | None:
+    """The margin (m) of the formula: the guaranteed one; for a fail whose guaranteed margin is unbounded (a window
+    with no sample), the optimistic one, or the worst finite value of the robustness signal, so that a failed check
+    always states by how much (None only when no spatial margin exists: a formula failing on constants)."""
+    if traj.verdict == "inconclusive":
+        return None
+    if math.isfinite(traj.margin_m) or traj.verdict == "pass":
+        return traj.margin_m
+    if math.isfinite(traj.margin_hi_m):
+        return traj.margin_hi_m
+    finite = traj.signal_rho_m[np.isfinite(traj.signal_rho_m)]
+    return float(finite.min()) if finite.size and float(finite.min()) < 0 else None
 
 
 def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[str] | frozenset[str],
@@ -166,7 +181,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
                             signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
-        "spec_trajectory", traj.verdict, traj.margin_m if traj.verdict != "inconclusive" else None,
+        "spec_trajectory", traj.verdict, _spec_margin(traj),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",

@@ -1,8 +1,9 @@
 """The ``tubempc certify`` subcommand: log paths + scenario -> certificate(s) and reports on disk, summary, exit code.
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
-``report.md``, ``report.html`` and ``junit.xml`` go into DIR. Unusable input raises ``UnusableInputError``, which
-``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
+``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
+``--force`` (``verify.outputs`` states the policy shared by every command). Unusable input raises
+``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
 ``--dask tcp://host:port`` for Dask distributed), one sub-folder per log plus ``summary.md``/``.html``/``.csv``
@@ -18,6 +19,8 @@ from pathlib import Path
 from typing import Any, Literal, cast
 
 import click
+
+from verify.errors import UnusableInputError
 
 __all__ = ["certify"]
 
@@ -74,6 +77,7 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
               help="Add SECONDS to TOPIC's times (its clock runs behind the pose topic's by that much); repeatable; "
                    "extends the scenario's clock_offsets.")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
+@click.option("--force", is_flag=True, help="Replace the reports in an existing, non-empty --out folder.")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes for several logs (default: one per core).")
@@ -88,7 +92,7 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
 @click.option("--digest", type=click.Choice(["blake3", "sha256"]), default="blake3", show_default=True,
               help="Hash of the log's bytes in the certificate (b3sum's / sha256sum's value for a file).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
-            time_base: str, salvage: bool, no_report: bool, workers: int | None, dask: str | None,
+            time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
             progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool,
             digest: str, clock_offsets: tuple[str, ...]) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
@@ -97,23 +101,30 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     """
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
     from verify.junit import InconclusiveAs
+    from verify.outputs import prepare_output_dir
     from verify.selection import parse_check_list
 
     level = _verbosity()
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None
     offsets = _parse_offsets(clock_offsets)
+    if out_dir is not None:
+        prepare_output_dir(out_dir, force=force, inputs=logs)
     if _single_log(logs) and dask is None:
         result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks,
                              digest=digest, clock_offsets=offsets)
         line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
-            line += f" -> {write_certificate(result, out_dir)}"
-            if not no_report:
-                from verify.report import write_reports
+            try:
+                line += f" -> {write_certificate(result, out_dir)}"
+                if not no_report:
+                    from verify.report import write_reports
 
-                write_reports(result, sc, out_dir, suite_name=logs[0].name,
-                              junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
+                    write_reports(result, sc, out_dir, suite_name=logs[0].name,
+                                  junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
+            except OSError as err:
+                raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)
+                                         ) from None
         if as_json:
             click.echo(json.dumps(result.certificate, indent=2))
         if level >= 0:
@@ -134,6 +145,9 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     if level >= 0:
         for text in summary_lines(batch):
             click.echo(text, err=as_json)
+    for item in batch.items:  # every unusable input also gets its one line on stderr
+        if item.exit_code == 3 and item.error:
+            click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
         written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
                               junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))

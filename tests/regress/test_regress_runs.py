@@ -57,7 +57,7 @@ def test_smaller_sigma_low_is_caught(small_suite: Path, tmp_path: Path) -> None:
     (tmp_path / "same" / "nexus.R1-R3.worst.s0").mkdir(parents=True)
     (tmp_path / "same" / "nexus.R1-R3.worst.s0" / "run.mcap").write_bytes(b"stale")  # an earlier run's output
     same = _regress("--suite", str(small_suite), "--baseline", str(base), "--workers", "1", "--out",
-                    str(tmp_path / "same"))
+                    str(tmp_path / "same"), "--force")
     assert same.returncode == 0, same.stdout + same.stderr
     assert same.stdout.strip().splitlines()[-1].startswith("OK: 1 runs")
     assert (tmp_path / "same" / "nexus.R1-R3.worst.s0" / "certificate.json").is_file()

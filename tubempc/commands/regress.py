@@ -29,9 +29,10 @@ __all__ = ["regress"]
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Keep each run's log and certificate here, with diff.txt and junit.xml.")
 @click.option("--reports", is_flag=True, help="With --out: also write report.md/html per run.")
+@click.option("--force", is_flag=True, help="Replace the runs in an existing, non-empty --out folder.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: when stderr is a terminal).")
 def regress(*, suite_path: str | None, baseline_path: str | None, update_baseline: bool, workers: int | None,
-            dask: str | None, out_dir: str | None, reports: bool, progress: bool | None) -> None:
+            dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None) -> None:
     """Run a regression suite with the current controller and compare it with a stored baseline."""
     from tubempc.regress import (
         compare,
@@ -55,6 +56,10 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         baseline_path = default_baseline_path()
     if out_dir is None and reports:
         raise click.UsageError("--reports needs --out DIR")
+    if out_dir is not None:
+        from verify.outputs import prepare_output_dir
+
+        prepare_output_dir(out_dir, force=force)
     cases = expand_suite(loaded)
     if update_baseline:
         progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
