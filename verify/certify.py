@@ -26,12 +26,12 @@ from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
-from verify.geometry import containment
+from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
-from verify.signals import signal_bounds, signal_summary, values_at
+from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory, reported_margin
 
@@ -150,6 +150,28 @@ def _formula_text(sc: Scenario, spec: str | None) -> str:
     return str(formula)
 
 
+def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[str] | frozenset[str],
+                  streams: Mapping[str, SignalStream]) -> dict[str, dict[str, Any]]:
+    """Per atom of the formula: its least and largest margin at the pose samples (regions: metres, as the
+    trajectory semantics defines them; signals: over their messages, in the field's unit, and relative to the
+    threshold, unit-free)."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, m in label_margins(x_m, y_m, sc, labels).items():
+        finite = m[np.isfinite(m)]
+        out[name] = {"min": _num(float(finite.min())) if finite.size else None,
+                     "max": _num(float(finite.max())) if finite.size else None, "unit": "m"}
+    for name, stream in streams.items():
+        sm = signal_margin(stream.spec, stream.value)
+        finite = sm[np.isfinite(sm)]
+        lo = float(finite.min()) if finite.size else None
+        hi = float(finite.max()) if finite.size else None
+        scale = abs(stream.spec.value)
+        out[name] = {"min": _num(lo), "max": _num(hi), "unit": stream.spec.unit,
+                     "relative_min": _num(lo / scale) if lo is not None and scale > 0 else None,
+                     "relative_max": _num(hi / scale) if hi is not None and scale > 0 else None}
+    return dict(sorted(out.items()))
+
+
 def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
     """The formula's margin is the margin of the atom that decides it: metres, or a signal field's unit."""
     if not streams:
@@ -184,6 +206,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
                       "bounded by the speed bound)",
          "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
          "margin_unit": _spec_unit(streams),
+         "atom_margins": _atom_margins(sc, pose.x_m, pose.y_m, used - set(streams), streams),
          **({"subformula": traj.subformula, "reason": traj.reason,
              "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
             if traj.verdict != "pass" else {})})
