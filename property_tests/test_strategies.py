@@ -67,20 +67,49 @@ def test_trajectories_respect_the_speed_bound(traj: Trajectory) -> None:
     assert np.all(np.abs(yaw) <= math.pi)
 
 
-@given(strategies.log_faults(max_index=50), st.integers(1, 50))
+@given(strategies.log_faults(max_index=50, places=[(9.0, 9.0)]), st.integers(1, 50))
 def test_sample_faults_do_what_they_say(fault: LogFault, n: int) -> None:
-    stamps = np.arange(n, dtype=np.int64) * 10_000_000
+    """Each fault changes exactly the rows its docstring names, and nothing else."""
+    stamps = np.arange(n, dtype=np.int64) * 10_000_000 + 10**18
     xyz = np.arange(3 * n, dtype=float).reshape(n, 3)
     quat = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
     s, x, q = apply_sample_fault(fault, stamps, xyz, quat)
-    assert np.array_equal(stamps, np.arange(n) * 10_000_000)  # inputs untouched
+    assert np.array_equal(stamps, np.arange(n) * 10_000_000 + 10**18)  # inputs untouched
+    start = fault.start % n
+    rows = np.arange(start, min(start + fault.count, n))
+    others = np.setdiff1d(np.arange(n), rows)
     if fault.kind == "drop":
-        assert 1 <= len(s) <= n and len(s) == len(x) == len(q)
-    elif fault.kind == "reorder":
-        assert sorted(s.tolist()) == stamps.tolist() and (n == 1 or not np.all(np.diff(s) > 0))
+        kept = others if others.size else np.array([0])
+        assert np.array_equal(s, stamps[kept]) and np.array_equal(x, xyz[kept]) and np.array_equal(q, quat[kept])
+        return
+    assert len(s) == len(x) == len(q) == n
+    changed_s = np.flatnonzero(s != stamps)
+    changed_x = np.flatnonzero(np.any((x != xyz) & ~(np.isnan(x) & np.isnan(xyz)), axis=1))
+    changed_q = np.flatnonzero(np.any(q != quat, axis=1))
+    if fault.kind == "reorder":
+        if n == 1:
+            assert changed_s.size == 0
+        else:
+            other = (start + fault.count) % n
+            other = (start + 1) % n if other == start else other
+            assert sorted(changed_s.tolist()) == sorted({start, other})
+            assert s[start] == stamps[other] and s[other] == stamps[start]
+            assert np.array_equal(x[start], xyz[other])
     elif fault.kind == "nan":
-        assert np.isnan(x).any()
+        assert np.isnan(x[rows, :2]).all() and changed_x.tolist() == rows.tolist()
+        assert changed_s.size == 0 and changed_q.size == 0
     elif fault.kind == "zero_quaternion":
-        assert (np.linalg.norm(q, axis=1) == 0).any()
+        assert changed_q.tolist() == rows.tolist() and not q[rows].any()
+        assert changed_s.size == 0 and changed_x.size == 0
+    elif fault.kind == "duplicate_stamp":
+        if n >= 2:
+            k = min(start, n - 2)
+            assert changed_s.tolist() == [k + 1] and s[k + 1] == s[k]
+            assert changed_x.tolist() == [k + 1] and tuple(x[k + 1, :2]) == (9.0, 9.0)
+    elif fault.kind == "zero_stamps":
+        assert not s.any() and changed_x.size == 0
+    elif fault.kind in ("negative_stamp", "stamp_1970"):
+        assert changed_s.tolist() == [start] and changed_x.size == 0
+        assert s[start] == (-5 * 10**9 if fault.kind == "negative_stamp" else 10**9)
     else:
-        assert np.array_equal(s, stamps) and np.array_equal(x, xyz)
+        assert changed_s.size == changed_x.size == changed_q.size == 0

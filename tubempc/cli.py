@@ -10,11 +10,14 @@ scenario, impossible controller design, an abstraction without any usable transi
 from __future__ import annotations
 
 import sys
+import traceback
+import warnings
 from typing import NoReturn
 
 import click
 
 from tubempc.commands.demo import demo
+from tubempc.commands.falsify import falsify
 from tubempc.commands.output import add_verbosity_options, say
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
@@ -75,10 +78,45 @@ def scenario_show(name: str) -> None:
 @scenario.command("validate")
 @click.argument("path")
 def scenario_validate(path: str) -> None:
-    """Validate a scenario file; print a summary or one line naming the problem (exit 3)."""
+    """Validate a scenario file; print a summary or one line naming the problem (exit 3).
+
+    Then one line per geometry warning of the (lenient) certifier, and what keeps the (strict) planner from using
+    the scenario, if anything: both name the field."""
     s = load_scenario(path)
     say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
                f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
+    for warning in s.certification_warnings():
+        say(f"{path}: warning: {warning}")
+    problems = s.planning_problems()
+    if problems:
+        field, what = problems[0]
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        say(f"{path}: certification only: the planner cannot use it: {field}: {what}{more}")
+
+
+@cli.group("schema")
+def schema() -> None:
+    """Print the JSON Schema of an output other programs parse."""
+
+
+@schema.command("certificate")
+def schema_certificate() -> None:
+    """The JSON Schema of certificate.json and of `certify --json` (also docs/certificate.schema.json)."""
+    import json
+
+    from verify.certificate import certificate_schema
+
+    click.echo(json.dumps(certificate_schema(), indent=2))
+
+
+@schema.command("certify-json")
+def schema_certify_json() -> None:
+    """The JSON Schema of `certify --json`: a certificate, or a list of certificates and unusable logs."""
+    import json
+
+    from verify.certificate import certify_json_schema
+
+    click.echo(json.dumps(certify_json_schema(), indent=2))
 
 
 @cli.command("spec")
@@ -94,6 +132,7 @@ cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
+cli.add_command(falsify)
 add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
 
 
@@ -109,13 +148,26 @@ def _exit_code(err: BaseException) -> int:
     return EXIT_INTERNAL
 
 
+def _one_line(text: str, limit: int = 600) -> str:
+    """An error message as one stderr line: lines joined with '; ', long messages cut at ``limit`` characters."""
+    line = "; ".join(part.strip() for part in text.splitlines() if part.strip())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
 def main(argv: list[str] | None = None) -> NoReturn:
-    """Console entry point: run the CLI, turning expected errors into one stderr line and an exit code."""
+    """Console entry point: run the CLI, turning expected errors into one stderr line and an exit code.
+
+    ``--debug`` prints the traceback before that line; it never changes the exit code."""
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
-        # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
-        code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
+        with warnings.catch_warnings():
+            # numeric edge cases of damaged data and matplotlib's degenerate axes are handled by the code; their
+            # library warnings are not the user's business (one stderr line per error is the contract)
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"(numpy|verify|pandas)(\..*)?")
+            warnings.filterwarnings("ignore", category=UserWarning, module=r"(matplotlib|verify)(\..*)?")
+            # standalone_mode=False turns ctx.exit(code) / sys.exit(code) inside a command into a return value
+            code = cli.main(args=args, prog_name="tubempc", standalone_mode=False)
     except click.exceptions.Exit as err:
         sys.exit(err.exit_code)
     except click.Abort:
@@ -126,16 +178,16 @@ def main(argv: list[str] | None = None) -> NoReturn:
         sys.exit(EXIT_UNUSABLE if err.exit_code == 2 else err.exit_code)
     except (TubeMPCError, VerifyError) as err:
         if debug:
-            raise
-        click.echo(f"tubempc: error: {err}", err=True)
+            traceback.print_exc()
+        click.echo(f"tubempc: error: {_one_line(str(err))}", err=True)
         sys.exit(_exit_code(err))
     except KeyboardInterrupt:
         click.echo("tubempc: interrupted", err=True)
         sys.exit(130)
     except Exception as err:
         if debug:
-            raise
-        click.echo(f"tubempc: internal error: {err.__class__.__name__}: {err} (rerun with --debug for the "
-                   f"traceback)", err=True)
+            traceback.print_exc()
+        hint = "" if debug else " (rerun with --debug for the traceback)"
+        click.echo(f"tubempc: internal error: {err.__class__.__name__}: {_one_line(str(err))}{hint}", err=True)
         sys.exit(EXIT_INTERNAL)
     sys.exit(code if isinstance(code, int) else EXIT_OK)

@@ -103,8 +103,10 @@ def demo_sections(scenario: Scenario, wts: nx.DiGraph, plan_run: tuple[tuple[str
 
 
 def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random", use_cache: bool = True,
-             progress: bool | None = None, log: Callable[[str], None] | None = None) -> DemoResult:
-    """Run the whole pipeline on the built-in scenario and write everything into ``out_dir``."""
+             progress: bool | None = None, log: Callable[[str], None] | None = None,
+             replace: bool = False) -> DemoResult:
+    """Run the whole pipeline on the built-in scenario and write everything into ``out_dir`` (existing logs there
+    are refused, or replaced with ``replace=True``)."""
     from tubempc.control.closed_loop import run_closed_loop
     from tubempc.planning.plan import plan_from_wts
     from tubempc.planning.wts import build_wts
@@ -116,8 +118,8 @@ def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random",
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for name in ("demo.mcap", "demo.bag"):
-        if (out / name).exists():
-            raise TubeMPCError(f"{out / name}: exists already; choose another --out folder or remove it")
+        if (out / name).exists() and not replace:
+            raise TubeMPCError(f"{out / name}: exists already; choose another --out folder or pass --force")
     scenario = builtin_scenario()
     seconds: dict[str, float] = {}
 
@@ -147,6 +149,11 @@ def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random",
         f"{result.max_tube_error_m * 1000:.2f} mm (r_q = {result.tube_radius_m * 1000:.1f} mm)")
 
     meta = {"plan": plan.to_json(), "demo": {"seed": seed, "disturbance": disturbance}}
+    if replace:
+        from verify.outputs import replace_output_log
+
+        for name in ("demo.mcap", "demo.bag"):
+            replace_output_log(out / name)
     mcap = write_log(result, scenario, out / "demo.mcap", metadata=meta)
     bag = write_log(result, scenario, out / "demo.bag", metadata=meta)
 

@@ -32,7 +32,8 @@ class SpecSyntaxError(TubeMPCError, ValueError):
         self.text = text
         self.column = column
         self.reason = message
-        super().__init__(f"column {column}: {message} (in {text!r})")
+        shown = repr(text) if len(text) <= 120 else f"{text[:80]!r}... ({len(text)} characters)"
+        super().__init__(f"column {column}: {message} (in {shown})")
 
 
 class ScenarioError(TubeMPCError, ValueError):

@@ -49,6 +49,7 @@ from tubempc.scenario import Scenario, scenario_from_dict
 
 __all__ = [
     "FAULT_KINDS",
+    "STAMP_FAULTS",
     "ControlAffineDynamics",
     "DisturbanceSignal",
     "LogFault",
@@ -628,9 +629,13 @@ def trajectories(draw: st.DrawFn, *, rate_hz: float = 100.0, max_samples: int = 
 
 
 # ---------------------------------------------------------------------------------------------------- log faults
-FaultKind = Literal["none", "truncate", "drop", "reorder", "nan", "zero_quaternion", "missing_topic"]
+FaultKind = Literal["none", "truncate", "drop", "reorder", "nan", "zero_quaternion", "missing_topic",
+                    "duplicate_stamp", "zero_stamps", "negative_stamp", "stamp_1970"]
 FAULT_KINDS: tuple[FaultKind, ...] = ("none", "truncate", "drop", "reorder", "nan", "zero_quaternion",
-                                      "missing_topic")
+                                      "missing_topic", "duplicate_stamp", "zero_stamps", "negative_stamp",
+                                      "stamp_1970")
+#: the header-stamp faults (the samples' positions are kept, except the moved duplicate)
+STAMP_FAULTS: tuple[FaultKind, ...] = ("duplicate_stamp", "zero_stamps", "negative_stamp", "stamp_1970")
 
 
 @dataclass(frozen=True, slots=True)
@@ -643,6 +648,11 @@ class LogFault:
     - ``nan``: set the position of pose samples [start, start + count) to NaN;
     - ``zero_quaternion``: set the orientation of pose samples [start, start + count) to (0, 0, 0, 0);
     - ``missing_topic``: omit ``topic`` (a role: ``pose``, ``cmd_vel`` or ``nominal``) from the log;
+    - ``duplicate_stamp``: pose sample ``start + 1`` gets the header stamp of sample ``start`` and is moved to
+      ``xy`` (when given): two different positions at one instant;
+    - ``zero_stamps``: every header stamp is 0 (a publisher that never sets ``header.stamp``);
+    - ``negative_stamp``: sample ``start``'s header stamp is -5 s (ROS2 only: ROS1 stamps are unsigned);
+    - ``stamp_1970``: sample ``start``'s header stamp is 1 s after the epoch (a clock that was never set);
     - ``none``: an undamaged log.
     Indices are taken modulo the number of samples by ``apply_sample_fault``.
     """
@@ -652,6 +662,7 @@ class LogFault:
     count: int = 1
     fraction: float = 1.0
     topic: Literal["pose", "cmd_vel", "nominal"] = "pose"
+    xy: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
@@ -663,21 +674,25 @@ class LogFault:
 
     @property
     def damages_samples(self) -> bool:
-        return self.kind in ("drop", "reorder", "nan", "zero_quaternion")
+        return self.kind in ("drop", "reorder", "nan", "zero_quaternion", *STAMP_FAULTS)
 
 
 @st.composite
-def log_faults(draw: st.DrawFn, kinds: Sequence[FaultKind] = FAULT_KINDS, max_index: int = 400) -> LogFault:
-    """Log faults of the given kinds with positions below ``max_index``."""
+def log_faults(draw: st.DrawFn, kinds: Sequence[FaultKind] = FAULT_KINDS, max_index: int = 400,
+               places: Sequence[tuple[float, float]] = ()) -> LogFault:
+    """Log faults of the given kinds with positions below ``max_index``; a ``duplicate_stamp`` moves its sample to
+    one of ``places`` (e.g. obstacle centres) when given."""
     kind = draw(st.sampled_from(list(kinds)))
+    xy = draw(st.sampled_from(list(places))) if places and kind == "duplicate_stamp" else None
     return LogFault(kind=kind, start=draw(st.integers(0, max_index - 1)), count=draw(st.integers(1, 50)),
                     fraction=draw(st.sampled_from([0.1, 0.3, 0.5, 0.7, 0.9, 0.99])),
-                    topic=draw(st.sampled_from(["pose", "cmd_vel", "nominal"])))
+                    topic=draw(st.sampled_from(["pose", "cmd_vel", "nominal"])), xy=xy)
 
 
 def apply_sample_fault(fault: LogFault, stamps_ns: npt.NDArray[np.int64], xyz_m: FloatArray, quat_xyzw: FloatArray,
                        ) -> tuple[npt.NDArray[np.int64], FloatArray, FloatArray]:
-    """Apply a sample-level fault (drop, reorder, nan, zero_quaternion) to pose arrays, in log order.
+    """Apply a sample-level fault (drop, reorder, nan, zero_quaternion, the stamp faults) to pose arrays, in log
+    order.
 
     Returns new arrays (the inputs are not modified); other kinds return copies unchanged. ``reorder`` swaps two
     rows, stamps included, so the log order is no longer the stamp order.
@@ -706,4 +721,15 @@ def apply_sample_fault(fault: LogFault, stamps_ns: npt.NDArray[np.int64], xyz_m:
         x[start:stop, :2] = np.nan
     elif fault.kind == "zero_quaternion":
         qt[start:stop] = 0.0
+    elif fault.kind == "duplicate_stamp" and n >= 2:
+        k = min(start, n - 2)
+        s[k + 1] = s[k]
+        if fault.xy is not None:
+            x[k + 1, :2] = fault.xy
+    elif fault.kind == "zero_stamps":
+        s[:] = 0
+    elif fault.kind == "negative_stamp":
+        s[start] = -5 * 10**9
+    elif fault.kind == "stamp_1970":
+        s[start] = 10**9
     return s, x, qt

@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate
 from verify.errors import UnusableInputError, VerifyError
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
 from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
@@ -164,14 +165,18 @@ class BatchResult:
             failed = [str(c.get("name")) for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"]
             unknown = [str(c.get("name")) for c in checks
                        if isinstance(c, dict) and c.get("verdict") not in ("pass", "fail")]
-            margins = [float(c["margin"]) for c in checks
-                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)]
+            # a failed log's worst margin is its most negative failed check's, never a passing check's;
+            # metres only: seconds and m/s do not compare
+            judged = [c for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"] or checks
+            margins = [float(c["margin"]) for c in judged
+                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)
+                       and c.get("margin_unit") == "m"]
             first = [float(c["first_violation_time"]) for c in checks if isinstance(c, dict)
                      and c.get("verdict") == "fail" and isinstance(c.get("first_violation_time"), int | float)]
             rows.append({
                 "log": item.path, "folder": item.name, "verdict": item.verdict, "exit_code": item.exit_code,
                 "checks": len(checks), "failed_checks": " ".join(failed), "inconclusive_checks": " ".join(unknown),
-                "worst_margin": min(margins) if margins else None,
+                "worst_margin_m": min(margins) if margins else None,
                 "first_violation_s": min(first) if first else None,
                 "error": item.error or "", "elapsed_s": round(item.elapsed_s, 3),
             })
@@ -189,6 +194,7 @@ class _Job:
     salvage: bool
     checks: tuple[str, ...] | None = None
     digest: str = "blake3"
+    clock_offsets: tuple[tuple[str, float], ...] = ()
 
 
 def _certify_function() -> Callable[..., CertifyResultLike]:
@@ -202,7 +208,8 @@ def _certify_one(job: _Job) -> BatchItem:
     start = time.perf_counter()
     try:
         result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
-                                     salvage=job.salvage, checks=job.checks, digest=job.digest)
+                                     salvage=job.salvage, checks=job.checks, digest=job.digest,
+                                     clock_offsets=dict(job.clock_offsets) or None)
     except VerifyError as err:
         return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
     except Exception as err:  # a bug in one log's certification must not take the other logs down
@@ -215,6 +222,12 @@ def _certify_one(job: _Job) -> BatchItem:
         return BatchItem(job.path, job.name, EXIT_INTERNAL, "error", message, time.perf_counter() - start, None)
     return BatchItem(job.path, job.name, code, verdict,  # type: ignore[arg-type]
                      None, time.perf_counter() - start, result)
+
+
+def _worker_died(job: _Job) -> BatchItem:
+    return BatchItem(job.path, job.name, EXIT_INTERNAL, "error",
+                     "internal error: the certifier's worker process died twice on this log, alone (a crash or an "
+                     "out-of-memory kill in native code)", 0.0, None)
 
 
 # ---- executors ----------------------------------------------------------------------------------------------------
@@ -233,8 +246,8 @@ def _process_context(preload: Sequence[str]) -> multiprocessing.context.BaseCont
 
 
 def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: str | None = None,
-                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",)
-                 ) -> list[R]:
+                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",),
+                 on_crash: Callable[[T], R] | None = None) -> list[R]:
     """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
 
     ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"`` or a scheduler address.
@@ -242,6 +255,10 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
     process server imports once for all workers. Exceptions raised by ``fn`` propagate; callers that must not stop
     (``certify_many``) catch inside ``fn``. Worker processes re-import the caller's ``__main__`` module: scripts
     must guard their top level with ``if __name__ == "__main__":``.
+
+    A worker that dies (a segfault or out-of-memory kill in native code) breaks the pool: every item not finished
+    then is rerun alone in a fresh process, so one bad item cannot take the others down. With ``on_crash``, an item
+    whose lone rerun dies too gets ``on_crash(item)`` as its result (without it: ``RuntimeError``).
     """
     if workers is not None and workers < 1:
         raise ValueError(f"workers={workers!r} must be at least 1")
@@ -258,18 +275,36 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
                 bar.update()
             return out
         results: dict[int, R] = {}
-        with ProcessPoolExecutor(max_workers=n, mp_context=_process_context(preload)) as pool:
+        context = _process_context(preload)
+        broken: list[int] = []
+        with ProcessPoolExecutor(max_workers=n, mp_context=context) as pool:
             futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
-            try:
-                for fut in as_completed(futures):
+            for fut in as_completed(futures):
+                try:
                     results[futures[fut]] = fut.result()
-                    bar.update()
-            except BrokenProcessPool as err:
-                raise RuntimeError("a worker process died; a script that starts workers must guard its top level "
-                                   "with `if __name__ == \"__main__\":`") from err
+                except BrokenProcessPool:
+                    broken.append(futures[fut])
+                    continue
+                bar.update()
+        for i in sorted(broken):  # rerun alone: an item that was only a bystander of the crash now finishes
+            results[i] = _run_alone(fn, items[i], context, on_crash)
+            bar.update()
         return [results[i] for i in range(len(items))]
     finally:
         bar.close()
+
+
+def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.BaseContext,
+               on_crash: Callable[[T], R] | None) -> R:
+    with ProcessPoolExecutor(max_workers=1, mp_context=context) as solo:
+        try:
+            return solo.submit(fn, item).result()
+        except BrokenProcessPool as err:
+            if on_crash is not None:
+                return on_crash(item)
+            raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
+                               "native code; or a script that starts workers without an `if __name__ == "
+                               "\"__main__\":` guard)") from err
 
 
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, address: str, bar: Any) -> list[R]:
@@ -325,7 +360,8 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
                  workers: int | None = None, dask: str | None = None, progress: bool | None = None,
-                 checks: Sequence[str] | None = None, digest: str = "blake3") -> BatchResult:
+                 checks: Sequence[str] | None = None, digest: str = "blake3",
+                 clock_offsets: dict[str, float] | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
     Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
@@ -344,8 +380,10 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     if checks is not None:
         select_checks(scenario, checks)  # unknown or unsupported checks concern every log: raise before the jobs
     chosen = tuple(checks) if checks is not None else None
-    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest) for p in logs]
-    done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify")
+    offsets = tuple(sorted((clock_offsets or {}).items()))
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest, offsets) for p in logs]
+    done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify",
+                        on_crash=_worker_died)
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)
 
@@ -400,7 +438,8 @@ def _write_item(job: _WriteJob) -> JUnitSuite:
         if job.reports:
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
                           junit_inconclusive=job.junit_inconclusive)
-        suite = certificate_suite(item.result.certificate, suite_name=item.name, inconclusive=job.junit_inconclusive)
+        suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
+                                  inconclusive=job.junit_inconclusive)
         return dataclasses.replace(suite, time_s=item.elapsed_s)
     (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
     case = JUnitCase("read log", item.name, "error", item.verdict, item.error or "")
@@ -424,7 +463,7 @@ def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool)
         colour = colours.get(row["verdict"], "#555")
         body.append(f'<tr><td>{link}</td><td style="color:{colour}">{e(row["verdict"])}</td>'
                     f"<td>{e(row['exit_code'])}</td><td>{e(row['failed_checks'])}</td>"
-                    f"<td>{e(row['inconclusive_checks'])}</td><td>{e(row['worst_margin'])}</td>"
+                    f"<td>{e(row['inconclusive_checks'])}</td><td>{e(row['worst_margin_m'])}</td>"
                     f"<td>{e(row['first_violation_s'])}</td><td>{e(row['error'])}</td></tr>")
     counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Batch certification</title>"
@@ -433,7 +472,7 @@ def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool)
             f"<h1>Batch certification: exit code {batch.exit_code}</h1>"
             f"<p>Scenario {e(batch.scenario.name)}; {len(batch.items)} log(s): {e(counts)}.</p>"
             "<table><tr><th>log</th><th>verdict</th><th>exit</th><th>failed checks</th><th>inconclusive checks</th>"
-            "<th>worst margin</th><th>first violation [s]</th><th>error</th></tr>"
+            "<th>worst margin [m]</th><th>first violation [s]</th><th>error</th></tr>"
             + "".join(body) + "</table></body></html>\n")
 
 
@@ -446,11 +485,9 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise UnusableInputError(f"cannot create the output folder ({err})", path=str(out)) from err
+    from verify.outputs import prepare_output_dir
+
+    out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
             for item in batch.items]
     suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports")
@@ -464,14 +501,14 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     lines = [f"# Batch certification: exit code {batch.exit_code}", "",
              f"Scenario `{_md_cell(batch.scenario.name)}`; {len(batch.items)} log(s): "
              + ", ".join(f"{n} {k}" for k, n in counts.items() if n) + ".", "",
-             "| log | verdict | exit | failed checks | inconclusive checks | worst margin | first violation [s] "
+             "| log | verdict | exit | failed checks | inconclusive checks | worst margin [m] | first violation [s] "
              "| error |", "|---|---|---|---|---|---|---|---|"]
     target = "report.md" if reports else "certificate.json"
     for row in rows:
         link = (f"[{_md_cell(row['log'])}]({row['folder']}/{target})" if row["exit_code"] in (0, 1, 2)
                 else _md_cell(row["log"]))
         lines.append(f"| {link} | {row['verdict']} | {row['exit_code']} | {_md_cell(row['failed_checks'])} | "
-                     f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin'])} | "
+                     f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin_m'])} | "
                      f"{_md_cell(row['first_violation_s'])} | {_md_cell(row['error'])} |")
     (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (out / "summary.html").write_text(_summary_html(batch, rows, reports), encoding="utf-8")

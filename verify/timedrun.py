@@ -10,15 +10,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
+from tubempc.mitl import Eventually, Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
-from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
+from verify.monitor import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
-__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of"]
+__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
 
 
 def parse_spec(text: str) -> Formula:
@@ -38,6 +39,7 @@ class TimedRunVerdict:
     subformula: str | None = None
     time_s: float | None = None
     reason: str | None = None
+    margin_s: float | None = None  # a fail's margin in seconds (<= 0; see ``_time_margin_s``)
 
     @property
     def first_violation_time(self) -> float | None:
@@ -51,14 +53,18 @@ def _to_ns(t: float) -> int:
 
 
 def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
-                    end: float | None = None) -> TimedRunVerdict:
+                    end: float | None = None,
+                    atom_values: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None = None,
+                    ) -> TimedRunVerdict:
     """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
 
     ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
     (a region missing from ``labels`` has none); ``end``: when observation stopped (default: the last time).
-    Times are compared in integer nanoseconds (``round(t * 1e9)``).
+    Times are compared in integer nanoseconds (``round(t * 1e9)``). ``atom_values``: robustness bounds
+    ``(lo, hi)`` per run entry for atoms that are not region labels (signal atoms, sampled at the entry times).
     """
     f = parse_spec(formula)
+    external = atom_values
     if not run:
         return TimedRunVerdict("inconclusive", str(f), str(f), None, "the timed run is empty")
     times = np.array([_to_ns(float(t)) for _, t in run], dtype=np.int64)
@@ -68,17 +74,48 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
     if end_ns < int(times[-1]):
         raise ValueError(f"end={end} is before the last run time {run[-1][1]}")
     pos = Positions.points(times, end_ns)  # equal times are allowed: distinct positions at the same instant
-    atom_values = {}
+    inputs: dict[str, Truth] = {}
     for name in atoms(f):
+        if external is not None and name in external:
+            lo, hi = external[name]
+            inputs[name] = Truth(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+            continue
         holds = np.array([name in labels.get(region, ()) for region, _ in run], dtype=bool)
-        atom_values[name] = truth_from_bool(holds)
-    values = evaluate(f, pos, atom_values)
+        inputs[name] = truth_from_bool(holds)
+    values = evaluate(f, pos, inputs)
     root = values[f]
     verdict = verdict_of(float(root.lo[0]), float(root.hi[0]))
     if verdict == "pass":
         return TimedRunVerdict("pass", str(f))
     why = explain(f, 0, pos, values)
-    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason)
+    margin = _time_margin_s(values, why.subformula, why.time_ns, times, end_ns) if verdict == "fail" else None
+    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason, margin)
+
+
+def _time_margin_s(values: Mapping[Formula, Any], subformula: str | None, time_ns: int, times: npt.NDArray[np.int64],
+                   end_ns: int) -> float | None:
+    """How far in time the run is from satisfying the witnessed sub-formula (seconds, <= 0).
+
+    The pointwise semantics are boolean, so the margin is temporal: for ``F[a,b] phi`` never met, minus the time
+    from the window to the nearest entry at which ``phi`` held (the log's end when it never did: at least that
+    late); for any other false sub-formula, minus how long it stayed false from the witness on (until the next
+    entry at which it is not false, or the log's end).
+    """
+    g = next((h for h in values if str(h) == subformula), None)
+    if g is None:
+        return None
+    if isinstance(g, Eventually) and g.interval.bounded:
+        hi_ns, lo_ns = time_ns, time_ns - round((g.interval.hi_s - g.interval.lo_s) * 1e9)
+        held = times[np.asarray(values[g.arg].lo) > 0]
+        if held.size == 0:
+            return -max(end_ns - hi_ns, 0) / 1e9
+        gap = np.where(held > hi_ns, held - hi_ns, np.where(held < lo_ns, lo_ns - held, 0))
+        return -float(gap.min()) / 1e9
+    false = np.asarray(values[g].hi) < 0
+    k = int(np.searchsorted(times, time_ns))
+    after = np.flatnonzero(~false[k:])
+    stop = int(times[k + int(after[0])]) if after.size else end_ns
+    return -max(stop - time_ns, 0) / 1e9
 
 
 def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.float64],
@@ -93,3 +130,30 @@ def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.fl
     change = np.flatnonzero(np.diff(region_index) != 0) + 1
     starts = np.concatenate(([0], change))
     return [(names[int(region_index[s])], float(times_s[s])) for s in starts if region_index[s] >= 0]
+
+
+def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64], names: Sequence[str],
+                      labels: Mapping[str, Sequence[str]]) -> tuple[list[tuple[str, float]], dict[str, list[str]]]:
+    """Definition 3 when regions may overlap or nest: ``contains`` is ``(n_regions, n)`` (``geometry.containment``).
+
+    Each maximal stretch of samples contained in the same non-empty *set* of regions starts an entry; the entry is
+    named by its regions joined with ``+`` in scenario order (``room+table``) and carries the union of their
+    labels (a table inside a room: both labels hold). Returns the run and the labels of every entry name."""
+    n = contains.shape[1] if contains.ndim == 2 else 0
+    if n == 0:
+        return [], {}
+    _, code = np.unique(contains.T, axis=0, return_inverse=True)
+    code = code.reshape(-1)
+    change = np.flatnonzero(np.diff(code) != 0) + 1
+    starts = np.concatenate(([0], change))
+    run: list[tuple[str, float]] = []
+    entry_labels: dict[str, list[str]] = {}
+    for s in starts:
+        members = [names[int(k)] for k in np.flatnonzero(contains[:, s])]
+        if not members:
+            continue
+        name = "+".join(members)
+        run.append((name, float(times_s[s])))
+        if name not in entry_labels:
+            entry_labels[name] = sorted({lab for m in members for lab in labels.get(m, ())})
+    return run, entry_labels

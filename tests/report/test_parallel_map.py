@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import faulthandler
+import functools
 import operator
 
 import pytest
@@ -39,3 +41,14 @@ def test_progress_bar_on_request(capsys: pytest.CaptureFixture[str]) -> None:
     assert "certify" in err and f"{len(ITEMS)}/{len(ITEMS)}" in err
     parallel_map(abs, ITEMS, workers=1, progress=False, desc="certify")
     assert capsys.readouterr().err == ""
+
+
+def test_a_worker_that_dies_is_rerun_alone_and_reported() -> None:
+    """A segfault in one item breaks the pool: bystanders are rerun alone and finish; the item that dies again
+    gets ``on_crash`` (the batch gives it exit 70) instead of aborting the whole map."""
+    items = [functools.partial(abs, -1), faulthandler._sigsegv, functools.partial(abs, -2),
+             functools.partial(abs, -3)]
+    out = parallel_map(operator.call, items, workers=2, progress=False, on_crash=lambda item: "died")
+    assert out == [1, "died", 2, 3]
+    with pytest.raises(RuntimeError, match="died twice"):
+        parallel_map(operator.call, items, workers=2, progress=False)

@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate
 from verify.figures import workspace_figure
 from verify.report import write_reports
 
@@ -158,8 +159,9 @@ def test_violation_is_drawn_on_the_map(scenario: Scenario, make_result: Callable
     failing = make_result(verdict="fail")
     passing_cert = {**failing.certificate, "checks": [c for c in failing.certificate["checks"]
                                                       if c["verdict"] != "fail"]}
-    with_mark = workspace_figure(failing.certificate, scenario, failing.trajectory, failing.nominal)
-    without = workspace_figure(passing_cert, scenario, failing.trajectory, failing.nominal)
+    with_mark = workspace_figure(Certificate.model_validate(failing.certificate), scenario, failing.trajectory,
+                                 failing.nominal)
+    without = workspace_figure(Certificate.model_validate(passing_cert), scenario, failing.trajectory, failing.nominal)
     assert with_mark != without
 
 

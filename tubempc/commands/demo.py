@@ -20,17 +20,20 @@ __all__ = ["demo"]
 @click.option("--disturbance", type=click.Choice(["none", "random", "worst", "bias", "sine"]), default="random",
               show_default=True, help="Disturbance model of the simulated run.")
 @click.option("--no-cache", is_flag=True, help="Rebuild the abstraction instead of reusing the on-disk cache.")
-def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool) -> None:
+@click.option("--force", is_flag=True, help="Replace the outputs in an existing, non-empty --out folder.")
+def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, force: bool) -> None:
     """Plan the paper's formula on the built-in scenario, run it with the tube MPC, log, certify and report.
 
     Exit code: the certificate's (0 pass, 1 fail, 2 inconclusive).
     """
     from tubempc.demo import run_demo
+    from verify.outputs import prepare_output_dir
 
     folder = out_dir if out_dir is not None else Path("reports") / time.strftime("demo-%Y%m%d-%H%M%S")
+    prepare_output_dir(folder, force=force)
     started = time.perf_counter()
     result = run_demo(folder, seed=seed, disturbance=disturbance, use_cache=not no_cache,
-                      log=say)
+                      log=say, replace=force)
     say(f"certificate: {result.verdict} ({time.perf_counter() - started:.1f} s in all)")
     for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:

@@ -1,7 +1,8 @@
 """The `tubempc regress` subcommand: run a suite with the current controller, compare with a baseline.
 
 input: a suite YAML (default: the shipped one), a baseline JSON -> output: a readable diff on stdout, exit 0 when
-nothing regressed and 1 otherwise; ``--update-baseline`` writes the current metrics as the new baseline (exit 0).
+nothing regressed and 1 otherwise (a falsification case regresses when it finds a counterexample the baseline did
+not); ``--update-baseline`` writes the current metrics as the new baseline (exit 0).
 With ``--out DIR``: every run's log and certificate under ``DIR/<run>/``, plus ``diff.txt`` and ``junit.xml``.
 """
 
@@ -29,14 +30,18 @@ __all__ = ["regress"]
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Keep each run's log and certificate here, with diff.txt and junit.xml.")
 @click.option("--reports", is_flag=True, help="With --out: also write report.md/html per run.")
+@click.option("--force", is_flag=True, help="Replace the runs in an existing, non-empty --out folder.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: when stderr is a terminal).")
 def regress(*, suite_path: str | None, baseline_path: str | None, update_baseline: bool, workers: int | None,
-            dask: str | None, out_dir: str | None, reports: bool, progress: bool | None) -> None:
+            dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None) -> None:
     """Run a regression suite with the current controller and compare it with a stored baseline."""
     from tubempc.regress import (
+        FalsifyCase,
+        RunCase,
         compare,
         comparison_junit,
         default_baseline_path,
+        expand_falsify,
         expand_suite,
         format_diff,
         load_suite,
@@ -55,7 +60,11 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         baseline_path = default_baseline_path()
     if out_dir is None and reports:
         raise click.UsageError("--reports needs --out DIR")
-    cases = expand_suite(loaded)
+    if out_dir is not None:
+        from verify.outputs import prepare_output_dir
+
+        prepare_output_dir(out_dir, force=force)
+    cases: list[RunCase | FalsifyCase] = [*expand_suite(loaded), *expand_falsify(loaded)]
     if update_baseline:
         progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
         outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)

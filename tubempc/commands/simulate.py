@@ -29,21 +29,30 @@ EXIT_NOT_REACHED = 1
               help="Standard deviation (m) of simulated MoCap position noise.")
 @click.option("--hold", "hold_s", type=float, default=None,
               help="Keep simulating until this time (s), holding position in the target.")
-@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=True, writable=True),
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=True),
               help="Output log: .mcap (ROS2), .bag (ROS1), .db3, or a directory name for a ROS2 bag.")
+@click.option("--force", is_flag=True, help="Replace an existing log at --out.")
 def simulate(*, scenario_path: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
-             hold_s: float | None, out_path: str) -> None:
+             hold_s: float | None, out_path: str, force: bool) -> None:
     """Simulate the tube MPC from one region to another and write the robot's log."""
     import numpy as np
 
     from tubempc.control import Target, run_closed_loop
+    from tubempc.errors import DesignError
     from tubempc.rosio import write_log
     from tubempc.scenario import load_scenario
+    from verify.outputs import prepare_output_log, replace_output_log
 
+    prepare_output_log(out_path, force=force)
     scenario = load_scenario(scenario_path)
     scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
-    result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
-                             t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    try:
+        result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
+                                 t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    except DesignError as err:  # exit 3, and the line names the scenario file
+        raise DesignError(f"{scenario_path}: the tube MPC cannot be designed for this scenario: {err}") from err
+    if force:
+        replace_output_log(out_path)
     path = write_log(result, scenario, out_path)
     arrival = result.arrivals[0]
     times_ms = np.array([r.solve_time_s for r in result.solver]) * 1e3

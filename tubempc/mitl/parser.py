@@ -3,6 +3,10 @@
 Precedence, tightest first: unary operators (``!`` ``X`` ``F`` ``G`` with optional interval), ``U`` (right
 associative), ``&``, ``|``, ``->`` (right associative). An absent interval means ``[0,inf)``.
 Malformed text raises ``SpecSyntaxError`` (a ``ValueError``) naming the 1-based column and what was expected.
+
+Limits (a formula beyond them is refused with ``SpecSyntaxError``, never a ``RecursionError``): at most
+``MAX_FORMULA_CHARS`` characters, operators nested at most ``MAX_DEPTH`` deep (a chain ``a & b & c`` nests one
+level per operator), interval bounds below ``10**MAX_BOUND_DIGITS`` seconds.
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from fractions import Fraction
 from functools import lru_cache
 from typing import Any
 
-from lark import Lark, Token, Transformer, v_args
+from lark import Lark, Token, Transformer, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
 
 from tubempc.errors import SpecSyntaxError
@@ -32,7 +36,14 @@ from tubempc.mitl.ast import (
     Until,
 )
 
-__all__ = ["parse"]
+__all__ = ["MAX_BOUND_DIGITS", "MAX_DEPTH", "MAX_FORMULA_CHARS", "parse"]
+
+#: longest formula text accepted (characters)
+MAX_FORMULA_CHARS = 20_000
+#: deepest operator nesting accepted (the parser, the planner and the monitors recurse once per level)
+MAX_DEPTH = 150
+#: interval bounds have at most this many digits before the decimal point (and as many after it)
+MAX_BOUND_DIGITS = 12
 
 _GRAMMAR = r"""
 ?start: impl
@@ -129,6 +140,10 @@ class _ToAst(Transformer[Token, Formula]):
 
     def interval(self, c: list[Token]) -> Interval:
         lpar, lo_tok, _comma, hi_tok, rpar = c
+        for tok in (lo_tok, hi_tok):
+            if tok.type == "NUMBER" and any(len(part) > MAX_BOUND_DIGITS for part in str(tok).split(".")):
+                raise _IntervalError(f"interval bound {str(tok)[:20]}... has more than {MAX_BOUND_DIGITS} digits "
+                                     f"before or after the decimal point", tok.column or lpar.column or 1)
         lo = Fraction(str(lo_tok))
         hi = None if hi_tok.type in ("INF", "INF_SYMBOL") else Fraction(str(hi_tok))
         column = lpar.column or 1
@@ -215,8 +230,15 @@ def parse(text: str) -> Formula:
     if not text.strip():
         raise SpecSyntaxError("empty formula: expected an atomic proposition, 'true', 'false' or an operator",
                               text=text, column=1)
+    if len(text) > MAX_FORMULA_CHARS:
+        raise SpecSyntaxError(f"formula of {len(text)} characters: at most {MAX_FORMULA_CHARS} are accepted",
+                              text=text, column=MAX_FORMULA_CHARS + 1)
     try:
         tree = _parser().parse(text)
+        depth, column = _depth(tree)
+        if depth > MAX_DEPTH:
+            raise SpecSyntaxError(f"operators nested {depth} deep: at most {MAX_DEPTH} levels are accepted",
+                                  text=text, column=column)
         return _ToAst().transform(tree)
     except UnexpectedEOF as err:
         raise SpecSyntaxError(f"unexpected end of input, expected {_expected(set(err.expected))}",
@@ -237,4 +259,23 @@ def parse(text: str) -> Formula:
         orig = err.orig_exc
         if isinstance(orig, _IntervalError):
             raise SpecSyntaxError(orig.message, text=text, column=orig.column) from None
-        raise
+        raise SpecSyntaxError(f"cannot build the formula ({orig.__class__.__name__}: {orig})", text=text,
+                              column=1) from None
+    except RecursionError:
+        raise SpecSyntaxError(f"formula nested too deeply (at most {MAX_DEPTH} levels are accepted)", text=text,
+                              column=1) from None
+
+
+def _depth(tree: Tree[Token]) -> tuple[int, int]:
+    """Operator nesting depth of a parse tree (iterative: no recursion), and the column where it is reached."""
+    deepest, column = 0, 1
+    stack: list[tuple[Tree[Token] | Token, int]] = [(tree, 0)]
+    while stack:
+        node, level = stack.pop()
+        if isinstance(node, Tree):
+            here = level + (0 if node.data in ("start", "group", "interval", "atom") else 1)
+            if here > deepest:
+                deepest = here
+                column = next((c.column or 1 for c in node.children if isinstance(c, Token)), column)
+            stack.extend((child, here) for child in node.children)
+    return deepest, column

@@ -24,6 +24,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from verify.errors import LogReadError
 from verify.ingest.raw import RawTopic
+from verify.ingest.readerrors import READ_ERRORS
 from verify.ingest.ros1 import PayloadBuffer
 
 __all__ = [
@@ -114,6 +115,28 @@ def _f64_block_uniform(u8: npt.NDArray[np.uint8], size: int, start: int, count: 
     return np.ascontiguousarray(mat[:, start : start + 8 * count]).view("<f8").reshape(mat.shape[0], count)
 
 
+def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray) -> bool:
+    """Whether every string ``u8[start:start+length]`` is valid UTF-8, as rosbags' deserializer requires (ASCII
+    is checked in bulk; only strings with bytes >= 0x80 are decoded one by one)."""
+    if start.shape[0] == 0:
+        return True
+    if np.any(length < 0):
+        return False
+    total = int(length.sum())
+    if total == 0:
+        return True
+    owner = np.repeat(np.arange(start.shape[0]), length)
+    within = np.arange(total) - np.repeat(np.cumsum(length) - length, length)
+    high = u8[start[owner] + within] >= 0x80
+    for k in np.unique(owner[high]).tolist():
+        a = int(start[k])
+        try:
+            u8[a : a + int(length[k])].tobytes().decode("utf-8")
+        except UnicodeDecodeError:
+            return False
+    return True
+
+
 def _align(pos: IntArray, base: int, to: int) -> IntArray:
     rel = pos - base
     return base + (rel + (to - 1)) // to * to
@@ -136,6 +159,8 @@ def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
     len_at = offs + 12
     str_len = _u32(u8, len_at, packed)
     pos = len_at + 4 + str_len  # after header.frame_id
+    if np.any(pos > offs + lens) or not _utf8_strings(u8, len_at + 4, str_len if ros1 else str_len - 1):
+        return None  # the slow path decides (and rejects) a cut message or a frame id that is not UTF-8
     if raw.msgtype == ODOMETRY:
         if not ros1:
             pos = offs + _align(pos - offs, base, 4)
@@ -270,13 +295,13 @@ def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool = True) -> TwistColumn
 
 
 def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:
-    """std_msgs/String payloads -> (log time ns, text); undecodable messages are skipped."""
+    """std_msgs/String payloads -> (log time ns, text); undecodable messages are skipped (the caller counts them)."""
     store = typestore(ros1)
     deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
     out: list[tuple[int, str]] = []
     for log_ns, payload in zip(raw.log_ns, raw.payloads, strict=True):
         try:
             out.append((log_ns, str(deser(payload, raw.msgtype).data)))
-        except (ValueError, KeyError, IndexError, AttributeError, UnicodeDecodeError):
+        except READ_ERRORS:
             continue
     return out

@@ -10,19 +10,24 @@ are unknown (NaN) to the formula; the counts are in ``samples``. Unusable input 
 from __future__ import annotations
 
 import json
+import stat
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import Scenario
-from verify.errors import LogReadError, MissingTopicError, UnusableInputError
+from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
+from verify.ingest.clocks import clock_report, median_offset_s
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
+from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
+from verify.ingest.readerrors import READ_ERRORS, in_words
 from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples
 
 __all__ = ["LogData", "PoseStream", "file_sha256", "read_log"]
@@ -30,6 +35,8 @@ __all__ = ["LogData", "PoseStream", "file_sha256", "read_log"]
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 TF_TOPIC = "/tf"
+T = TypeVar("T")
+_OPTIONAL_ERRORS: tuple[type[BaseException], ...] = (VerifyError, *READ_ERRORS)
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,21 +71,27 @@ class LogData:
     time_base_note: str | None = None
     samples: dict[str, dict[str, int]] = field(default_factory=dict)  # per stream: read, judged, merged, ...
     stream_problems: dict[str, str] = field(default_factory=dict)  # stream -> why nothing judged on it can pass
+    signals: dict[str, SignalStream] = field(default_factory=dict)  # signal atoms (verify.ingest.fields)
 
 
 
-def _json_objects(raw: RawLog, topic: str) -> list[dict[str, Any]]:
-    """The JSON objects carried by a std_msgs/String topic (solver status, run metadata); other strings skipped."""
+def _json_objects(raw: RawLog, topic: str) -> tuple[list[dict[str, Any]], int]:
+    """The JSON objects carried by a std_msgs/String topic (solver status, run metadata), and how many messages
+    could not be decoded or parsed (an optional topic: counted as a finding, never an error)."""
     out: list[dict[str, Any]] = []
+    bad = 0
     if topic in raw.topics:
-        for _, text in decode_strings(raw.topics[topic], raw.ros1):
+        texts = decode_strings(raw.topics[topic], raw.ros1)
+        bad = len(raw.topics[topic].payloads) - len(texts)
+        for _, text in texts:
             try:
                 item = json.loads(text)
-            except json.JSONDecodeError:
+            except (json.JSONDecodeError, RecursionError):
+                bad += 1
                 continue
             if isinstance(item, dict):
                 out.append(item)
-    return out
+    return out, bad
 
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file, or of a bag directory (every file's relative name and bytes, in name order)."""
@@ -116,30 +129,72 @@ def _stream(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, theta_rad: FloatAr
     return one, PoseStream(t_ns[a], x_m[a], y_m[a], theta_rad[a]), js
 
 
+def _check_path(p: Path) -> None:
+    """A log is a regular file or a folder: a FIFO, device or socket would block or never end (refused)."""
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        raise LogReadError("no such file or directory", path=str(p)) from None
+    except OSError as err:
+        raise LogReadError(f"cannot be read ({err.strerror or err.__class__.__name__})", path=str(p)) from None
+    if stat.S_ISDIR(mode):
+        return
+    if not stat.S_ISREG(mode):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a character device" if stat.S_ISCHR(mode)
+                else "a block device" if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+                else "not a regular file")
+        raise LogReadError(f"is {kind}: a log must be a regular file or a ROS2 bag folder", path=str(p))
+
+
 def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", salvage: bool = False,
-             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
-    """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
-    a thread beside the reading."""
+             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST,
+             clock_offsets: Mapping[str, float] | None = None) -> LogData:
+    """Read and judge-ready the log at ``path``; any error of the readers on damaged bytes is a ``LogReadError``
+    (exit 3) naming the file and the problem in words, never an internal error. Its digest (``digest``: "blake3" or
+    "sha256") is computed in a thread beside the reading. ``clock_offsets`` (topic -> seconds, added to that topic's
+    times) extends and overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
-    if not p.exists():
-        raise LogReadError("no such file or directory", path=str(p))
+    _check_path(p)
     try:
         job = start_digest(p, digest)
     except ValueError as err:
         raise UnusableInputError(str(err)) from err
     try:
-        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job)
+        offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
+        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
+                         offsets_s=offsets)
+    except VerifyError:
+        job.cancel()
+        raise
+    except READ_ERRORS as err:
+        job.cancel()
+        fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
+        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
     except BaseException:
         job.cancel()
         raise
 
 
+def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: dict[str, Any]) -> T | None:
+    """Decode an optional stream; a stream whose messages cannot be decoded becomes a finding (not an error)."""
+    try:
+        return decode()
+    except _OPTIONAL_ERRORS as err:
+        words = err.reason if isinstance(err, UnusableInputError) else in_words(err)
+        quality[what] = {"missing": True, "undecodable": True, "topic": topic, "error": words}
+        quality["notes"].append(f"{topic}: messages cannot be decoded ({words}); the {what} stream is not used")
+        return None
+
+
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob) -> LogData:
+              job: DigestJob, offsets_s: dict[str, float]) -> LogData:
+    offsets_ns = {topic: round(sec * 1e9) for topic, sec in offsets_s.items()}
+    clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
     wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
+    wanted |= {sig.topic for sig in scenario.signals.values()}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -156,10 +211,14 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         cols = decode_pose(praw, raw.ros1, child_frame=child)
     except LogReadError as err:
         raise LogReadError(err.reason, path=str(p)) from err
+    except READ_ERRORS as err:
+        raise LogReadError(f"pose topic {pose_topic}: {praw.msgtype} messages cannot be decoded: {in_words(err)}",
+                           path=str(p)) from err
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
     base = choose_time_base(cols.stamp_ns, cols.log_ns, time_base)
-    stamps = base.t_ns
+    stamps = base.t_ns + offsets_ns.get(pose_topic, 0)
+    clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
     pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
     t0 = int(pose.t_ns[0]) if time0_ns is None else int(time0_ns)
@@ -190,10 +249,15 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
             problems["pose"] = base.note
 
     nominal = None
-    if t.nominal is not None and t.nominal in raw.topics and raw.topics[t.nominal].payloads:
-        ncols = decode_pose(raw.topics[t.nominal], raw.ros1)
+    nraw = raw.topics.get(t.nominal) if t.nominal is not None else None
+    ncols = None
+    if nraw is not None and nraw.payloads and t.nominal is not None:
+        nominal_topic = t.nominal
+        ncols = _decode_optional("nominal", nominal_topic, lambda: decode_pose(nraw, raw.ros1), quality)
+    if ncols is not None:
         nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
-        nst = nbase.t_ns
+        nst = nbase.t_ns + offsets_ns.get(nominal_topic, 0)
+        clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
         nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
         quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
@@ -202,34 +266,52 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         if nbase.note:
             quality["notes"].append(f"{t.nominal}: {nbase.note}")
             problems["nominal"] = nbase.note
-    else:
+    elif "nominal" not in quality:
         quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
     cmd_t = cmd_u = None
-    if t.cmd_vel is not None and t.cmd_vel in raw.topics and raw.topics[t.cmd_vel].payloads:
-        tw = decode_twist(raw.topics[t.cmd_vel], raw.ros1)
+    craw = raw.topics.get(t.cmd_vel) if t.cmd_vel is not None else None
+    tw = None
+    if craw is not None and craw.payloads and t.cmd_vel is not None:
+        cmd_topic = t.cmd_vel
+        tw = _decode_optional("cmd_vel", cmd_topic, lambda: decode_twist(craw, raw.ros1), quality)
+    if tw is not None:
         # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
-        cst = tw.stamp_ns if (tw.stamp_ns is not None and base.name == "header") else tw.log_ns
+        header_cmd = tw.stamp_ns is not None and base.name != "log"
+        cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + offsets_ns.get(cmd_topic, 0)
+        clock_streams[cmd_topic] = ("header" if header_cmd else "log", median_offset_s(cst, tw.log_ns))
         corder = clean_order(cst)
         cjs = judged_samples(cst, tw.u)
         cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
-        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
-                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        cq = stream_findings(cst, tw.log_ns if header_cmd else None, corder, expected_rate_hz=scenario.mocap.rate_hz,
+                             time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         cq.update(cjs.counts())
-        cq["type"] = raw.topics[t.cmd_vel].msgtype
-        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
+        cq["type"] = craw.msgtype if craw is not None else "?"
+        cq["time_base"] = "header" if header_cmd else "log"
         quality["cmd_vel"] = cq
         samples["cmd_vel"] = cjs.counts()
-    else:
+    elif "cmd_vel" not in quality:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
-    statuses = _json_objects(raw, t.solver)
+    signals, signal_quality = read_signals(raw, scenario, base.name, str(p), offsets_ns)
+    if signal_quality:
+        quality["signals"] = signal_quality
+        for sq in signal_quality.values():
+            clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
+    clocks = clock_report(pose_topic, clock_streams, offsets_s)
+    quality["clocks"] = clocks
+    quality["notes"].extend(clocks["findings"])
+
+    statuses, bad_status = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
     quality["solver"] = {"count": len(statuses), "failed": len(failed), "backup": sum(1 for s in statuses
-                                                                                     if s.get("backup"))}
-    documents = _json_objects(raw, t.metadata)
+                                                                                     if s.get("backup")),
+                         "undecodable": bad_status}
+    documents, bad_meta = _json_objects(raw, t.metadata)
     metadata = documents[0] if documents else None
+    if bad_meta:
+        quality["notes"].append(f"{t.metadata}: {bad_meta} message(s) cannot be decoded as JSON text")
     if raw.partial:
         quality["partial"] = True
     try:
@@ -240,4 +322,4 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
                    nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
                    pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,
-                   samples=samples, stream_problems=problems)
+                   samples=samples, stream_problems=problems, signals=signals)

@@ -37,6 +37,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
+from verify.ingest.readerrors import in_words
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 from verify.ingest.sqlite import QuickReader, read_sqlite_storage
@@ -79,6 +80,11 @@ def detect_format(path: Path) -> str:
         meta = path / "metadata.yaml"
         if not meta.exists():
             raise LogReadError("a directory without metadata.yaml is not a ROS2 bag", path=str(path))
+        suffixes = {p.suffix for p in path.iterdir()}
+        if ".db3" in suffixes and ".mcap" not in suffixes:  # the storage files decide (metadata may be damaged)
+            return "sqlite3"
+        if ".mcap" in suffixes and ".db3" not in suffixes:
+            return "mcap"
         text = meta.read_text(encoding="utf-8", errors="replace")
         return "sqlite3" if "storage_identifier: sqlite3" in text else "mcap"
     suffix = path.suffix.lower()
@@ -149,13 +155,13 @@ _READ_ERRORS = (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw
 
 
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
-    text = str(err) or err.__class__.__name__
+    text = " ".join(str(err).split()) or err.__class__.__name__
     hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
     if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
-        return TruncatedLogError(f"truncated or unindexed log ({text})", path=str(path))
+        return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]})", path=str(path))
     if isinstance(err, sqlite3.DatabaseError | apsw.Error):
-        return TruncatedLogError(f"unreadable sqlite3 database ({text})", path=str(path))
-    return LogReadError(f"unreadable {fmt} log ({text})", path=str(path))
+        return TruncatedLogError(f"unreadable sqlite3 database: {in_words(err)}", path=str(path))
+    return LogReadError(f"unreadable {fmt} log: {in_words(err)}", path=str(path))
 
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
@@ -186,10 +192,25 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
             m = fast.get(topic)
             if m is not None:
                 raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+        _check_counts(path, fmt, selected, out)
         return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
+    _check_counts(path, fmt, selected, out)
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:
+    """Messages read vs the counts the file declares (MCAP statistics, metadata.yaml, the ROS1 index): a damaged
+    index or chunk can make a reader stop early without an error, which would silently drop samples."""
+    declared: dict[str, int] = {}
+    for c in selected:
+        declared[c.topic] = declared.get(c.topic, 0) + int(getattr(c, "msgcount", 0) or 0)
+    for topic, want in declared.items():
+        got = len(out[topic].payloads) if topic in out else 0
+        if want > 0 and got < want:
+            raise TruncatedLogError(f"damaged {fmt} log: it declares {want} messages on {topic} but only {got} can "
+                                    f"be read", path=str(path))
 
 
 def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog | None:
@@ -220,6 +241,7 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
         m = fast.get(topic)
         if m is not None:
             raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
+    _check_counts(path, "sqlite3", selected, out)
     return RawLog(str(path), "sqlite3", False, out, {c.topic: c.msgtype for c in conns}, False, tuple(notes))
 
 

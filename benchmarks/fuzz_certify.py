@@ -1,0 +1,699 @@
+"""Fault campaign for ``tubempc certify``: damaged logs, faulty messages, formulas, scenarios and output paths.
+
+    python3 benchmarks/fuzz_certify.py [--cases 3000] [--seed 1] [--timeout 30] [--dir /tmp/fuzz_certify] [-v]
+
+Seed logs are written here (ROS1 ``.bag``, bare ``.mcap``, bare sqlite3 ``.db3`` and a ROS2 bag folder), each as a
+clean run (stays in R1: it passes ``G !(obs_1 | ... | obs_4)``) and a violating run (three separate visits to an
+obstacle's centre, so no single damage can hide all of them). Every case runs the real command line in this process
+(``tubempc.cli.main`` with stdout/stderr captured, a per-case alarm to detect hangs) and is classified:
+
+* crash: exit 70, an exception escaping ``main``, an exit code outside 0-3, a traceback or more than one stderr
+  line for exit 3, a warning on stderr, an input file modified, or a required outcome missed (e.g. an optional
+  topic's bad message making the log unusable);
+* hang: the case exceeded ``--timeout`` seconds;
+* false pass: exit 0 for a run whose ground truth violates the formula (the violating seed, whatever the damage:
+  a byte-level fault touches at most one of its three visits), or for a log the fault leaves undecidable.
+
+Case families (drawn with one ``random.Random(seed)``): byte flips, truncations and zeroed ranges of every seed
+format; message-content faults (header stamps: a repeated stamp hiding an obstacle visit, stamps never set,
+negative / 1970 / reordered stamps; NaN positions, zero quaternions, invalid UTF-8 frame ids, bad bytes in an
+optional topic, a wrong type on the pose topic, a missing topic); formula mutations (edits, deep nesting, long
+chains, huge bounds); scenario YAML mutations (edits, many regions, alias bombs, bad bytes); output paths and
+non-regular log paths. The last line is ``cases=N crashes=N hangs=N false_pass=N``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import os
+import random
+import shutil
+import signal
+import stat
+import struct
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import numpy as np
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_typestore
+
+from tubempc.scenario import builtin_scenario, builtin_scenario_text
+
+SCENARIO = builtin_scenario()
+SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
+TIME0_NS = 1_767_225_600 * 10**9
+RATE_HZ = 10.0
+END_S = 30.0
+FORMATS = ("bag", "mcap", "db3", "dir")
+POSE = "geometry_msgs/msg/PoseStamped"
+TWIST = "geometry_msgs/msg/Twist"
+STRING = "std_msgs/msg/String"
+
+
+class Hang(BaseException):
+    """Raised by the per-case alarm (a BaseException: no ``except Exception`` in the code under test catches it)."""
+
+
+# ------------------------------------------------------------------------------------------------ seed logs
+@dataclass
+class Run:
+    """Samples of one run (all arrays in reading order) and the message-level edits applied when writing it."""
+
+    t_ns: np.ndarray
+    stamp_ns: np.ndarray
+    xy: np.ndarray
+    quat: np.ndarray
+    cmd: np.ndarray
+    violating: bool
+    frame_ids: dict[int, bytes] = field(default_factory=dict)  # pose index -> raw frame_id bytes
+    status_patch: bytes | None = None  # raw bytes replacing one solver status payload
+    pose_type: str = POSE
+    topics: tuple[str, ...] = ("pose", "nominal", "cmd_vel", "solver", "metadata")
+
+
+def base_run(*, violating: bool) -> Run:
+    t = np.arange(0.0, END_S + 1e-9, 1.0 / RATE_HZ)
+    r1 = SCENARIO.region("R1").center
+    x = r1[0] + 0.05 * np.sin(t / 5.0)
+    y = r1[1] + 0.05 * np.cos(t / 5.0) - 0.05
+    if violating:
+        obs = SCENARIO.unsafe_regions[0].center
+        for visit_s in (5.0, 15.0, 25.0):
+            k = round(visit_s * RATE_HZ)
+            x[k : k + 3], y[k : k + 3] = obs[0], obs[1]
+    t_ns = TIME0_NS + np.rint(t * 1e9).astype(np.int64)
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (t.size, 1))
+    return Run(t_ns, t_ns.copy(), np.column_stack([x, y]), quat, np.zeros((t.size, 3)), violating)
+
+
+def _cdr_string_patch(payload: bytes, ros1: bool, new: bytes) -> bytes:
+    """Replace a PoseStamped's frame_id (after seq/stamp, or CDR header + stamp) by raw ``new`` bytes."""
+    at = 12  # ROS1: seq(4) sec(4) nsec(4); CDR: encapsulation(4) sec(4) nsec(4)
+    (old_len,) = struct.unpack_from("<I", payload, at)
+    rest = payload[at + 4 + old_len :]
+    body = new if ros1 else new + b"\0"
+    if not ros1:
+        pad = (-(at + 4 + len(body) - 4)) % 8  # the pose (float64) is 8-aligned relative to the CDR body
+        old_pad = (-(at + 4 + old_len - 4)) % 8
+        rest = rest[old_pad:]
+        body += b"\0" * pad
+        return payload[:at] + struct.pack("<I", len(new) + 1) + body + rest
+    return payload[:at] + struct.pack("<I", len(new)) + body + rest
+
+
+def write_run(run: Run, path: Path, fmt: str) -> Path:
+    """Write ``run`` with rosbags writers; ``fmt``: bag, mcap (bare file), db3 (bare file), dir (sqlite3 folder)."""
+    ros1 = fmt == "bag"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ser = store.serialize_ros1 if ros1 else store.serialize_cdr
+    ty = store.types
+    topics = SCENARIO.topics
+    msgs: list[tuple[int, str, str, bytes]] = []
+    for i in range(run.t_ns.size):
+        sec, nsec = divmod(int(run.stamp_ns[i]), 10**9)
+        stamp = ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+        header = ty["std_msgs/msg/Header"](**({"seq": i} if ros1 else {}), stamp=stamp, frame_id="world")
+        pose = ty[POSE](header=header, pose=ty["geometry_msgs/msg/Pose"](
+            position=ty["geometry_msgs/msg/Point"](x=float(run.xy[i, 0]), y=float(run.xy[i, 1]), z=0.0),
+            orientation=ty["geometry_msgs/msg/Quaternion"](*(float(q) for q in run.quat[i]))))
+        raw = bytes(ser(pose, POSE))
+        if i in run.frame_ids:
+            raw = _cdr_string_patch(raw, ros1, run.frame_ids[i])
+        if "pose" in run.topics:
+            if run.pose_type == POSE:
+                msgs.append((int(run.t_ns[i]), topics.pose, POSE, raw))
+            else:
+                msgs.append((int(run.t_ns[i]), topics.pose, STRING,
+                             bytes(ser(ty[STRING](data="not a pose"), STRING))))
+        if "nominal" in run.topics:
+            msgs.append((int(run.t_ns[i]), topics.nominal, POSE, bytes(ser(pose, POSE))))
+        if "cmd_vel" in run.topics:
+            v3 = ty["geometry_msgs/msg/Vector3"]
+            tw = ty[TWIST](linear=v3(x=float(run.cmd[i, 0]), y=float(run.cmd[i, 1]), z=0.0),
+                           angular=v3(x=0.0, y=0.0, z=float(run.cmd[i, 2])))
+            msgs.append((int(run.t_ns[i]), topics.cmd_vel, TWIST, bytes(ser(tw, TWIST))))
+        if "solver" in run.topics and i % 10 == 0:
+            status = {"t_s": i / RATE_HZ, "status": "Solve_Succeeded", "success": True, "iterations": 4}
+            data = bytes(ser(ty[STRING](data=json.dumps(status)), STRING))
+            if run.status_patch is not None and i == 100:
+                data = run.status_patch
+            msgs.append((int(run.t_ns[i]), topics.solver, STRING, data))
+    if "metadata" in run.topics:
+        meta = {"generator": "fuzz_certify", "scenario_sha256": SCENARIO.sha256(), "time0_ns": TIME0_NS}
+        msgs.append((TIME0_NS, topics.metadata, STRING, bytes(ser(ty[STRING](data=json.dumps(meta)), STRING))))
+    msgs.sort(key=lambda m: m[0])
+
+    def write_all(writer: Any) -> None:
+        conns: dict[str, Any] = {}
+        for t, topic, msgtype, data in msgs:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            writer.write(conns[topic], t, data)
+
+    if ros1:
+        with Writer1(path) as w1:
+            write_all(w1)
+        return path
+    storage = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
+    bag_dir = path if fmt == "dir" else path.parent / (path.name + ".d")
+    with Writer2(bag_dir, version=9, storage_plugin=storage) as w2:
+        write_all(w2)
+    if fmt == "dir":
+        return path
+    (inner,) = [p for p in bag_dir.iterdir() if p.suffix in (".mcap", ".db3")]
+    shutil.move(inner, path)
+    shutil.rmtree(bag_dir)
+    return path
+
+
+SUFFIX = {"bag": ".bag", "mcap": ".mcap", "db3": ".db3", "dir": ""}
+
+
+def seed_path(root: Path, fmt: str, violating: bool) -> Path:
+    return root / f"seed_{'bad' if violating else 'good'}_{fmt}{SUFFIX[fmt]}"
+
+
+def write_seeds(root: Path) -> dict[tuple[str, bool], Path]:
+    root.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for fmt in FORMATS:
+        for violating in (False, True):
+            p = seed_path(root, fmt, violating)
+            if p.exists():
+                shutil.rmtree(p) if p.is_dir() else p.unlink()
+            out[fmt, violating] = write_run(base_run(violating=violating), p, fmt)
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ running a case
+@dataclass
+class Outcome:
+    code: int | None
+    stdout: str
+    stderr: str
+    error: str | None  # an exception that escaped main
+    seconds: float
+
+
+def run_cli(argv: list[str], timeout_s: float) -> Outcome:
+    """``tubempc.cli.main(argv)`` in this process; a Hang after ``timeout_s``; output captured."""
+    from tubempc.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+
+    def on_alarm(signum: int, frame: FrameType | None) -> None:
+        raise Hang
+
+    # CPU time (ITIMER_PROF) detects a busy loop whatever the machine's load; wall time (ITIMER_REAL, 4x longer)
+    # detects a blocked read (a FIFO, a lock)
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    previous_prof = signal.signal(signal.SIGPROF, on_alarm)
+    signal.setitimer(signal.ITIMER_PROF, timeout_s)
+    signal.setitimer(signal.ITIMER_REAL, 4 * timeout_s)
+    start = time.perf_counter()
+    code: int | None = None
+    error = None
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                main(argv)
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except Hang:
+        code, error = None, "hang"
+    except Exception as exc:  # anything escaping main is a crash of the command line
+        error = f"{exc.__class__.__name__}: {exc}"
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        signal.signal(signal.SIGALRM, previous)
+        signal.signal(signal.SIGPROF, previous_prof)
+    return Outcome(code, out.getvalue(), err.getvalue(), error, time.perf_counter() - start)
+
+
+@dataclass
+class Case:
+    family: str
+    kind: str
+    argv: list[str]
+    truth: str  # "violating": must not pass; "undecidable": must not pass; "any": no requirement on the verdict
+    inputs: list[Path] = field(default_factory=list)  # must be byte-identical after the run
+    require: Callable[[Outcome], str | None] | None = None  # an extra requirement (message when it fails)
+
+
+def _snapshot(paths: list[Path]) -> dict[str, bytes]:
+    snap: dict[str, bytes] = {}
+    for p in paths:
+        if p.is_dir():
+            for f in sorted(p.rglob("*")):
+                if f.is_file():
+                    snap[str(f)] = f.read_bytes()
+        elif p.is_file():
+            snap[str(p)] = p.read_bytes()
+    return snap
+
+
+def classify(case: Case, res: Outcome, before: dict[str, bytes], after: dict[str, bytes]) -> tuple[str, str]:
+    """(class, detail): class is ok, crash, hang or false_pass."""
+    if res.error == "hang":
+        return "hang", f"> timeout ({res.seconds:.1f} s)"
+    if res.error is not None:
+        return "crash", res.error
+    if res.code not in (0, 1, 2, 3):
+        return "crash", f"exit {res.code}: {res.stderr.strip()[-300:]}"
+    err_lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    debug = "--debug" in case.argv
+    if debug and "Traceback" in res.stderr:  # --debug adds the traceback before the one line
+        err_lines = err_lines[-1:]
+    if "Traceback" in res.stderr and not debug:
+        return "crash", "traceback on stderr"
+    if res.code == 3 and (len(err_lines) != 1 or not err_lines[0].startswith("tubempc: error: ")):
+        return "crash", f"exit 3 with {len(err_lines)} stderr lines: {res.stderr.strip()[:300]!r}"
+    if res.code in (0, 1, 2) and err_lines:
+        return "crash", f"stderr on a normal run: {res.stderr.strip()[:300]!r}"
+    if before != after:
+        return "crash", "an input file was modified"
+    if case.require is not None and (why := case.require(res)) is not None:
+        return "crash", why
+    if res.code == 0 and case.truth in ("violating", "undecidable"):
+        return "false_pass", f"pass for a {case.truth} log"
+    return "ok", ""
+
+
+# ------------------------------------------------------------------------------------------------ case families
+def _copy(src: Path, dst: Path) -> Path:
+    if src.is_dir():
+        shutil.copytree(src, dst)
+    else:
+        shutil.copyfile(src, dst)
+    return dst
+
+
+def _storage(p: Path) -> Path:
+    return next(f for f in p.iterdir() if f.suffix == ".db3") if p.is_dir() else p
+
+
+def byte_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    fmt = rng.choice(FORMATS)
+    violating = rng.random() < 0.5
+    path = _copy(seeds[fmt, violating], work / seeds[fmt, violating].name)
+    target = _storage(path)
+    if fmt == "dir" and rng.random() < 0.2:
+        target = path / "metadata.yaml"
+    data = bytearray(target.read_bytes())
+    kind = rng.choice(["flip", "flip", "truncate", "zero"])
+    if kind == "flip":
+        for _ in range(rng.choice([1, 1, 2, 4, 8])):
+            k = rng.randrange(len(data))
+            data[k] ^= 1 << rng.randrange(8) if rng.random() < 0.7 else rng.randrange(1, 256)
+    elif kind == "truncate":
+        data = data[: rng.randrange(len(data))]
+    else:
+        a = rng.randrange(len(data))
+        data[a : a + rng.choice([1, 4, 16, 256, 4096])] = bytes(min(len(data) - a,
+                                                                     rng.choice([1, 4, 16, 256, 4096])))
+    target.write_bytes(bytes(data))
+    argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    if rng.random() < 0.3:
+        argv.append("--salvage")
+    if rng.random() < 0.2:
+        argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    if rng.random() < 0.1:
+        argv.insert(0, "--debug")
+    return Case("bytes", f"{fmt}:{kind}", argv, "violating" if violating else "any", [path])
+
+
+def _not_unusable(res: Outcome) -> str | None:
+    return "a bad message in an optional topic made the log unusable" if res.code == 3 else None
+
+
+def content_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    fmt = rng.choice(FORMATS)
+    kinds = ["dup_hides_obstacle", "zero_stamps", "zero_stamps_violating", "outlier_stamp", "reorder",
+             "nan_position", "zero_quaternion", "bad_utf8_frame", "bad_status_bytes", "bad_status_utf8",
+             "wrong_pose_type", "missing_nominal", "missing_cmd", "huge_frame_len"]
+    kind = rng.choice(kinds)
+    run = base_run(violating=kind == "zero_stamps_violating")
+    n = run.t_ns.size
+    truth = "any"
+    require: Callable[[Outcome], str | None] | None = None
+    time_base = "auto"
+    if kind == "dup_hides_obstacle":
+        k = rng.randrange(1, n - 2)
+        run.stamp_ns[k + 1] = run.stamp_ns[k]
+        run.xy[rng.choice([k, k + 1])] = SCENARIO.unsafe_regions[rng.randrange(4)].center
+        truth = "violating"
+    elif kind in ("zero_stamps", "zero_stamps_violating"):
+        run.stamp_ns[:] = 0
+        truth = "violating" if run.violating else "any"
+        time_base = rng.choice(["auto", "header"])
+        if time_base == "header" and not run.violating:
+            truth = "undecidable"
+    elif kind == "outlier_stamp":
+        k = rng.randrange(n)
+        run.stamp_ns[k] = rng.choice([-5 * 10**9, 0, 10**9, 86_400 * 10**9]) if fmt != "bag" else \
+            rng.choice([0, 10**9, 86_400 * 10**9])
+
+        def must_pass(res: Outcome) -> str | None:
+            return None if res.code == 0 else f"a good run with one outlier stamp gave exit {res.code}"
+
+        require = must_pass
+    elif kind == "reorder":
+        for _ in range(rng.randrange(1, 30)):
+            k = rng.randrange(n - 1)
+            run.stamp_ns[[k, k + 1]] = run.stamp_ns[[k + 1, k]]
+    elif kind == "nan_position":
+        run.xy[rng.randrange(n), rng.randrange(2)] = math.nan
+        truth = "undecidable"
+    elif kind == "zero_quaternion":
+        run.quat[rng.randrange(n)] = 0.0
+    elif kind == "bad_utf8_frame":
+        run.frame_ids[rng.randrange(n)] = b"w\xff\xfeorld"
+    elif kind == "huge_frame_len":
+        run.frame_ids[rng.randrange(n)] = b"x" * rng.choice([1, 7, 300])
+    elif kind == "bad_status_bytes":
+        run.status_patch = bytes(rng.randrange(256) for _ in range(rng.choice([0, 3, 9, 40])))
+        require = _not_unusable
+    elif kind == "bad_status_utf8":
+        body = b'{"success": \xff\xfe}'
+        run.status_patch = (struct.pack("<I", len(body)) + body if fmt == "bag"
+                            else b"\0\x01\0\0" + struct.pack("<I", len(body) + 1) + body + b"\0")
+        require = _not_unusable
+    elif kind == "wrong_pose_type":
+        run.pose_type = STRING
+    elif kind == "missing_nominal":
+        run.topics = ("pose", "cmd_vel", "solver", "metadata")
+        truth = "undecidable"
+    elif kind == "missing_cmd":
+        run.topics = ("pose", "nominal", "solver", "metadata")
+        truth = "undecidable"
+    path = write_run(run, work / f"run_{kind}{SUFFIX[fmt]}", fmt)
+    argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", time_base]
+    return Case("content", f"{fmt}:{kind}", argv, truth, [path], require)
+
+
+VALID_FORMULAS = [SPEC, "F[0,10] mission_1", "G[0,20] (mission_1 -> F[0,5] mission_1)",
+                  "!obs_1 U[0,30] mission_1", "X[0,1] mission_1", "G[0,inf) (obs_1 -> F[0,1] !obs_1)"]
+
+
+def formula_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    kind = rng.choice(["edit", "edit", "nest_not", "nest_paren", "nest_temporal", "and_chain", "or_chain",
+                       "big_bound", "garbage", "empty"])
+    text = rng.choice(VALID_FORMULAS)
+    if kind == "edit":
+        chars = list(text)
+        alphabet = "()[]{},.;:!&|-><=~UFGX0123456789 abcinfmission_obs_∧∨¬◇□→\x00\n\t\\\"'"
+        for _ in range(rng.randrange(1, 5)):
+            op = rng.randrange(3)
+            k = rng.randrange(len(chars) + 1)
+            if op == 0:
+                chars.insert(k, rng.choice(alphabet))
+            elif chars and op == 1:
+                del chars[min(k, len(chars) - 1)]
+            elif chars:
+                chars[min(k, len(chars) - 1)] = rng.choice(alphabet)
+        text = "".join(chars)
+    elif kind == "nest_not":
+        depth = rng.choice([100, 500, 2000, 20000])
+        text = "!" * depth + "obs_1"
+    elif kind == "nest_paren":
+        depth = rng.choice([100, 500, 2000, 20000])
+        text = "(" * depth + "obs_1" + ")" * depth
+    elif kind == "nest_temporal":
+        depth = rng.choice([50, 500, 3000])
+        text = "F[0,1] (" * depth + "mission_1" + ")" * depth
+    elif kind in ("and_chain", "or_chain"):
+        count = rng.choice([1000, 10_000, 100_000])
+        op = " & " if kind == "and_chain" else " | "
+        text = op.join(f"!obs_{1 + k % 4}" for k in range(count))
+    elif kind == "big_bound":
+        digits = rng.choice([20, 400, 5000])
+        text = f"F[0,{'9' * digits}] mission_1" if rng.random() < 0.5 else f"G[{'1' * digits}.5,inf) !obs_1"
+    elif kind == "garbage":
+        text = "".join(chr(rng.randrange(1, 0x3000)) for _ in range(rng.randrange(1, 80)))
+    else:
+        text = rng.choice(["", " ", "\n"])
+    seed = seeds["mcap", False]
+    argv = ["certify", str(seed), "--scenario", "nexus-sml", "--spec", text]
+    return Case("formula", kind, argv, "any", [seed])
+
+
+def scenario_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    base = builtin_scenario_text("nexus-sml")
+    lines = base.splitlines()
+    kind = rng.choice(["delete_line", "duplicate_line", "number", "chars", "many_regions", "alias_bomb",
+                       "bad_bytes", "empty", "not_a_mapping", "deep_yaml"])
+    data: bytes
+    if kind == "delete_line":
+        del lines[rng.randrange(len(lines))]
+        data = "\n".join(lines).encode()
+    elif kind == "duplicate_line":
+        k = rng.randrange(len(lines))
+        lines.insert(k, lines[k])
+        data = "\n".join(lines).encode()
+    elif kind == "number":
+        import re
+
+        nums = list(re.finditer(r"-?\d+\.?\d*", base))
+        m = rng.choice(nums)
+        new = rng.choice(["-1", "0", "1e308", "nan", ".inf", "-.inf", "1e400", "9" * 400, "''", "[]", "{}"])
+        data = (base[: m.start()] + new + base[m.end():]).encode()
+    elif kind == "chars":
+        chars = list(base)
+        for _ in range(rng.randrange(1, 6)):
+            chars[rng.randrange(len(chars))] = rng.choice("[]{}:,-&*!|>'\"\t#@`%")
+        data = "".join(chars).encode()
+    elif kind == "many_regions":
+        count = rng.choice([500, 5000, 40_000])
+        head = base[: base.index("regions:")]
+        tail = base[base.index("initial_region:"):]
+        regs = "".join(f"  - {{name: Q{k}, center: [{-2.4 + (k % 200) * 0.024:.3f}, {-2.4 + (k // 200) * 0.024:.3f}], "
+                       f"radius: 0.01, labels: [obs_1], unsafe: true}}\n" for k in range(count))
+        data = (head + "regions:\n  - {name: R1, center: [-1.99, -1.78], radius: 0.45, labels: [mission_1]}\n"
+                + regs + tail.replace("initial_region: R1", "initial_region: R1")).encode()
+    elif kind == "alias_bomb":
+        bomb = 'a: &a ["x","x","x","x","x","x","x","x","x"]\n'
+        for k in range(1, 9):
+            bomb += f"{chr(97 + k)}: &{chr(97 + k)} [" + ",".join([f"*{chr(96 + k)}"] * 9) + "]\n"
+        data = (bomb + base).encode()
+    elif kind == "bad_bytes":
+        raw = bytearray(base.encode())
+        raw[rng.randrange(len(raw))] = rng.choice([0xFF, 0xC3, 0x00, 0x80])
+        data = bytes(raw)
+    elif kind == "empty":
+        data = b""
+    elif kind == "not_a_mapping":
+        data = rng.choice([b"- 1\n- 2\n", b"42\n", b"just text\n", b"null\n"])
+    else:
+        depth = rng.choice([100, 1000, 10000])
+        data = ("x: " + "[" * depth + "]" * depth + "\n").encode() + base.encode()
+    scen = work / "scenario.yaml"
+    scen.write_bytes(data)
+    seed = seeds["mcap", False]
+    argv = ["certify", str(seed), "--scenario", str(scen), "--spec", SPEC]
+    return Case("scenario", kind, argv, "any", [seed, scen])
+
+
+def path_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    seed = seeds["bag", False]
+    kind = rng.choice(["out_existing_file", "out_below_file", "out_dev_null", "out_readonly_fs", "out_existing_dir",
+                       "log_fifo", "log_dev_zero", "log_empty_dir", "log_empty_file", "log_no_ext", "log_missing",
+                       "simulate_out_existing"])
+    truth = "any"
+    require: Callable[[Outcome], str | None] | None = None
+    inputs = [seed]
+
+    def exit3(res: Outcome) -> str | None:
+        return None if res.code == 3 else f"expected exit 3, got {res.code}"
+
+    argv = ["certify", str(seed), "--scenario", "nexus-sml", "--spec", SPEC]
+    if kind == "out_existing_file":
+        f = work / "taken.txt"
+        f.write_text("keep me\n")
+        argv += ["--out", str(f)]
+        inputs.append(f)
+        require = exit3
+    elif kind == "out_below_file":
+        f = work / "file.txt"
+        f.write_text("x\n")
+        argv += ["--out", str(f / "report")]
+        inputs.append(f)
+        require = exit3
+    elif kind == "out_dev_null":
+        argv += ["--out", "/dev/null"]
+        require = exit3
+    elif kind == "out_readonly_fs":
+        argv += ["--out", "/proc/tubempc-report"]
+        require = exit3
+    elif kind == "out_existing_dir":  # refused without --force (nothing overwritten), replaced with it
+        d = work / "previous"
+        d.mkdir()
+        (d / "certificate.json").write_text("{}\n")
+        argv += ["--out", str(d)]
+        if rng.random() < 0.5:
+            argv.append("--force")
+
+            def replaced(res: Outcome) -> str | None:
+                written = json.loads((d / "certificate.json").read_text())
+                return None if res.code == 0 and written.get("verdict") == "pass" else "--force did not replace"
+
+            require = replaced
+        else:
+            inputs.append(d)
+            require = exit3
+    elif kind == "log_fifo":
+        fifo = work / "pipe.bag"
+        os.mkfifo(fifo)
+        argv[1] = str(fifo)
+        require = exit3
+        inputs = []
+    elif kind == "log_dev_zero":
+        argv[1] = "/dev/zero"
+        require = exit3
+        inputs = []
+    elif kind == "log_empty_dir":
+        d = work / "empty"
+        d.mkdir()
+        argv[1] = str(d)
+        require = exit3
+    elif kind == "log_empty_file":
+        f = work / f"empty{rng.choice(['.bag', '.mcap', '.db3'])}"
+        f.write_bytes(b"")
+        argv[1] = str(f)
+        require = exit3
+    elif kind == "log_no_ext":
+        f = work / "runlog"
+        shutil.copyfile(seed, f)
+        argv[1] = str(f)
+        require = exit3
+    elif kind == "log_missing":
+        argv[1] = str(work / "nope.mcap")
+        require = exit3
+    else:
+        existing = work / rng.choice(["sim.mcap", "notes.txt"])
+        existing.write_bytes(b"keep")
+        argv = ["simulate", "--out", str(existing), "--from", "R1", "--to", "R1"]
+        inputs = [existing]
+        require = exit3
+    if rng.random() < 0.2:
+        argv.insert(0, "--debug")
+    return Case("paths", kind, argv, truth, inputs, require)
+
+
+FAMILIES: list[tuple[str, float, Callable[[random.Random, dict[tuple[str, bool], Path], Path], Case]]] = [
+    ("bytes", 0.55, byte_case), ("content", 0.2, content_case), ("formula", 0.1, formula_case),
+    ("scenario", 0.1, scenario_case), ("paths", 0.05, path_case)]
+
+
+@contextlib.contextmanager
+def _workdir(root: Path) -> Iterator[Path]:
+    d = Path(tempfile.mkdtemp(dir=root))
+    try:
+        yield d
+    finally:
+        for p in d.rglob("*"):
+            with contextlib.suppress(OSError):
+                if p.is_dir() and not p.is_symlink():
+                    p.chmod(stat.S_IRWXU)
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _fresh(folder: Path) -> Path:
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    return folder
+
+
+@dataclass
+class Report:
+    cases: int = 0
+    counts: Counter[str] = field(default_factory=Counter)
+    by_kind: Counter[str] = field(default_factory=Counter)
+    failures: list[str] = field(default_factory=list)
+    exit_codes: Counter[str] = field(default_factory=Counter)
+
+    @property
+    def last_line(self) -> str:
+        return (f"cases={self.cases} crashes={self.counts['crash']} hangs={self.counts['hang']} "
+                f"false_pass={self.counts['false_pass']}")
+
+
+def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, verbose: bool = False,
+                 families: tuple[str, ...] | None = None, only: int | None = None) -> Report:
+    """Run ``cases`` cases drawn from ``random.Random(seed)``; returns the counts (see the module docstring).
+
+    ``only``: replay case number ``only`` of that campaign alone (its files are kept under ``root/case``)."""
+    import warnings
+
+    warnings.resetwarnings()  # pytest's or the caller's filters must not hide a warning that leaks to stderr
+    rng = random.Random(seed)
+    seeds = write_seeds(root / "seeds")
+    chosen = [f for f in FAMILIES if families is None or f[0] in families]
+    weights = [w for _, w, _ in chosen]
+    report = Report()
+    for i in range(cases):
+        _, _, make = rng.choices(chosen, weights)[0]
+        case_rng = random.Random(rng.getrandbits(64))
+        if only is not None and i != only:
+            continue
+        with _workdir(root) if only is None else contextlib.nullcontext(_fresh(root / "case")) as work:
+            case = make(case_rng, seeds, work)
+            before = _snapshot(case.inputs)
+            res = run_cli(case.argv, timeout_s)
+            after = _snapshot(case.inputs)
+            cls, detail = classify(case, res, before, after)
+        report.cases += 1
+        report.counts[cls] += 1
+        report.exit_codes[f"{case.family}:{res.code}"] += 1
+        if cls != "ok":
+            report.by_kind[f"{cls} {case.family}:{case.kind}"] += 1
+            argv = " ".join(a if len(a) < 80 else a[:60] + f"...({len(a)} chars)" for a in case.argv)
+            report.failures.append(f"#{i} {cls} {case.family}:{case.kind}: {detail} [{argv}]")
+            if verbose:
+                print(report.failures[-1], file=sys.stderr)
+    return report
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", type=int, default=3000)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--timeout", type=float, default=30.0,
+                    help="CPU seconds per case (4x as many wall seconds) before it counts as a hang")
+    ap.add_argument("--dir", type=Path, default=None, help="work folder (default: a fresh temporary folder)")
+    ap.add_argument("--families", default=None, help="comma-separated subset of: " +
+                    ", ".join(f[0] for f in FAMILIES))
+    ap.add_argument("-v", "--verbose", action="store_true", help="print each failing case as it happens")
+    ap.add_argument("--only", type=int, default=None, help="replay this case number alone (files kept)")
+    args = ap.parse_args()
+    root = args.dir or Path(tempfile.mkdtemp(prefix="fuzz_certify_"))
+    root.mkdir(parents=True, exist_ok=True)
+    fams = tuple(args.families.split(",")) if args.families else None
+    start = time.perf_counter()
+    report = run_campaign(args.cases, args.seed, root=root, timeout_s=args.timeout, verbose=args.verbose,
+                          families=fams, only=args.only)
+    for line in report.failures[:60]:
+        print(line)
+    for key, count in sorted(report.by_kind.items()):
+        print(f"{count:6d}  {key}")
+    print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
+    print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")
+    print(report.last_line)
+
+
+if __name__ == "__main__":
+    main()

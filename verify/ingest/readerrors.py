@@ -1,0 +1,69 @@
+"""Library errors met while reading a damaged log -> one line in words (the library's message is detail).
+
+input: an exception raised by rosbags, sqlite3/apsw, the decompressors or our own readers on bad bytes -> output:
+the problem in words (``in_words``), and ``READ_ERRORS``, the exception classes the read boundary
+(``verify.ingest.log.read_log``) turns into ``LogReadError`` (exit 3) instead of an internal error (exit 70).
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import struct
+import zlib
+
+import apsw  # rosbags' sqlite3 driver
+from rosbags.rosbag1 import ReaderError as ReaderError1
+from rosbags.rosbag2 import ReaderError as ReaderError2
+from rosbags.serde import SerdeError
+
+__all__ = ["READ_ERRORS", "in_words"]
+
+#: what readers and decoders raise on damaged bytes (AssertionError: rosbags checks its index with ``assert``;
+#: RuntimeError: lz4; MemoryError: a corrupt size field; TypeError/AttributeError: a record missing a field)
+READ_ERRORS: tuple[type[BaseException], ...] = (
+    ReaderError1, ReaderError2, SerdeError, AssertionError, OverflowError, UnicodeDecodeError, KeyError, IndexError,
+    ValueError, TypeError, AttributeError, struct.error, EOFError, OSError, sqlite3.Error, apsw.Error, zlib.error,
+    MemoryError, RecursionError, RuntimeError, NotImplementedError)
+
+_DETAIL_CHARS = 160
+
+
+def _detail(err: BaseException) -> str:
+    text = " ".join(str(err).split()) or "no message"
+    if len(text) > _DETAIL_CHARS:
+        text = text[: _DETAIL_CHARS - 3] + "..."
+    return f"{err.__class__.__name__}: {text}"
+
+
+def in_words(err: BaseException) -> str:
+    """What is wrong with the file, in words, with the library's message as detail in parentheses."""
+    name = err.__class__.__name__
+    if isinstance(err, NotImplementedError):
+        words = "it uses a feature this reader does not support"
+    elif isinstance(err, AssertionError):
+        words = "its index disagrees with its data (an internal consistency check of the file failed)"
+    elif isinstance(err, SerdeError) or "Serde" in name:
+        words = "a message cannot be decoded"
+    elif isinstance(err, UnicodeDecodeError):
+        words = "text that must be UTF-8 is not"
+    elif isinstance(err, OverflowError):
+        words = "a size, offset or time field is out of range"
+    elif isinstance(err, KeyError | IndexError):
+        words = "a record refers to a connection, schema or chunk that does not exist"
+    elif isinstance(err, MemoryError):
+        words = "a size field asks for more memory than is available"
+    elif isinstance(err, RecursionError):
+        words = "its structure is nested too deeply"
+    elif isinstance(err, sqlite3.Error | apsw.Error):
+        words = "the sqlite3 database is damaged or not a rosbag2 database"
+    elif isinstance(err, zlib.error | RuntimeError) or "decompress" in str(err).lower():
+        words = "a compressed chunk cannot be decompressed"
+    elif isinstance(err, struct.error | EOFError):
+        words = "it ends in the middle of a record (truncated)"
+    elif isinstance(err, OSError):
+        words = "it cannot be read from disk"
+    elif isinstance(err, ReaderError1 | ReaderError2) and "YAML" in str(err):
+        words = "its metadata.yaml is not valid YAML"
+    else:
+        words = "its records are malformed"
+    return f"{words} ({_detail(err)})"

@@ -1,0 +1,112 @@
+"""Output paths of every command: ``--out`` -> a ready folder (or log path), or one clear exit-3 error.
+
+The policy, one for all commands (certify, regress, demo write a folder; simulate writes a log):
+- nothing that exists is overwritten unless ``--force`` is given: a report folder must be new or empty, a log
+  path must not exist (exit 3, one line, "exists already");
+- with ``--force`` an existing output of the right kind is replaced: a report folder keeps its other files and gets
+  its own files (``certificate.json``, ``report.*``, ``junit.xml``, per-log sub-folders) rewritten; an existing log
+  file (``.bag``, ``.mcap``, ``.db3``) or ROS2 bag folder (it holds ``metadata.yaml``) is replaced once the new log
+  is ready;
+- an output of the wrong kind is always refused (``UnusableInputError``, exit 3): a file (or ``/dev/null``, a
+  device) where a folder is needed, a folder that is not a bag where a log is needed, a path below a file, an
+  unwritable or read-only place, and a report folder that is (or is inside) a log being certified (inputs are never
+  modified).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+from collections.abc import Iterable
+from pathlib import Path
+
+from verify.errors import UnusableInputError
+
+__all__ = ["LOG_SUFFIXES", "prepare_output_dir", "prepare_output_log", "replace_output_log"]
+
+LOG_SUFFIXES = (".bag", ".mcap", ".db3")
+
+
+def _os_words(err: OSError) -> str:
+    if err.errno in (errno.EROFS,):
+        return "the file system is read-only"
+    if err.errno in (errno.EACCES, errno.EPERM):
+        return "permission denied"
+    if err.errno == errno.ENOTDIR:
+        return "a part of the path is a file, not a folder"
+    if err.errno == errno.ENOSPC:
+        return "no space left on the device"
+    if err.errno == errno.ENOENT:
+        return "a part of the path does not exist and cannot be created"
+    return err.strerror or err.__class__.__name__
+
+
+def _below_a_file(path: Path) -> Path | None:
+    for parent in path.absolute().parents:
+        if parent.exists():
+            return None if parent.is_dir() else parent
+    return None
+
+
+def prepare_output_dir(path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
+    """Create (or, with ``force``, reuse) the report folder ``path``; refuse what the policy above refuses."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise UnusableInputError("--out exists and is not a folder (reports need a folder)", path=str(out))
+    if out.is_dir() and not force and any(out.iterdir()):
+        raise UnusableInputError("--out exists already and is not empty: pass --force to replace its reports",
+                                 path=str(out))
+    blocker = _below_a_file(out)
+    if blocker is not None:
+        raise UnusableInputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
+    resolved = out.resolve()
+    for item in inputs:
+        log = Path(item).resolve()
+        if log.is_dir() and (resolved == log or log in resolved.parents):
+            raise UnusableInputError(f"--out is inside the log {item} being certified (inputs are never modified)",
+                                     path=str(out))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise UnusableInputError(f"cannot create the output folder: {_os_words(err)}", path=str(out)) from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise UnusableInputError("the output folder is not writable: permission denied", path=str(out))
+    return out
+
+
+def prepare_output_log(path: str | Path, *, force: bool = False) -> Path:
+    """Check a log output path before the work starts (nothing is removed here)."""
+    out = Path(path)
+    if out.exists() and not force:
+        raise UnusableInputError("--out exists already: pass --force to replace it", path=str(out))
+    if out.exists():
+        if out.is_dir():
+            if not (out / "metadata.yaml").is_file():
+                raise UnusableInputError("--out is a folder that is not a ROS2 bag (no metadata.yaml): not replaced",
+                                         path=str(out))
+        elif not out.is_file() or out.suffix.lower() not in LOG_SUFFIXES:
+            raise UnusableInputError(f"--out exists and is not a log file ({', '.join(LOG_SUFFIXES)}): not "
+                                     f"replaced", path=str(out))
+    blocker = _below_a_file(out)
+    if blocker is not None:
+        raise UnusableInputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
+    parent = out.absolute().parent
+    if not parent.is_dir():
+        raise UnusableInputError(f"the folder {parent} does not exist", path=str(out))
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UnusableInputError(f"cannot write into {parent}: permission denied", path=str(out))
+    return out
+
+
+def replace_output_log(path: str | Path) -> Path:
+    """Remove an existing log at ``path`` (after ``prepare_output_log`` accepted it), so the new one takes its place."""
+    out = prepare_output_log(path, force=True)
+    try:
+        if out.is_dir():
+            shutil.rmtree(out)
+        elif out.exists():
+            out.unlink()
+    except OSError as err:
+        raise UnusableInputError(f"cannot replace the existing log: {_os_words(err)}", path=str(out)) from None
+    return out
