@@ -625,6 +625,7 @@ class Report:
     by_kind: Counter[str] = field(default_factory=Counter)
     failures: list[str] = field(default_factory=list)
     exit_codes: Counter[str] = field(default_factory=Counter)
+    per_format: Counter[str] = field(default_factory=Counter)  # family:format (bytes, content) or family
 
     @property
     def last_line(self) -> str:
@@ -659,6 +660,8 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
         report.cases += 1
         report.counts[cls] += 1
         report.exit_codes[f"{case.family}:{res.code}"] += 1
+        fmt = case.kind.split(":")[0] if case.family in ("bytes", "content") else ""
+        report.per_format[f"{case.family}:{fmt}" if fmt else case.family] += 1
         if cls != "ok":
             report.by_kind[f"{cls} {case.family}:{case.kind}"] += 1
             argv = " ".join(a if len(a) < 80 else a[:60] + f"...({len(a)} chars)" for a in case.argv)
@@ -690,6 +693,7 @@ def main() -> None:
         print(line)
     for key, count in sorted(report.by_kind.items()):
         print(f"{count:6d}  {key}")
+    print("cases per family and format: " + ", ".join(f"{k}={v}" for k, v in sorted(report.per_format.items())))
     print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
     print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")
     print(report.last_line)

@@ -398,12 +398,16 @@ def test_planner_finds_a_run_when_brute_force_does(wts: nx.DiGraph, f: Formula) 
     witness = next((run for run in simple_lassos(wts, init, 4) if certifier_on_lasso(f, run, labels) == "pass"),
                    None)
     assume(witness is not None)
+    decided = 0
     for wait, dwell in ((False, SILENT), (True, SILENT), (True, OBSERVED)):
         try:
             found = planner_accepts(wts, f, wait=wait, dwell=dwell)
         except SearchLimitError:
             continue
+        decided += 1
         assert found is not None, (str(f), witness, labels, wait, dwell)
+    # a search that hits its limit in every configuration would assert nothing: at least one must decide
+    assert decided >= 1, (str(f), witness, "the planner hit its search limit in every configuration")
 
 
 def test_oracle_examples() -> None:

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from tubempc.scenario import builtin_scenario
 from verify import certify_log
 
@@ -29,8 +31,21 @@ def test_demo_end_to_end(tmp_path: Path) -> None:
     assert "R5 -&gt; R1" in report and "cannot be reproduced" in report
     html = (out / "report.html").read_text()
     assert "Demo: transition times" in html and "data:image/png;base64," in html
-    # the plan's arrivals fall inside the formula's windows
+    # the run-dependent rows: every planned and every executed (region, time) of this run is in the report's
+    # table, in order (the paper's times above are constants; these come from plan.json and the certificate)
     plan = json.loads((out / "plan.json").read_text())
+    table = report[report.index("Demo: the planned run and the executed one"):]
+    rows = [line for line in table.splitlines() if line.startswith("| ") and line[2:3].isdigit()]
+    planned = [(str(e["region"]), float(e["time"])) for e in plan["run"]]
+    executed = [(str(e["region"]), float(e["time"])) for e in cert["timed_run"]]
+    assert len(rows) == max(len(planned), len(executed))
+    for k, row in enumerate(rows):
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        if k < len(planned):
+            assert cells[1] == planned[k][0] and float(cells[2]) == pytest.approx(planned[k][1], rel=1e-5)
+        if k < len(executed):
+            assert cells[3] == executed[k][0] and float(cells[4]) == pytest.approx(executed[k][1], rel=1e-5)
+    # the plan's arrivals fall inside the formula's windows
     times = {e["region"]: e["time"] for e in plan["run"][1:]}
     assert 30 <= times["R3"] <= 50
     assert 80 <= times["R1"] <= 110

@@ -33,7 +33,7 @@ from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
 from verify.signals import signal_bounds, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
-from verify.trajectory import TrajectoryVerdict, check_trajectory
+from verify.trajectory import check_trajectory, reported_margin
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
            "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
@@ -150,21 +150,6 @@ def _formula_text(sc: Scenario, spec: str | None) -> str:
     return str(formula)
 
 
-def _spec_margin(traj: TrajectoryVerdict) -> float | None:
-    """The formula's margin: on a pass the guaranteed robustness; on a fail the optimistic one (violated by at least
-    that much), else the guaranteed one, else the worst finite value of the robustness signal, so that a failed check
-    always states by how much (None only when no margin exists: a formula failing on constants)."""
-    if traj.verdict == "inconclusive":
-        return None
-    if traj.verdict == "pass":
-        return traj.margin_m
-    for value in (traj.margin_hi_m, traj.margin_m):
-        if math.isfinite(value):
-            return value
-    finite = traj.signal_rho_m[np.isfinite(traj.signal_rho_m)]
-    return float(finite.min()) if finite.size and float(finite.min()) < 0 else None
-
-
 def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
     """The formula's margin is the margin of the atom that decides it: metres, or a signal field's unit."""
     if not streams:
@@ -193,7 +178,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
                             signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
         # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
-        "spec_trajectory", traj.verdict, _spec_margin(traj),
+        "spec_trajectory", traj.verdict, reported_margin(traj.verdict, traj.margin_m, traj.margin_hi_m),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",

@@ -11,6 +11,7 @@ undecided, never true, and a sample inside an obstacle makes it false with that 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -24,7 +25,8 @@ from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdic
 from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 from verify.signals import SignalBounds
 
-__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "trajectory_positions"]
+__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "reported_margin",
+           "trajectory_positions"]
 
 #: the fast path computes distances with sqrt(dx*dx + dy*dy) (a few ulps from hypot); a root margin closer to 0
 #: than this is recomputed with hypot, so the verdict is the one of the exact margins
@@ -46,6 +48,21 @@ class TrajectoryVerdict:
     reason: str | None
     signal_t_ns: IntArray
     signal_rho_m: FloatArray
+
+
+def reported_margin(verdict: str, lo_m: float, hi_m: float) -> float | None:
+    """The margin a certificate states for the formula (certify and the online monitor alike): on a pass the
+    guaranteed one (``lo_m``); on a fail the optimistic one (``hi_m`` < 0: violated by at least that much), or the
+    guaranteed one where the optimistic one is unbounded, so a failed formula always states by how much; None when
+    undecided, or when no finite margin exists (a formula failing on constants)."""
+    if verdict == "inconclusive":
+        return None
+    if verdict == "pass":
+        return lo_m
+    for value in (hi_m, lo_m):
+        if math.isfinite(value):
+            return value
+    return None
 
 
 def trajectory_positions(t_ns: IntArray) -> tuple[Positions, IntArray, IntArray]:

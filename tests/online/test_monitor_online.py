@@ -194,3 +194,23 @@ def test_the_general_geometry_path_gives_the_same_verdicts() -> None:
         [(c.name, c.verdict, c.first_violation_ns) for c in general.checks]
     for a, b in zip(fast.checks, general.checks, strict=True):
         assert _same_margin(a.margin, b.margin if b.margin is None or math.isfinite(b.margin) else None)
+
+
+@pytest.mark.parametrize("update_every", [1, 2])
+def test_motion_between_two_updates_is_judged(update_every: int) -> None:
+    """Two samples clear of R6 on either side of it, 6.4 s apart: the straight path between them crosses R6, so
+    G !obs_1 is undecided (the speed bound allows the crossing). Fed one sample per update, the gap between the two
+    updates must still be judged (it was skipped: a pass)."""
+    sc = builtin_scenario()
+    cx, cy = sc.region("R6").center
+    t0 = 1_767_225_600 * 10**9
+    samples = [(t0, cx - 0.8, cy), (t0 + 6_400_000_000, cx + 0.8, cy), (t0 + 6_410_000_000, cx + 0.8, cy)]
+    mon = OnlineMonitor(sc, spec="G[0,inf) !obs_1")
+    for k, (t, x, y) in enumerate(samples):
+        mon.push_pose(t, x, y)
+        if (k + 1) % update_every == 0:
+            mon.update()
+    res = mon.close()
+    spec = next(c for c in res.checks if c.name == "spec_trajectory")
+    assert spec.verdict == "inconclusive"
+    assert res.verdict != "pass"

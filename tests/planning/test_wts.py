@@ -5,6 +5,8 @@ from __future__ import annotations
 from fractions import Fraction
 from pathlib import Path
 
+import pytest
+
 from tubempc.planning.synthetic import straight_line_oracle
 from tubempc.planning.wts import FAILED, LABELS, WEIGHT, build_wts
 from tubempc.scenario import builtin_scenario
@@ -24,13 +26,25 @@ def test_nodes_are_safe_regions_with_labels(tmp_path: Path) -> None:
     assert all("passes region" in why for why in g.graph[FAILED].values())
 
 
-def test_cache_and_process_pool_agree(tmp_path: Path) -> None:
+def test_cache_and_process_pool_agree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import tubempc.planning.wts as wts_module
+
     s = builtin_scenario()
     cold = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=2)
-    assert list(tmp_path.glob("wts-*.json"))
+    (cache_file,) = tmp_path.glob("wts-*.json")
+    written = cache_file.stat().st_mtime_ns
+
+    def no_evaluation(*args: object) -> None:
+        raise AssertionError("the warm build evaluated a region pair instead of reading the cache")
+
+    monkeypatch.setattr(wts_module, "_evaluate", no_evaluation)  # workers=1 evaluates in this process
     warm = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
+    assert warm.graph.get("cache") == str(cache_file)
+    assert cache_file.stat().st_mtime_ns == written  # read, not recomputed and rewritten
     assert sorted(cold.edges(data=WEIGHT)) == sorted(warm.edges(data=WEIGHT))
     assert cold.graph[FAILED] == warm.graph[FAILED]
+    with pytest.raises(AssertionError, match="instead of reading the cache"):  # the guard itself can fire
+        build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1, use_cache=False)
 
 
 def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from tubempc.scenario import Scenario
@@ -162,7 +163,22 @@ def test_violation_is_drawn_on_the_map(scenario: Scenario, make_result: Callable
     with_mark = workspace_figure(Certificate.model_validate(failing.certificate), scenario, failing.trajectory,
                                  failing.nominal)
     without = workspace_figure(Certificate.model_validate(passing_cert), scenario, failing.trajectory, failing.nominal)
-    assert with_mark != without
+    again = workspace_figure(Certificate.model_validate(passing_cert), scenario, failing.trajectory, failing.nominal)
+    assert again == without  # deterministic
+    # the difference is the violation drawn in the failure colour: more pixels of that colour on the failing map
+    from matplotlib.colors import to_rgb
+
+    from verify.workspace_map import _FAIL_COLOUR
+
+    def fail_pixels(png: bytes) -> int:
+        import io
+
+        import matplotlib.image as mpimg
+
+        rgb = mpimg.imread(io.BytesIO(png), format="png")[..., :3]
+        return int(np.count_nonzero(np.all(np.abs(rgb - np.asarray(to_rgb(_FAIL_COLOUR))) < 0.08, axis=-1)))
+
+    assert fail_pixels(with_mark) > fail_pixels(without) + 20
 
 
 def test_reports_and_batch_import_only_the_shared_parts_of_tubempc() -> None:

@@ -266,10 +266,10 @@ def test_empty_folder_and_bad_metadata_name_the_problem(tmp_path: Path, seed_log
     code, _, err = run(["certify", str(bag), "--scenario", "nexus-sml"], capsys)
     assert code == 3
     one_line_error(err, str(bag), "sqlite3")  # named by its storage files, not "mcap"
-    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")  # KeyError('version') in rosbags
     code, _, err = run(["certify", str(bag), "--scenario", "nexus-sml"], capsys)
     assert code == 3
-    one_line_error(err, str(bag))
+    one_line_error(err, str(bag), "metadata.yaml is incomplete or malformed")
 
 
 def test_scenario_with_40000_regions_is_refused_fast(tmp_path: Path, seed_logs: dict[tuple[str, bool], Path],

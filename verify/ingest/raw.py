@@ -172,6 +172,11 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         reader = Reader1(path) if fmt == "ros1" else Reader2(path)
         reader.open()
     except _READ_ERRORS as err:
+        if path.is_dir() and isinstance(err, KeyError | TypeError | AttributeError | ReaderError2) and not \
+                isinstance(err, sqlite3.DatabaseError | apsw.Error):
+            raise LogReadError(f"unreadable {fmt} ROS2 bag: its metadata.yaml is incomplete or malformed "
+                               f"({err.__class__.__name__}: {' '.join(str(err).split())[:160]})",
+                               path=str(path)) from err
         raise _wrap_error(path, fmt, err) from err
     try:
         conns = list(reader.connections)

@@ -43,6 +43,7 @@ from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
 from verify.timedrun import parse_spec
+from verify.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
@@ -622,8 +623,7 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", "inconclusive", None, None, {"reason": "no pose samples"})
         else:
             v = traj.verdict
-            # the certificate's rule: pass -> guaranteed margin, fail -> optimistic one (violated by at least that)
-            spec_traj = CheckResult("spec_trajectory", v, traj.lo if v == "pass" else traj.hi if v == "fail" else None,
+            spec_traj = CheckResult("spec_trajectory", v, reported_margin(v, traj.lo, traj.hi),
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
