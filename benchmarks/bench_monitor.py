@@ -4,7 +4,9 @@
 
 Prints the best-of-N wall time of each monitor and the ratios. RTAMT's discrete-time offline monitor is run on
 ``--rtamt-samples`` (it takes minutes on 1e6) and its time is scaled linearly to the full length; the printout says
-so. Also shows the obstacle crossed between two samples: the peers pass it, ours must not.
+so. Also shows the obstacle crossed between two samples: the peers pass it, ours must not. The same formula on a
+variant of the scenario whose mission_2 region (R3) and obstacle obs_3 (R8) are polygons (a square and a rectangle)
+prints the cost of polygon atoms against the discs, measured in the same process.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from tubempc.mitl import parse
-from tubempc.scenario import Scenario, builtin_scenario
+from tubempc.scenario import Scenario, builtin_scenario, scenario_from_dict
 from verify.geometry import label_margins
 from verify.trajectory import check_trajectory
 
@@ -38,6 +40,17 @@ def trajectory(sc: Scenario, n: int, rate_hz: float = 100.0) -> tuple[np.ndarray
     late = t_s > 88.0
     x[late] += 0.05 * np.sin(0.5 * (t_s[late] - 88.0))
     return (np.round(t_s * 1e9)).astype(np.int64), x, y
+
+
+def polygon_variant(sc: Scenario) -> Scenario:
+    """R3 (mission_2) as a square of half-side 0.45 m and R8 (obs_3) as a 0.9 m x 0.6 m rectangle, same centres."""
+    data = sc.to_dict()
+    for region in data["regions"]:
+        if region["name"] in ("R3", "R8"):
+            (cx, cy), hx = region.pop("center"), region.pop("radius")
+            hy = hx if region["name"] == "R3" else 0.3
+            region["polygon"] = [[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]]
+    return scenario_from_dict(data, source="<polygon variant>")
 
 
 def best(fn: Callable[[], object], repeat: int) -> tuple[float, float, object]:
@@ -90,6 +103,13 @@ def main() -> None:
     print(f"ours (trajectory semantics, samples + gaps) on {args.samples} samples: {t_ours:.3f} s "
           f"(CPU {cpu_ours:.3f} s) -> {res.verdict} (margin {res.margin_m:.4f} m)")  # type: ignore[attr-defined]
 
+    sc_poly = polygon_variant(sc)
+    t_poly, cpu_poly, res_poly = best(lambda: check_trajectory(formula, t_ns, x, y, sc_poly, max_speed_mps=v),
+                                      args.repeat)
+    print(f"ours with R3 and R8 as polygons: {t_poly:.3f} s (CPU {cpu_poly:.3f} s) -> "
+          f"{res_poly.verdict} (margin {res_poly.margin_m:.4f} m); polygon / disc = "  # type: ignore[attr-defined]
+          f"{t_poly / t_ours:.2f}x")
+
     t_s = t_ns * 1e-9
     sig = label_margins(x, y, sc, {"obs_1", "obs_2", "obs_3", "obs_4", "mission_1", "mission_2"})
     stl_s = STL.format(a=30, b=50, c=80, d=110)
@@ -105,6 +125,7 @@ def main() -> None:
           f"{t_rt_full:.1f} s) -> robustness {rho_rt:.4f}")
     print(f"ratios: argus / ours = {t_arg / t_ours:.1f}x (CPU time: {cpu_arg / cpu_ours:.1f}x), "
           f"RTAMT(scaled) / ours = {t_rt_full / t_ours:.1f}x; target: ours <= 0.2 s and >= 10x argus")
+    print(f"with polygons: argus / ours = {t_arg / t_poly:.1f}x (ours {t_poly:.3f} s; same target)")
     print(f"load average after the run: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
     # an obstacle crossed between two samples 10 s apart

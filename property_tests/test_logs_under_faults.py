@@ -299,7 +299,7 @@ def test_reordered_stamps_read_back_sorted_and_reported(traj: Trajectory, fmt: F
     with tempfile.TemporaryDirectory() as tmp:
         path = write_run(_paths(Path(tmp), fmt), fmt, SCENARIO, stamps_ns=s, log_ns=stamps, xyz_m=x, quat_xyzw=q,
                          cmd_ns=stamps, cmd_u=np.zeros((len(stamps), 3)), topics={"pose", "nominal", "cmd_vel"})
-        log = read_log(path, SCENARIO, time_base="header")  # auto may pick log time for a swap
+        log = read_log(path, SCENARIO, time_base="header")
     assert np.array_equal(log.pose.t_ns, stamps)
     assert np.array_equal(log.pose.x_m, xyz[:, 0]) and np.array_equal(log.pose.y_m, xyz[:, 1])
     swapped = int(np.count_nonzero(np.diff(s) < 0))

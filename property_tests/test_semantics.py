@@ -9,6 +9,9 @@
 3. Every plan ``plan_from_wts`` returns (re-timed) satisfies its formula per the certifier.
 4. On tiny random WTSs, when brute force (every simple lasso up to a length) finds an accepting run, the planner
    finds one too, with and without waiting.
+5. On chain-shaped WTSs (3-5 moves, late windows, response obligations: the waits that matter lie several moves
+   before the goal), the planner (silent waits) against ``brute_force_silent`` (every run with every wait on the
+   planner's tick grid): no missed run, no later-than-optimal run, no unsound run (reference semantics and certifier).
 Times are exact (half seconds), so no tolerance is involved.
 """
 
@@ -40,8 +43,10 @@ from tubempc.mitl import (
     parse,
     to_fraction,
 )
-from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, make_wts, plan_from_wts
+from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, holds, make_wts, plan_from_wts
+from tubempc.planning.automaton import tick_of
 from tubempc.planning.search import OBSERVED, SILENT
+from tubempc.planning.semantics import brute_force_silent
 from tubempc.strategies import TimedRun
 from verify import check_timed_run
 
@@ -417,3 +422,85 @@ def test_oracle_examples() -> None:
     assert oracle(parse("G[0,inf) !p"), [z, one], [none, none], one) == T
     assert oracle(parse("X[0,1] p"), [z], [none], z) == U
     assert oracle(parse("X[0,inf) p"), [z], [none], z) == F
+
+
+# ---------------------------------------------------------------------------------------------------- 5. chains
+HALF = Fraction(1, 2)
+
+
+@st.composite
+def chain_cases(draw: st.DrawFn) -> tuple[dict[str, tuple[str, ...]], dict[tuple[str, str], Fraction], Formula]:
+    """A chain ``C0 -> C1 -> ... -> Cn`` (n = 3..5 moves of 1 or 2 s; the last region labelled ``p``, the others
+    random over ``p``, ``q``) and a late window on ``p`` with one or two response obligations (``G(q -> F[..] p)``,
+    ``G(q -> F[..] r)``, a ``G`` window on ``!q``): meeting them needs waits taken moves before the goal."""
+    n = draw(st.integers(3, 5))
+    names = [f"C{k}" for k in range(n + 1)]
+    labels = {c: tuple(sorted(draw(st.sets(st.sampled_from(("p", "q", "r")), max_size=2)))) for c in names[:-1]}
+    labels[names[-1]] = ("p",)
+    weights = {(a, b): Fraction(draw(st.integers(1, 2))) for a, b in itertools.pairwise(names)}
+    lo = draw(st.integers(n, 2 * n + 3))
+    width = draw(st.integers(0, 2))
+    window = Interval(Fraction(lo), Fraction(lo + width), True, True) if width == 0 else Interval(
+        Fraction(lo), Fraction(lo + width), draw(st.booleans()), draw(st.booleans()))
+    parts: list[Formula] = [Eventually(window, Atom("p"))]
+    for _ in range(draw(st.integers(1, 2))):
+        kind = draw(st.integers(0, 3))
+        c = Fraction(draw(st.integers(1, 4)))
+        if kind == 0:
+            parts.append(Always(Interval(Fraction(0), None), Implies(Atom("q"), Eventually(
+                Interval(Fraction(0), c), Atom("p")))))
+        elif kind == 1:
+            parts.append(Always(Interval(Fraction(0), None), Implies(Atom("q"), Eventually(
+                Interval(Fraction(0), c, True, draw(st.booleans())), Atom("r")))))
+        elif kind == 2:
+            parts.append(Always(Interval(Fraction(0), None), Implies(Atom("r"), Eventually(
+                Interval(HALF, c), Atom("p")))))
+        else:
+            parts.append(Always(Interval(Fraction(0), c), Not(Atom("q"))))
+    return labels, weights, And(tuple(parts))
+
+
+@given(case=chain_cases())
+@example(case=({"A": (), "B": ("q",), "C": (), "D": ("p",)},
+               {("A", "B"): Fraction(1), ("B", "C"): Fraction(1), ("C", "D"): Fraction(1)},
+               parse("F[4,5] p & G(q -> F[0,2] p)")))
+@settings(max_examples=max(10, settings().max_examples // 2), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+def test_chain_planner_matches_brute_force(
+        case: tuple[dict[str, tuple[str, ...]], dict[tuple[str, str], Fraction], Formula]) -> None:
+    labels, weights, f = case
+    names = sorted(labels)
+    wts = make_wts(labels, weights, initial=names[0])
+    moves = len(names) - 1
+    until = sum(max((c for c in (iv.lo, iv.hi) if c is not None), default=Fraction(0)) for iv in _intervals_of(f)) + 1
+
+    def dead(run: LassoRun) -> bool:
+        # every interval here is bounded but the outer G[0,inf): a verdict F of the three-valued oracle at the run's
+        # last position is final (later positions fall outside every decided window)
+        return oracle(f, run.times, _labels_at(list(zip(run.regions, run.times, strict=True)), labels),
+                      run.times[-1]) == F
+
+    # the planner's tick grid: half the gcd of every weight and constant ("strictly after c" is one tick after c)
+    grid = tick_of([*weights.values(), *(c for iv in _intervals_of(f) for c in (iv.lo, iv.hi) if c is not None)],
+                   refine=2)
+    best = brute_force_silent(labels, weights, f, initial=names[0], grid_s=grid, max_moves=moves, until_s=until,
+                              dead=dead)
+    try:
+        found = find_run(wts, f, dwell=SILENT, diagnose=False).run
+    except NoAcceptingRunError:
+        found = None
+    assert (found is None) == (best is None), (str(f), labels, weights, found, best)  # no missed run
+    if found is None or best is None:
+        return
+    assert holds(f, found, labels), (str(f), found)  # sound under the reference semantics
+    verdict = check_timed_run(str(f), [(r, float(t)) for r, t in zip(found.regions, found.times, strict=True)],
+                              {k: list(v) for k, v in labels.items()}, end=float(until + 10))
+    assert verdict.verdict == "pass", (str(f), found, verdict)  # and per the certifier
+    assert found.loop_start is None  # a chain has no cycle: the run ends and the robot stays
+    assert found.times[-1] == best.times[-1], (str(f), labels, weights, found, best)  # time-optimal
+
+
+def _intervals_of(f: Formula) -> list[Interval]:
+    from tubempc.mitl import subformulas
+
+    return [g.interval for g in subformulas(f) if isinstance(g, Next | Eventually | Always | Until)]

@@ -114,6 +114,28 @@ def command_messages(run: UnicycleRun, topic: str, *, ros1: bool, stamped: bool,
     return out
 
 
+def battery_messages(times_s: Sequence[float], percentage: Sequence[float], topic: str, *, ros1: bool,
+                     cells: Sequence[Sequence[float]] | None = None, time0_ns: int = TIME0_NS,
+                     header_offset_ns: int = 0) -> list[tuple[str, str, int, Any]]:
+    """``sensor_msgs/BatteryState`` at ``times_s`` with ``percentage`` (0..1) and optional per-cell voltages."""
+    T = _store(ros1).types
+    out = []
+    for k, (t, pct) in enumerate(zip(times_s, percentage, strict=True)):
+        t_ns = time0_ns + round(float(t) * 1e9)
+        stamp = t_ns + header_offset_ns
+        header = T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), frame_id="battery",
+                                         stamp=T["builtin_interfaces/msg/Time"](sec=stamp // 10**9,
+                                                                                nanosec=stamp % 10**9))
+        volts = np.asarray(cells[k] if cells is not None else [], dtype=np.float32)
+        msg = T["sensor_msgs/msg/BatteryState"](
+            header=header, voltage=float(volts.sum()), temperature=25.0, current=-1.0, charge=float("nan"),
+            capacity=float("nan"), design_capacity=float("nan"), percentage=float(pct), power_supply_status=2,
+            power_supply_health=1, power_supply_technology=2, present=True, cell_voltage=volts,
+            cell_temperature=np.zeros(volts.shape[0], dtype=np.float32), location="base", serial_number="")
+        out.append((topic, "sensor_msgs/msg/BatteryState", t_ns, msg))
+    return out
+
+
 def _store(ros1: bool) -> Any:
     return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
 
@@ -150,7 +172,7 @@ EXAMPLE_WAYPOINTS = ((0.5, 0.5), (2.5, 0.5), (2.5, 2.5), (4.4, 3.3), (4.4, 3.3),
 
 
 def example_run() -> UnicycleRun:
-    return unicycle_run(EXAMPLE_WAYPOINTS, v_mps=0.4, w_radps=0.8, rate_hz=20.0, pauses={3: 5.0})
+    return unicycle_run(EXAMPLE_WAYPOINTS, v_mps=0.4, w_radps=0.8, rate_hz=10.0, pauses={3: 5.0})
 
 
 def main() -> None:

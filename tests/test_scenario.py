@@ -170,6 +170,12 @@ def test_certification_warnings_name_the_field() -> None:
     k = len(nested["regions"]) - 1
     assert any(f"regions[0] (R1) and regions[{k}] (room) may overlap" in w for w in warnings), warnings
     assert builtin_scenario().certification_warnings() == []
+    ell = _broken()
+    ell["workspace"] = {"polygon": [[-2.5, -2.5], [2.5, -2.5], [2.5, 0.0], [0.0, 0.0], [0.0, 2.5], [-2.5, 2.5]]}
+    # the L-shape lacks the quarter x > 0, y > 0: R7 lies in it, R3 and R9 straddle its edges, the others are inside
+    outside = scenario_from_dict(ell).certification_warnings()
+    assert [w for w in outside if "workspace" in w] == [
+        f"regions[{k}] ({n}): reaches outside the workspace polygon" for k, n in ((2, "R3"), (3, "R7"), (5, "R9"))]
 
 
 def test_optional_fields_keep_the_form_and_the_hash() -> None:

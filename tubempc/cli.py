@@ -1,8 +1,10 @@
 """The ``tubempc`` command: a thin front over both packages; maps errors to exit codes and one clear line.
 
 Exit codes (all subcommands): 0 success / all checks pass; 1 a violation was found (certify, regress) or no
-accepting run exists (plan); 2 inconclusive (certify); 3 unusable input (unreadable or truncated log, missing
-topic, malformed formula or scenario, impossible controller design); 4 feature not available; 70 internal error.
+accepting run exists (plan, proved); 2 inconclusive (certify) or undecided (plan: the search reached its state
+limit, ``--max-states``); 3 unusable input (unreadable or truncated log, missing topic, malformed formula or
+scenario, impossible controller design, an abstraction without any usable transition); 4 feature not available;
+70 internal error.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from tubempc.commands.output import add_verbosity_options, say
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
 from tubempc.commands.simulate import simulate
-from tubempc.errors import NoAcceptingRunError, NotAvailableError, TubeMPCError
+from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
 from tubempc.mitl import parse
 from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
 from verify.command import certify
@@ -75,10 +77,20 @@ def scenario_show(name: str) -> None:
 @scenario.command("validate")
 @click.argument("path")
 def scenario_validate(path: str) -> None:
-    """Validate a scenario file; print a summary or one line naming the problem (exit 3)."""
+    """Validate a scenario file; print a summary or one line naming the problem (exit 3).
+
+    Then one line per geometry warning of the (lenient) certifier, and what keeps the (strict) planner from using
+    the scenario, if anything: both name the field."""
     s = load_scenario(path)
     say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
                f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
+    for warning in s.certification_warnings():
+        say(f"{path}: warning: {warning}")
+    problems = s.planning_problems()
+    if problems:
+        field, what = problems[0]
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        say(f"{path}: certification only: the planner cannot use it: {field}: {what}{more}")
 
 
 @cli.command("spec")
@@ -102,6 +114,8 @@ def _exit_code(err: BaseException) -> int:
         return EXIT_NOT_AVAILABLE
     if isinstance(err, NoAcceptingRunError):
         return EXIT_FAIL
+    if isinstance(err, SearchLimitError):
+        return EXIT_INCONCLUSIVE
     if isinstance(err, TubeMPCError | VerifyError):
         return EXIT_UNUSABLE
     return EXIT_INTERNAL

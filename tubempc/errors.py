@@ -1,7 +1,8 @@
 """Exceptions of the tubempc package: one root, semantic leaves that also subclass the natural builtin.
 
 Input problems (a malformed formula or scenario) are ``ValueError``s; a controller that cannot be designed for a
-scenario is a ``DesignError``; a specification the planner cannot satisfy is ``NoAcceptingRunError``.
+scenario is a ``DesignError``; a specification the planner proves unsatisfiable is ``NoAcceptingRunError``, one it
+could not decide within its state limit ``SearchLimitError``.
 Failed *checks* are never exceptions: they are values (see ``verify``).
 """
 
@@ -13,6 +14,7 @@ __all__ = [
     "NoAcceptingRunError",
     "NotAvailableError",
     "ScenarioError",
+    "SearchLimitError",
     "SolverError",
     "SpecSyntaxError",
     "TubeMPCError",
@@ -61,6 +63,15 @@ class NoAcceptingRunError(TubeMPCError, ValueError):
 
     def __init__(self, message: str, *, obligation: str | None = None) -> None:
         self.obligation = obligation
+        super().__init__(message)
+
+
+class SearchLimitError(TubeMPCError, RuntimeError):
+    """The planner's search reached its state limit before it found a run or proved that none exists (undecided,
+    exit 2). ``limit`` is the limit that was reached; the message says how to raise it."""
+
+    def __init__(self, message: str, *, limit: int) -> None:
+        self.limit = limit
         super().__init__(message)
 
 

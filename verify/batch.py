@@ -191,6 +191,7 @@ class _Job:
     salvage: bool
     checks: tuple[str, ...] | None = None
     digest: str = "blake3"
+    clock_offsets: tuple[tuple[str, float], ...] = ()
 
 
 def _certify_function() -> Callable[..., CertifyResultLike]:
@@ -204,7 +205,8 @@ def _certify_one(job: _Job) -> BatchItem:
     start = time.perf_counter()
     try:
         result = _certify_function()(job.path, job.scenario, spec=job.spec, time_base=job.time_base,
-                                     salvage=job.salvage, checks=job.checks, digest=job.digest)
+                                     salvage=job.salvage, checks=job.checks, digest=job.digest,
+                                     clock_offsets=dict(job.clock_offsets) or None)
     except VerifyError as err:
         return BatchItem(job.path, job.name, EXIT_UNUSABLE, "unusable", str(err), time.perf_counter() - start, None)
     except Exception as err:  # a bug in one log's certification must not take the other logs down
@@ -355,7 +357,8 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
                  workers: int | None = None, dask: str | None = None, progress: bool | None = None,
-                 checks: Sequence[str] | None = None, digest: str = "blake3") -> BatchResult:
+                 checks: Sequence[str] | None = None, digest: str = "blake3",
+                 clock_offsets: dict[str, float] | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 
     Same arguments as ``certify_log`` plus the executor's (see ``parallel_map``). Returns the items in input
@@ -374,7 +377,8 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     if checks is not None:
         select_checks(scenario, checks)  # unknown or unsupported checks concern every log: raise before the jobs
     chosen = tuple(checks) if checks is not None else None
-    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest) for p in logs]
+    offsets = tuple(sorted((clock_offsets or {}).items()))
+    jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest, offsets) for p in logs]
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify",
                         on_crash=_worker_died)
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]

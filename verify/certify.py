@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -25,11 +25,13 @@ from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
-from verify.geometry import containing_region
+from verify.geometry import containment
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
+from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
-from verify.timedrun import check_timed_run, parse_spec, timed_run_of
+from verify.signals import signal_bounds, signal_summary, values_at
+from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory, reported_margin
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
@@ -100,22 +102,32 @@ def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, st
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
                 time_base: str = "auto", salvage: bool = False, time0_ns: int | None = None,
-                digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None) -> CertifyResult:
+                digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None,
+                clock_offsets: Mapping[str, float] | None = None) -> CertifyResult:
     """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
-
     ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256".
-    ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names)."""
+    ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
+    ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
     formula = parse_spec(spec if spec is not None else sc.spec)
-    known = {lab for r in sc.regions for lab in r.labels}
+    known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
     unknown = sorted(atoms(formula) - known)
     if unknown:
-        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region of scenario "
-                        f"{sc.name!r}")
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest)
+        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region and name no "
+                        f"signal of scenario {sc.name!r}")
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
+                   clock_offsets=clock_offsets)
     with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
         return _judge(log, sc, formula_text=str(formula), selection=selection)
+
+
+def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
+    """The formula's margin is the margin of the atom that decides it: metres, or a signal field's unit."""
+    if not streams:
+        return "m"
+    units = ", ".join(f"{k}: {v.spec.unit or 'its field unit'}" for k, v in sorted(streams.items()))
+    return f"m for region atoms; {units}"
 
 
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
@@ -128,22 +140,28 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     t_rel = pose.t_ns - t0
     v_max = sc.max_speed_mps
 
-    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max)
+    used = atoms(formula)
+    streams = {k: v for k, v in log.signals.items() if k in used}
+    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
+                            signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
         "spec_trajectory", traj.verdict, reported_margin(traj.verdict, traj.margin_m, traj.margin_hi_m),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",
          "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
+         "margin_unit": _spec_unit(streams),
          **({"subformula": traj.subformula, "reason": traj.reason,
              "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
             if traj.verdict != "pass" else {})})
 
-    regions = containing_region(pose.x_m, pose.y_m, sc)
     names = [r.name for r in sc.regions]
-    run = timed_run_of(regions, t_rel.astype(np.float64) * 1e-9, names)
+    run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
+                                        {r.name: list(r.labels) for r in sc.regions})
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
-    tr = check_timed_run(formula_text, run, {r.name: list(r.labels) for r in sc.regions}, end=end_s)
+    entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
+    tr = check_timed_run(formula_text, run, run_labels, end=end_s,
+                         atom_values={k: values_at(v, entry_ns) for k, v in streams.items()})
     spec_run = CheckResult(
         "spec_timed_run", tr.verdict, None,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
@@ -200,8 +218,11 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         "checks_source": selection.source,
         "not_checked": [{"name": n, "reason": r} for n, r in selection.not_checked],
         "scenario_warnings": sc.certification_warnings(),
+        "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
+        **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
+                        for k, v in log.signals.items()}} if log.signals else {}),
         "data_quality": log.data_quality,
         "generator": log.metadata,
     }
@@ -211,7 +232,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     t_s = t_rel * 1e-9
     trajectory = pd.DataFrame({"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad})
     nominal_df = None
-    if log.nominal is not None:
+    if log.nominal is not None and "tube" in selection:
         nominal_df = pd.DataFrame({"t_s": (log.nominal.t_ns - t0) * 1e-9, "x_m": log.nominal.x_m,
                                    "y_m": log.nominal.y_m, "theta_rad": log.nominal.theta_rad})
     inputs_df = None

@@ -73,7 +73,7 @@ def margin_check(name: str, t_ns: IntArray, margin: FloatArray, step_m: FloatArr
 def check_workspace(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> CheckResult:
     step = step_bound_m(t_ns, x_m, y_m, scenario.max_speed_mps)
     return margin_check("workspace", t_ns, workspace_margin(x_m, y_m, scenario), step,
-                        {"between_samples": "bounded by max(v_max * dt, step)"})
+                        {"margin_unit": "m", "between_samples": "bounded by max(v_max * dt, step)"})
 
 
 def check_clearance(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> CheckResult:
@@ -84,7 +84,7 @@ def check_clearance(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: 
     margins = region_margins(x_m, y_m, scenario)[unsafe]
     clearance = -np.max(margins, axis=0)  # > 0: the disc is away from every obstacle
     step = step_bound_m(t_ns, x_m, y_m, scenario.max_speed_mps)
-    res = margin_check("obstacle_clearance", t_ns, clearance, step, {})
+    res = margin_check("obstacle_clearance", t_ns, clearance, step, {"margin_unit": "m"})
     if res.verdict == "fail" and res.first_violation_ns is not None:
         k = int(np.searchsorted(t_ns, res.first_violation_ns))
         res.details["region"] = scenario.regions[unsafe[int(np.argmax(margins[:, k]))]].name
@@ -94,7 +94,7 @@ def check_clearance(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: 
 def check_tube(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, nominal: tuple[IntArray, FloatArray, FloatArray]
                | None, *, radius_m: float, tolerance_m: float, match_ns: int) -> CheckResult:
     """``|p - p_hat| <= r_q + tolerance`` at every pose sample that has a nominal sample within ``match_ns``."""
-    details: dict[str, Any] = {"radius_m": radius_m, "noise_tolerance_m": tolerance_m,
+    details: dict[str, Any] = {"margin_unit": "m", "radius_m": radius_m, "noise_tolerance_m": tolerance_m,
                                "checked_at": "logged samples (pose matched to the nearest nominal sample)"}
     if nominal is None or nominal[0].size == 0:
         return CheckResult("tube", "inconclusive", None, None,
@@ -141,7 +141,8 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
         cols = [0, 2, 1]
     details: dict[str, Any] = {"model": limits.model, "max_abs": list(limits.max_abs),
                                "bounds": dict(zip(names, bounds.tolist(), strict=True)),
-                               "tolerance": INPUT_TOLERANCE, "frame": "body (as logged)"}
+                               "tolerance": INPUT_TOLERANCE, "frame": "body (as logged)",
+                               "margin_unit": "m/s for linear.x and linear.y, rad/s for angular.z"}
     if t_ns is None or u is None or t_ns.size == 0:
         return CheckResult("input_box", "inconclusive", None, None, {**details, "reason": "no cmd_vel logged"})
     per = bounds[None, :] + INPUT_TOLERANCE - np.abs(u[:, cols])

@@ -13,6 +13,7 @@ under ``--out``, and the worst exit code by severity: pass 0 < inconclusive 2 < 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any, Literal, cast
@@ -44,6 +45,22 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
     return not path.is_dir() or (path / "metadata.yaml").is_file()
 
 
+def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
+    from verify.errors import ScenarioInputError
+
+    out: dict[str, float] = {}
+    for item in items:
+        topic, sep, value = item.partition("=")
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = float("nan")
+        if not sep or not topic.startswith("/") or not math.isfinite(seconds):
+            raise ScenarioInputError(f"--clock-offset {item!r}: expected TOPIC=SECONDS, e.g. /cmd_vel=2.0")
+        out[topic] = seconds
+    return out
+
+
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
@@ -56,6 +73,9 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 @click.option("--checks", "checks_text", default=None, metavar="NAME,...",
               help="Checks to run: spec, obstacle_clearance, workspace, tube, input_box (default: the scenario's "
                    "checks:, else every check whose data the scenario names).")
+@click.option("--clock-offset", "clock_offsets", multiple=True, metavar="TOPIC=SECONDS",
+              help="Add SECONDS to TOPIC's times (its clock runs behind the pose topic's by that much); repeatable; "
+                   "extends the scenario's clock_offsets.")
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
 @click.option("--force", is_flag=True, help="Replace the reports in an existing, non-empty --out folder.")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
@@ -74,7 +94,7 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
             progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool,
-            digest: str) -> None:
+            digest: str, clock_offsets: tuple[str, ...]) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
@@ -87,11 +107,12 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     level = _verbosity()
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None
+    offsets = _parse_offsets(clock_offsets)
     if out_dir is not None:
         prepare_output_dir(out_dir, force=force, inputs=logs)
     if _single_log(logs) and dask is None:
         result = certify_log(logs[0], sc, spec=spec, time_base=time_base, salvage=salvage, checks=checks,
-                             digest=digest)
+                             digest=digest, clock_offsets=offsets)
         line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
             try:
@@ -118,15 +139,15 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
-                         progress=progress, checks=checks, digest=digest)
+                         progress=progress, checks=checks, digest=digest, clock_offsets=offsets)
     if as_json:
         click.echo(json.dumps([_json_entry(item) for item in batch.items], indent=2))
     if level >= 0:
         for text in summary_lines(batch):
             click.echo(text, err=as_json)
-        for item in batch.items:  # every unusable input also gets its one line on stderr
-            if item.exit_code == 3 and item.error:
-                click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
+    for item in batch.items:  # every unusable input also gets its one line on stderr
+        if item.exit_code == 3 and item.error:
+            click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
         written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
                               junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))

@@ -26,7 +26,7 @@ from matplotlib.figure import Figure
 from tubempc.scenario import Scenario
 from verify.geometry import region_margins, workspace_margin
 from verify.obligations import Obligation, obligations_of
-from verify.workspace_map import workspace_figure
+from verify.workspace_map import tube_radius_or_nan, workspace_figure
 
 __all__ = [
     "FigureSpec",
@@ -130,7 +130,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     eta = scenario.robot.radius
-    r_q = scenario.tube_radius_m
+    r_q = tube_radius_or_nan(scenario)
     bounds = {"x_m": scenario.workspace.x, "y_m": scenario.workspace.y}
     ylabels = ("x [m]", "y [m]", "theta [rad], unwrapped")
     for ax, col, ylabel in zip(axes, ("x_m", "y_m", "theta_rad"), ylabels, strict=True):
@@ -163,9 +163,12 @@ def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     units = ("m/s", "m/s", "rad/s")
+    lim = scenario.inputs
+    # columns: linear.x, linear.y, angular.z; a unicycle bounds (v, w) and allows linear.y up to a tolerance
+    bounds = lim.max_abs if lim.model == "holonomic" else (lim.max_abs[0], lim.lateral_tolerance, lim.max_abs[1])
     for i, ax in enumerate(axes):
         col = f"u{i + 1}"
-        bound = scenario.inputs.max_abs[i]
+        bound = bounds[i]
         ax.step(data["t_s"], data[col], where="post", color="black", lw=1.0, label=col)
         ax.axhline(bound, color="grey", ls="-.", lw=0.8, label=f"|{col}| <= {bound:g}")
         ax.axhline(-bound, color="grey", ls="-.", lw=0.8)
@@ -195,7 +198,7 @@ def tube_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: 
     dy = trajectory["y_m"].to_numpy(dtype=float)[inside] - np.interp(t, t_nom, nom["y_m"].to_numpy(dtype=float))
     env = _envelope(pd.DataFrame({"t_s": t, "err_m": np.hypot(dx, dy)}), ("err_m",))
     t, err_m = env["t_s"].to_numpy(), env["err_m"].to_numpy()
-    r_q = scenario.tube_radius_m
+    r_q = tube_radius_or_nan(scenario)
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
     ax = fig.add_subplot()

@@ -4,10 +4,13 @@ input: sample positions ``x_m, y_m`` (arrays) and a scenario -> output: margins 
 (so the motion between two samples bounds them), the region containing the robot disc, and the conservative bounds
 of a margin over the gap between two samples given the largest distance the robot can travel in that gap.
 
-Conventions (metres; positive = the proposition holds):
-* safe region R (centre c, radius r): the disc ``M(p, eta)`` is inside R: margin ``r - eta - |p - c|``;
-* unsafe region R: the disc intersects R: margin ``r + eta - |p - c|``;
-* workspace box: the disc is inside the box: margin ``min(x - x0, x1 - x, y - y0, y1 - y) - eta``.
+Regions are discs or simple polygons. Let ``sd(p)`` be the signed distance of p to the region's boundary, positive
+inside (disc: ``r - |p - c|``; polygon: the distance to the nearest edge, signed by the even-odd rule). Both are
+exact and 1-Lipschitz. Conventions (metres; positive = the proposition holds):
+* safe region R: the disc ``M(p, eta)`` is inside R: margin ``sd(p) - eta``;
+* unsafe region R: the disc intersects R: margin ``sd(p) + eta``;
+* workspace box: the disc is inside the box: margin ``min(x - x0, x1 - x, y - y0, y1 - y) - eta``; workspace
+  polygon: ``sd(p) - eta``.
 A margin of exactly 0 is reported as undecided by the monitor (see docs/certifier.md).
 """
 
@@ -23,8 +26,10 @@ from tubempc.scenario import Scenario
 __all__ = [
     "GapBounds",
     "containing_region",
+    "containment",
     "gap_bounds",
     "label_margins",
+    "polygon_signed_distance",
     "region_margins",
     "step_bound_m",
     "step_bound_regular_m",
@@ -40,8 +45,85 @@ def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> Floa
     eta = scenario.robot.radius
     out = np.empty((len(scenario.regions), x_m.shape[0]), dtype=np.float64)
     for k, r in enumerate(scenario.regions):
+        if r.polygon is not None:
+            sd = polygon_signed_distance(x_m, y_m, r.polygon)
+            out[k] = sd + eta if r.unsafe else sd - eta
+            continue
         d = np.hypot(x_m - r.center[0], y_m - r.center[1])
         out[k] = (r.radius + eta - d) if r.unsafe else (r.radius - eta - d)
+    return out
+
+
+def _axis_rectangle(vertices: tuple[tuple[float, float], ...]) -> tuple[float, float, float, float] | None:
+    """``(x0, y0, x1, y1)`` when the polygon is an axis-aligned rectangle (either vertex order), else None."""
+    if len(vertices) != 4:
+        return None
+    xs = sorted({v[0] for v in vertices})
+    ys = sorted({v[1] for v in vertices})
+    if len(xs) != 2 or len(ys) != 2:
+        return None
+    for (ax, ay), (bx, by) in zip(vertices, (*vertices[1:], vertices[0]), strict=True):
+        if ax != bx and ay != by:  # a diagonal edge: not a rectangle's ring
+            return None
+    return xs[0], ys[0], xs[1], ys[1]
+
+
+def polygon_signed_distance(x_m: FloatArray, y_m: FloatArray,
+                            vertices: tuple[tuple[float, float], ...]) -> FloatArray:
+    """Signed distance of each point to a simple polygon's boundary: positive inside, negative outside, 0 on it,
+    NaN for a NaN point. Exact up to rounding: the distance to each edge segment (clamped projection), the sign
+    from the even-odd crossing rule, block by block so the temporaries stay in cache. An axis-aligned rectangle
+    (rooms, tables) takes a closed form: inside ``min(x - x0, x1 - x, y - y0, y1 - y)``, outside minus the
+    distance to the nearest point of the box."""
+    rect = _axis_rectangle(vertices)
+    if rect is not None:
+        return _rectangle_signed_distance(x_m, y_m, rect)
+    n = x_m.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    vx = np.array([v[0] for v in vertices], dtype=np.float64)
+    vy = np.array([v[1] for v in vertices], dtype=np.float64)
+    vy_next = np.roll(vy, -1)  # the crossing rule compares the vertices themselves (vy + ey may round)
+    ex, ey = np.roll(vx, -1) - vx, vy_next - vy
+    inv_len2 = 1.0 / (ex * ex + ey * ey)  # a simple polygon has no zero-length edge
+    for s in range(0, n, _BLOCK):
+        e = min(n, s + _BLOCK)
+        px, py = x_m[s:e], y_m[s:e]
+        best = np.full(e - s, np.inf)
+        inside = np.zeros(e - s, dtype=bool)
+        for k in range(vx.shape[0]):
+            wx, wy = px - vx[k], py - vy[k]
+            t = np.clip((wx * ex[k] + wy * ey[k]) * inv_len2[k], 0.0, 1.0)
+            wx -= t * ex[k]
+            wy -= t * ey[k]
+            np.minimum(best, wx * wx + wy * wy, out=best)
+            if ey[k] != 0.0:  # a horizontal edge never crosses the ray
+                y0, y1 = vy[k], vy_next[k]
+                straddle = (y0 > py) != (y1 > py)
+                x_cross = vx[k] + (py - y0) * (ex[k] / ey[k])
+                inside ^= straddle & (px < x_cross)
+        np.sqrt(best, out=best)
+        out[s:e] = np.where(inside, best, -best)
+    nan = np.isnan(x_m) | np.isnan(y_m)
+    if nan.any():
+        out[nan] = np.nan
+    return out
+
+
+def _rectangle_signed_distance(x_m: FloatArray, y_m: FloatArray,
+                               rect: tuple[float, float, float, float]) -> FloatArray:
+    x0, y0, x1, y1 = rect
+    n = x_m.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    for s in range(0, n, _BLOCK):
+        e = min(n, s + _BLOCK)
+        px, py = x_m[s:e], y_m[s:e]
+        dx = np.maximum(x0 - px, px - x1)  # > 0 outside the slab, -(distance to the nearer side) inside
+        dy = np.maximum(y0 - py, py - y1)
+        inside = np.minimum(-dx, -dy)
+        ox = np.maximum(dx, 0.0)
+        oy = np.maximum(dy, 0.0)
+        outside = np.sqrt(ox * ox + oy * oy)
+        out[s:e] = np.where((dx <= 0.0) & (dy <= 0.0), inside, -outside)
     return out
 
 
@@ -84,8 +166,12 @@ def label_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario, names: s
     def margin(k: int) -> FloatArray:
         if k not in cache:
             r = scenario.regions[k]
-            offset = (r.radius + eta) if r.unsafe else (r.radius - eta)
-            cache[k] = _region_margin(x_m, y_m, r.center, offset, exact)
+            if r.polygon is not None:  # always the exact polygon distance
+                sd = polygon_signed_distance(x_m, y_m, r.polygon)
+                cache[k] = sd + eta if r.unsafe else sd - eta
+            else:
+                offset = (r.radius + eta) if r.unsafe else (r.radius - eta)
+                cache[k] = _region_margin(x_m, y_m, r.center, offset, exact)
         return cache[k]
 
     out: dict[str, FloatArray] = {}
@@ -101,21 +187,34 @@ def label_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario, names: s
     return out
 
 
-def containing_region(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> IntArray:
-    """Index of the region whose ball contains the whole robot disc (``|p - c| + eta <= r``), -1 if none or NaN.
-
-    Regions of a valid scenario do not overlap, so at most one region contains the disc.
-    """
+def containment(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> npt.NDArray[np.bool_]:
+    """``(n_regions, n)``: whether the region contains the whole robot disc (Definition 3); False where NaN.
+    Disc: ``|p - c| + eta <= r``; polygon: ``sd(p) >= eta``. Regions may overlap or nest, so a sample may be in
+    several regions at once."""
     eta = scenario.robot.radius
-    idx = np.full(x_m.shape[0], -1, dtype=np.int64)
+    out = np.zeros((len(scenario.regions), x_m.shape[0]), dtype=bool)
     for k, r in enumerate(scenario.regions):
-        inside = np.hypot(x_m - r.center[0], y_m - r.center[1]) + eta <= r.radius
-        idx[inside] = k
+        if r.polygon is not None:
+            out[k] = polygon_signed_distance(x_m, y_m, r.polygon) >= eta
+        else:
+            out[k] = np.hypot(x_m - r.center[0], y_m - r.center[1]) + eta <= r.radius
+    return out
+
+
+def containing_region(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> IntArray:
+    """Index of a region whose shape contains the whole robot disc, -1 if none or NaN (the last one in scenario
+    order when regions nest; ``containment`` gives them all)."""
+    inside = containment(x_m, y_m, scenario)
+    idx = np.full(x_m.shape[0], -1, dtype=np.int64)
+    for k in range(inside.shape[0]):
+        idx[inside[k]] = k
     return idx
 
 
 def workspace_margin(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> FloatArray:
     ws, eta = scenario.workspace, scenario.robot.radius
+    if ws.polygon is not None:
+        return polygon_signed_distance(x_m, y_m, ws.polygon) - eta
     return np.minimum(np.minimum(x_m - ws.x[0], ws.x[1] - x_m), np.minimum(y_m - ws.y[0], ws.y[1] - y_m)) - eta
 
 

@@ -148,8 +148,25 @@ def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple
         if key in _MAIN_KEYS or key == "verdict":
             continue
         rows.append((str(key), _fmt(certificate[key])))
-    rows.append(("tube radius r_q (scenario)", f"{scenario.tube_radius_m:.6g} m"))
+    if isinstance(certificate.get("tube"), Mapping):
+        rows.append(("tube radius r_q (scenario)", f"{certificate['tube']['radius_m']:.6g} m"))
     return rows
+
+
+def _top_lines(certificate: Mapping[str, Any]) -> list[str]:
+    """Which checks made the verdict, which were not run and why, and findings a reader must see first (clock
+    offsets between topics, lenient scenario geometry)."""
+    lines: list[str] = []
+    chosen = certificate.get("checks_selected")
+    if isinstance(chosen, list):
+        lines.append(f"Verdict over the checks: {', '.join(map(str, chosen)) or 'none'}.")
+    for item in certificate.get("not_checked", []) or []:
+        if isinstance(item, Mapping):
+            lines.append(f"Not checked: {item.get('name')} ({item.get('reason')}).")
+    for key in ("clock_findings", "scenario_warnings"):
+        for text in certificate.get(key, []) or []:
+            lines.append(f"Finding: {text}")
+    return lines
 
 
 def _is_quiet(value: Any) -> bool:
@@ -215,7 +232,9 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
         return out
 
     lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
-             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", "", "| | |", "|---|---|"]
+             f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", ""]
+    lines += [f"- {_md(t)}" for t in _top_lines(cert)] + ([""] if _top_lines(cert) else [])
+    lines += ["| | |", "|---|---|"]
     lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _summary_rows(cert, scenario)]
     lines += ["", "## Checks", "", "| check | verdict | margin | first violation | details |",
               "|---|---|---|---|---|"]
@@ -287,6 +306,8 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
              f"<title>Certificate {_e(verdict)}: {_e(scenario.name)}</title>", f"<style>{_CSS}</style></head><body>",
              f"<h1>Certificate {_badge(verdict)}</h1>",
              f"<p>Exit code {int(result.exit_code)} (0 pass, 1 violation, 2 inconclusive).</p>",
+             *([("<ul>" + "".join(f"<li>{_e(t)}</li>" for t in _top_lines(cert)) + "</ul>")]
+               if _top_lines(cert) else []),
              '<table class="summary">']
     parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _summary_rows(cert, scenario)]
     parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'

@@ -16,9 +16,9 @@ import numpy.typing as npt
 
 from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
-from verify.monitor import Positions, evaluate, explain, truth_from_bool, verdict_of
+from verify.monitor import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
-__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of"]
+__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
 
 
 def parse_spec(text: str) -> Formula:
@@ -51,14 +51,18 @@ def _to_ns(t: float) -> int:
 
 
 def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
-                    end: float | None = None) -> TimedRunVerdict:
+                    end: float | None = None,
+                    atom_values: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None = None,
+                    ) -> TimedRunVerdict:
     """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
 
     ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
     (a region missing from ``labels`` has none); ``end``: when observation stopped (default: the last time).
-    Times are compared in integer nanoseconds (``round(t * 1e9)``).
+    Times are compared in integer nanoseconds (``round(t * 1e9)``). ``atom_values``: robustness bounds
+    ``(lo, hi)`` per run entry for atoms that are not region labels (signal atoms, sampled at the entry times).
     """
     f = parse_spec(formula)
+    external = atom_values
     if not run:
         return TimedRunVerdict("inconclusive", str(f), str(f), None, "the timed run is empty")
     times = np.array([_to_ns(float(t)) for _, t in run], dtype=np.int64)
@@ -68,11 +72,15 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
     if end_ns < int(times[-1]):
         raise ValueError(f"end={end} is before the last run time {run[-1][1]}")
     pos = Positions.points(times, end_ns)  # equal times are allowed: distinct positions at the same instant
-    atom_values = {}
+    inputs: dict[str, Truth] = {}
     for name in atoms(f):
+        if external is not None and name in external:
+            lo, hi = external[name]
+            inputs[name] = Truth(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+            continue
         holds = np.array([name in labels.get(region, ()) for region, _ in run], dtype=bool)
-        atom_values[name] = truth_from_bool(holds)
-    values = evaluate(f, pos, atom_values)
+        inputs[name] = truth_from_bool(holds)
+    values = evaluate(f, pos, inputs)
     root = values[f]
     verdict = verdict_of(float(root.lo[0]), float(root.hi[0]))
     if verdict == "pass":
@@ -93,3 +101,30 @@ def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.fl
     change = np.flatnonzero(np.diff(region_index) != 0) + 1
     starts = np.concatenate(([0], change))
     return [(names[int(region_index[s])], float(times_s[s])) for s in starts if region_index[s] >= 0]
+
+
+def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64], names: Sequence[str],
+                      labels: Mapping[str, Sequence[str]]) -> tuple[list[tuple[str, float]], dict[str, list[str]]]:
+    """Definition 3 when regions may overlap or nest: ``contains`` is ``(n_regions, n)`` (``geometry.containment``).
+
+    Each maximal stretch of samples contained in the same non-empty *set* of regions starts an entry; the entry is
+    named by its regions joined with ``+`` in scenario order (``room+table``) and carries the union of their
+    labels (a table inside a room: both labels hold). Returns the run and the labels of every entry name."""
+    n = contains.shape[1] if contains.ndim == 2 else 0
+    if n == 0:
+        return [], {}
+    _, code = np.unique(contains.T, axis=0, return_inverse=True)
+    code = code.reshape(-1)
+    change = np.flatnonzero(np.diff(code) != 0) + 1
+    starts = np.concatenate(([0], change))
+    run: list[tuple[str, float]] = []
+    entry_labels: dict[str, list[str]] = {}
+    for s in starts:
+        members = [names[int(k)] for k in np.flatnonzero(contains[:, s])]
+        if not members:
+            continue
+        name = "+".join(members)
+        run.append((name, float(times_s[s])))
+        if name not in entry_labels:
+            entry_labels[name] = sorted({lab for m in members for lab in labels.get(m, ())})
+    return run, entry_labels

@@ -12,6 +12,7 @@ undecided, never true, and a sample inside an obstacle makes it false with that 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,7 @@ from tubempc.scenario import Scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
 from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
+from verify.signals import SignalBounds
 
 __all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "reported_margin",
            "trajectory_positions"]
@@ -108,25 +110,32 @@ def _sample_truth(margin: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 
 def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario, *,
-                     max_speed_mps: float) -> TrajectoryVerdict:
-    """Evaluate ``formula`` at the first sample under the trajectory semantics (times: ns, strictly increasing)."""
+                     max_speed_mps: float, signals: Mapping[str, SignalBounds] | None = None) -> TrajectoryVerdict:
+    """Evaluate ``formula`` at the first sample under the trajectory semantics (times: ns, strictly increasing).
+
+    ``signals``: bounds of the signal atoms at these samples and gaps (``verify.signals.signal_bounds``); a formula
+    that uses one is evaluated by the general engine (the regular-grid path bounds only position margins)."""
+    sig = {k: v for k, v in (signals or {}).items() if k in atoms(formula)}
     n = t_ns.shape[0]
     if n == 0:
         empty_i = np.zeros(0, dtype=np.int64)
         return TrajectoryVerdict("inconclusive", -np.inf, np.inf, str(formula), None, "no pose samples",
                                  empty_i, np.zeros(0))
     grid = regular_grid(t_ns)
-    if grid is not None and bool(np.isfinite(x_m).all()) and bool(np.isfinite(y_m).all()):
+    if grid is not None and not sig and bool(np.isfinite(x_m).all()) and bool(np.isfinite(y_m).all()):
         fast = _check_on_grid(formula, grid, t_ns, x_m, y_m, scenario=scenario, max_speed_mps=max_speed_mps)
         if fast is not None:
             return fast
     pos, point_at, gap_at = trajectory_positions(t_ns)
     step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
     values: dict[str, Truth] = {}
-    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula)).items():
+    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula) - set(sig)).items():
         plo, phi = _sample_truth(margin)
         gb = gap_bounds(margin, step)
         values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
+    for name, b in sig.items():
+        values[name] = interleave(b.point_lo, b.point_hi, b.gap_lo, b.gap_hi, point_at=point_at, gap_at=gap_at,
+                                  size=pos.size)
     result = evaluate_at_points(formula, pos, values)
     root = result[formula]
     lo0, hi0 = float(root.lo[0]), float(root.hi[0])

@@ -34,7 +34,7 @@ from matplotlib.patches import Circle, FancyArrowPatch, Polygon, Rectangle
 from matplotlib.text import Annotation, Text
 from matplotlib.transforms import Bbox
 
-from tubempc.scenario import Scenario
+from tubempc.scenario import Region, Scenario, ScenarioError
 
 __all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "place_texts", "region_caption", "text_box",
            "violations_of", "workspace_figure", "workspace_map"]
@@ -250,22 +250,49 @@ def map_texts(fig: Figure) -> list[Annotation]:
 
 
 # ---- drawing -------------------------------------------------------------------------------------------------------
+def tube_radius_or_nan(scenario: Scenario) -> float:
+    """r_q, or NaN when the scenario gives none (the tube is then not checked and no nominal is plotted)."""
+    try:
+        return scenario.tube_radius_m
+    except ScenarioError:
+        return math.nan
+
+
+def _anchor(region: Region) -> tuple[float, float]:
+    """Where a region's caption goes: a disc's centre, a polygon's bounding-box centre."""
+    if region.polygon is None:
+        return region.center
+    x0, y0, x1, y1 = region.bounds
+    return 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+
+
+def _size_m(region: Region) -> float:
+    """A disc's radius; half the shorter side of a polygon's bounding box."""
+    if region.polygon is None:
+        return region.radius
+    x0, y0, x1, y1 = region.bounds
+    return 0.5 * min(x1 - x0, y1 - y0)
+
+
 def _draw_regions(ax: Axes, scenario: Scenario, *, with_legend: bool) -> None:
     seen: set[str] = set()
     for region in scenario.regions:
         kind = _region_kind(region.labels, region.unsafe)
         colour = _KIND_COLOURS[kind]
         name = {"unsafe": "unsafe region", "labelled": "labelled region", "free": "unlabelled region"}[kind]
-        ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25,
-                            label=name if with_legend and kind not in seen else None))
+        label = name if with_legend and kind not in seen else None
+        if region.polygon is not None:
+            ax.add_patch(Polygon(region.polygon, closed=True, fc=colour, ec=colour, alpha=0.25, label=label))
+        else:
+            ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25, label=label))
         seen.add(kind)
 
 
 def _draw_small_region_markers(ax: Axes, scenario: Scenario, px_per_m: float) -> None:
     for region in scenario.regions:
-        if region.radius * px_per_m < _MIN_REGION_PX:
+        if _size_m(region) * px_per_m < _MIN_REGION_PX:
             colour = _KIND_COLOURS[_region_kind(region.labels, region.unsafe)]
-            ax.plot(*region.center, "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
+            ax.plot(*_anchor(region), "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
 
 
 def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: int) -> LineCollection:
@@ -344,9 +371,13 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.07, map_in / fig_h_in, 0.64, map_h_in / fig_h_in))
     cax = fig.add_axes((0.07, cbar_in / fig_h_in, 0.64, 0.16 / fig_h_in))
-    ax.add_patch(Rectangle((ws.x[0], ws.y[0]), width_m, height_m, fill=False, lw=1.5, ec="black", label="workspace"))
+    if ws.polygon is not None:
+        ax.add_patch(Polygon(ws.polygon, closed=True, fill=False, lw=1.5, ec="black", label="workspace"))
+    else:
+        ax.add_patch(Rectangle((ws.x[0], ws.y[0]), width_m, height_m, fill=False, lw=1.5, ec="black",
+                               label="workspace"))
     _draw_regions(ax, scenario, with_legend=True)
-    _draw_nominal(ax, nominal, scenario.tube_radius_m, with_legend=True)
+    _draw_nominal(ax, nominal, tube_radius_or_nan(scenario), with_legend=True)
     ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
     ax.set_ylim(ws.y[0] - pad, ws.y[1] + pad)
     ax.set_aspect("equal")
@@ -401,8 +432,8 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     else:
         cax.set_visible(False)
     for region in scenario.regions:
-        r_pt = max(region.radius * px_per_m, _MIN_REGION_PX) * pt_per_px
-        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), region.center,
+        r_pt = max(_size_m(region) * px_per_m, _MIN_REGION_PX) * pt_per_px
+        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), _anchor(region),
                                          xytext=(0, 0), textcoords="offset points", fontsize=8), _ring(r_pt)))
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
@@ -434,7 +465,7 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
     fig_h_in = fig.get_figheight()
     ax = fig.add_axes((0.07 + k * width, 0.35 / fig_h_in, width - 0.05, 2.2 / fig_h_in))
     _draw_regions(ax, scenario, with_legend=False)
-    _draw_nominal(ax, nominal, scenario.tube_radius_m, with_legend=False)
+    _draw_nominal(ax, nominal, tube_radius_or_nan(scenario), with_legend=False)
     if trajectory is not None:
         t = trajectory["t_s"].to_numpy(dtype=float)
         near = (np.abs(trajectory["x_m"].to_numpy(dtype=float) - pos[0]) <= 2 * half_m) & (
@@ -443,9 +474,9 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
         if len(part) > 1:
             _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0)
     for region in scenario.regions:
-        if abs(region.center[0] - pos[0]) < half_m and abs(region.center[1] - pos[1]) < half_m:
-            ax.text(region.center[0], region.center[1], region.name, ha="center", va="center", fontsize=7,
-                    clip_on=True)
+        cx, cy = _anchor(region)
+        if abs(cx - pos[0]) < half_m and abs(cy - pos[1]) < half_m:
+            ax.text(cx, cy, region.name, ha="center", va="center", fontsize=7, clip_on=True)
     ax.add_patch(Circle(pos, scenario.robot.radius, fill=False, ec=_FAIL_COLOUR, lw=1.2, zorder=6))
     ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=9, mec="white", mew=0.8, zorder=7)
     ax.set_xlim(pos[0] - half_m, pos[0] + half_m)

@@ -15,7 +15,8 @@ from verify.ingest import read_log
 from verify.online import MonitorClosedError, OnlineMonitor, feed_log_data
 
 LOGS = Path(__file__).resolve().parents[2] / "logs"
-EXAMPLES = sorted(p.name for p in LOGS.iterdir() if p.suffix in (".bag", ".mcap"))
+#: the Nexus runs (diffdrive_odom.bag is judged against its own scenario: polygon regions and signal atoms)
+EXAMPLES = sorted(p.name for p in LOGS.iterdir() if p.suffix in (".bag", ".mcap") and p.name != "diffdrive_odom.bag")
 
 
 def _same_margin(a: float | None, b: float | None) -> bool:

@@ -3,8 +3,9 @@
 Small random WTSs (3 regions, integer weights) and random formulas over the whole grammar (next, eventually,
 always, until, open/closed/unbounded intervals, nesting). The planner's run must satisfy the formula under the
 exact reference semantics, and whenever brute force finds a satisfying lasso, the planner must find one too
-(event-driven waits lose nothing against every grid dwell duration). Time-optimality is checked on windows in
-``test_search.py``.
+(the exact search with one-tick delays loses nothing against every grid dwell duration), and the exact search
+alone (without the fast first attempt) reaches the same verdict and cost. Time-optimality against brute force is
+checked on chain-shaped WTSs in ``property_tests/test_semantics.py``, on windows in ``test_search.py``.
 
 Three modes: observed dwells (each dwell a position; brute force over dwell positions of 1..6 half-ticks), silent
 waits (no position; brute force over every wait of 0..6 half-ticks before every departure, including the first,
@@ -140,6 +141,16 @@ def _check(seed: int, *, wait: bool, dwell: str = "observed", max_pos: int = 4) 
         found = find_run(wts, formula, wait=wait, dwell=dwell)
     except NoAcceptingRunError:
         found = None
+    if wait:
+        # the exact search alone (no first attempt) reaches the same verdict and the same cost
+        try:
+            alone = find_run(wts, formula, wait=wait, dwell=dwell, first_attempt=False, diagnose=False)
+        except NoAcceptingRunError:
+            alone = None
+        assert (alone is None) == (found is None), (seed, str(formula))
+        if alone is not None and found is not None:
+            assert holds(formula, alone.run, labels), (formula, alone.run)
+            assert _cost(alone.run) == _cost(found.run), (seed, str(formula), alone.run, found.run)
     if found is not None:
         assert holds(formula, found.run, labels), (formula, found.run)
         if wait and dwell == "silent":
@@ -150,6 +161,10 @@ def _check(seed: int, *, wait: bool, dwell: str = "observed", max_pos: int = 4) 
         bf = brute_force(labels, weights, formula, wait=wait, max_pos=max_pos)
     if bf is not None:
         assert found is not None, f"seed {seed}: planner found no run for {formula}, brute force entered at {bf}"
+
+
+def _cost(run: LassoRun) -> Fraction:
+    return run.times[run.loop_start if run.loop_start is not None else run.size - 1]
 
 
 @pytest.mark.parametrize("seed", range(40))

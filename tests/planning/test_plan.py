@@ -1,7 +1,8 @@
 """Plans for the built-in scenario, checked by the certifier's independent ``check_timed_run``.
 
-Silent mode (the default) must give a run of arrivals only, inside both windows of the paper's formula with a
-margin; observed mode keeps each dwell as a position.
+Silent mode (the default) must give a run of arrivals only, inside both windows of the paper's formula: at the
+earliest time by default (objective ``time``), with the largest margin under objective ``margin``; observed mode
+keeps each dwell as a position.
 """
 
 from __future__ import annotations
@@ -60,9 +61,23 @@ def check_silent_builtin(p: Plan, wts: nx.DiGraph) -> None:
         prev_region, prev_depart = t.region, (t.depart_after_s if t.depart_after_s is not None else t.arrival_s)
 
 
-def test_builtin_silent_plan_satisfies_the_paper_formula(synthetic_wts: nx.DiGraph) -> None:
+def test_builtin_plan_is_time_optimal_by_default(synthetic_wts: nx.DiGraph) -> None:
     s = builtin_scenario()
     p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region)
+    assert p.objective == "time"
+    assert certify(s.spec, list(p.run), s.labels()) == "pass"
+    # F[80,110] mission_1 is met at 80 s, the earliest any run can (the window's lower end); re-timing for margin
+    # keeps it there (the margin is then 0: the objective "margin" trades it for 10 s, below)
+    assert p.run[-1] == ("R1", 80.0) and p.period_s == 0
+    assert p.margin_s == pytest.approx(0.0, abs=1e-9)
+    assert ("R3", 40.0) in p.run  # the other window's witness is still centred, at no cost in time
+    margin = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, objective="margin")
+    assert margin.run[-1][1] > 80.0
+
+
+def test_builtin_silent_plan_satisfies_the_paper_formula(synthetic_wts: nx.DiGraph) -> None:
+    s = builtin_scenario()
+    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, objective="margin")
     check_silent_builtin(p, synthetic_wts)
     assert p.targets[0].region == s.initial_region  # R3 at 40 needs a wait in R1 before the first departure
     assert p.targets[-1].depart_after_s is None  # the run ends: stay in the last region
@@ -82,7 +97,7 @@ def test_controller_targets_hold_until_departure(synthetic_wts: nx.DiGraph) -> N
 
 def test_builtin_observed_plan_keeps_dwell_positions(synthetic_wts: nx.DiGraph) -> None:
     s = builtin_scenario()
-    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, dwell="observed")
+    p = plan_from_wts(synthetic_wts, s.formula, initial=s.initial_region, dwell="observed", objective="margin")
     assert p.dwell == "observed" and "dwell" in p.kinds
     assert certify(s.spec, list(p.run), s.labels()) == "pass"
     assert p.margin_s == pytest.approx(10.0, abs=1e-6)  # LP optimum, rounded to the millisecond
@@ -100,6 +115,24 @@ def test_bad_dwell_mode_is_refused(synthetic_wts: nx.DiGraph) -> None:
     s = builtin_scenario()
     with pytest.raises(ValueError, match="dwell="):
         plan_from_wts(synthetic_wts, s.formula, dwell="sometimes")
+    with pytest.raises(ValueError, match="objective="):
+        plan_from_wts(synthetic_wts, s.formula, objective="soon")
+
+
+def test_abstraction_without_transitions_is_a_design_error() -> None:
+    from tubempc.errors import DesignError
+    from tubempc.mitl import parse
+    from tubempc.planning import make_wts
+    from tubempc.planning.wts import FAILED
+
+    wts = make_wts({"A": ("p",), "B": ("q",)}, {}, initial="A")
+    wts.graph[FAILED] = {("A", "B"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m",
+                         ("B", "A"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m"}
+    with pytest.raises(DesignError, match=r"no usable transition.*tube radius 0\.4 m"):
+        plan_from_wts(wts, parse("F[0,10] q"), initial="A")
+    wts.graph[FAILED] = {}
+    with pytest.raises(Exception, match="no timed run"):  # no pair was tried: the formula is what fails
+        plan_from_wts(wts, parse("F[0,10] q"), initial="A")
 
 
 @pytest.mark.slow
@@ -107,9 +140,9 @@ def test_builtin_silent_plan_with_the_real_controller() -> None:
     pytest.importorskip("tubempc.control.algorithm1")
     s = builtin_scenario()
     wts = build_wts(s, progress=False)  # cached under $TUBEMPC_CACHE or ~/.cache/tubempc (about 13 s cold)
-    p = plan_from_wts(wts, s.formula, initial=s.initial_region)
+    p = plan_from_wts(wts, s.formula, initial=s.initial_region, objective="margin")
     check_silent_builtin(p, wts)
-    observed = plan_from_wts(wts, s.formula, initial=s.initial_region, dwell="observed")
+    observed = plan_from_wts(wts, s.formula, initial=s.initial_region, dwell="observed", objective="margin")
     assert certify(s.spec, list(observed.run), s.labels()) == "pass"
     assert observed.margin_s > 0
 
@@ -134,11 +167,12 @@ def test_executed_silent_plan_is_certified_from_its_trajectory() -> None:
         verdict = timedrun.check_timed_run(s.spec, run, s.labels(), end=float(res.t_s[-1])).verdict
         return run, str(verdict)
 
-    run, verdict = executed(plan_from_wts(wts, s.formula, initial=s.initial_region))
+    run, verdict = executed(plan_from_wts(wts, s.formula, initial=s.initial_region, objective="margin"))
     assert verdict == "pass", run
     # executed arrivals come a little before the planned 40 s / 95 s (the disc is contained before the nominal
     # enters the terminal ball); the 10 s margin absorbs that: each must stay well inside its window
     assert [r for r, _ in run] == ["R1", "R3", "R1"]
     assert 35.0 <= run[1][1] <= 41.0 and 90.0 <= run[2][1] <= 96.0
-    run, verdict = executed(plan_from_wts(wts, s.formula, initial=s.initial_region, dwell="observed"))
+    run, verdict = executed(plan_from_wts(wts, s.formula, initial=s.initial_region, dwell="observed",
+                                          objective="margin"))
     assert verdict == "fail", run

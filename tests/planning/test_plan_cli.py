@@ -61,3 +61,33 @@ def test_dwell_modes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert any(e["region"] == "R3" and 30 <= e["time"] <= 50 for e in s["run"])
     assert s["targets"][0]["region"] == "R1" and s["targets"][0]["depart_after_s"] > 0
     assert run(["plan", "--dwell", "sometimes", "--workers", "1"]) != 0
+
+
+def test_objective_time_is_the_default_and_margin_is_asked(tmp_path: Path) -> None:
+    fast, wide = tmp_path / "time.json", tmp_path / "margin.json"
+    assert run(["plan", "--json", str(fast), "--workers", "1"]) == 0
+    assert run(["plan", "--objective", "margin", "--json", str(wide), "--workers", "1"]) == 0
+    t, m = json.loads(fast.read_text()), json.loads(wide.read_text())
+    assert t["objective"] == "time" and m["objective"] == "margin"
+    assert t["run"][-1]["time"] == 80.0  # F[80,110] mission_1 met at the earliest possible time
+    assert m["run"][-1]["time"] > 80.0 and m["margin_s"] > t["margin_s"]
+
+
+def test_state_limit_exits_2_saying_how_to_raise_it(capsys: pytest.CaptureFixture[str]) -> None:
+    assert run(["plan", "--max-states", "2", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "limit of 2 product states" in err and "--max-states" in err and "Traceback" not in err
+
+
+def test_no_usable_transition_exits_3_naming_the_design_quantity(monkeypatch: pytest.MonkeyPatch,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    from tubempc.planning.synthetic import SyntheticTransition
+
+    def failing(*args: object, **kwargs: object) -> SyntheticTransition:
+        return SyntheticTransition(False, "design check: tube radius 0.31 m exceeds the region radius 0.3 m", None)
+
+    monkeypatch.setattr(wts_module, "default_oracle", lambda: failing)
+    assert run(["plan", "--workers", "1"]) == 3
+    err = capsys.readouterr().err
+    assert "nexus-sml" in err and "every transition" in err and "tube radius 0.31 m" in err
+    assert "mission" not in err  # the formula is not blamed

@@ -160,3 +160,77 @@ def test_export_dot() -> None:
     found = plan("F[0,10] r")
     text = export_dot(found.explored())
     assert text.startswith("digraph product {") and "->" in text
+
+
+# ---- exactness: waits taken several moves before the goal, proofs of "no run", the state limit ----------------
+CHAIN_LABELS = {"A": (), "B": ("q",), "C": (), "D": ("p",)}
+CHAIN = make_wts(CHAIN_LABELS, {("A", "B"): 1, ("B", "C"): 1, ("C", "D"): 1}, initial="A")
+RESPONSE = "F[4,5] p & G(q -> F[0,2] p)"
+
+
+def test_wait_three_moves_before_the_goal_is_found() -> None:
+    # the wait must be taken in A: waiting in B or C breaks F[0,2] p after q; the event-driven first attempt
+    # misses it (it aims a wait at the next two arrivals only), the exact search finds it
+    f = parse(RESPONSE)
+    found = find_run(CHAIN, f, initial="A")
+    assert found.run.regions == ("A", "B", "C", "D") and found.run.times == (0, 2, 3, 4)
+    assert found.waits_s == (0, 1, 0, 0) and found.run.loop_start is None
+    assert found.method == "exact search"
+    assert holds(f, found.run, CHAIN_LABELS)
+    from verify.timedrun import check_timed_run
+
+    verdict = check_timed_run(RESPONSE, [(r, float(t)) for r, t in zip(found.run.regions, found.run.times,
+                                                                         strict=True)],
+                              {k: list(v) for k, v in CHAIN_LABELS.items()}, end=10.0)
+    assert verdict.verdict == "pass"
+
+
+def test_issue_example_through_plan_from_wts_keeps_the_optimum() -> None:
+    from tubempc.planning import plan_from_wts
+
+    plan_ = plan_from_wts(CHAIN, parse(RESPONSE), initial="A")
+    assert [r for r, _ in plan_.run] == ["A", "B", "C", "D"]
+    assert plan_.run[-1][1] == 4.0  # the optimum: the LP re-timing does not make it later by default
+    assert plan_.targets[0].region == "A" and plan_.targets[0].depart_after_s == 1.0
+
+
+def test_first_attempt_alone_would_have_said_no_run() -> None:
+    # the fast stage on its own finds nothing here; the answer comes from the exact search
+    from tubempc.planning.automaton import compile_formula, tick_of
+    from tubempc.planning.search import _search
+
+    f = parse(RESPONSE)
+    aut = compile_formula(f, tick_of([Fraction(1), Fraction(4), Fraction(5), Fraction(2)], refine=2))
+    assert _search(CHAIN, aut, "A", wait=True, silent=True, prune=True, max_states=10_000) is None
+
+
+def test_named_conjuncts_are_themselves_unsatisfiable() -> None:
+    # F[0,2] p cannot be met from A (D is 3 s away): named alone, and the message names nothing false
+    with pytest.raises(NoAcceptingRunError) as info:
+        find_run(CHAIN, parse("G(q -> F[0,2] p) & F[0,2] p"), initial="A")
+    assert info.value.obligation == "F[0,2] p"
+    with pytest.raises(NoAcceptingRunError):
+        find_run(CHAIN, parse("F[0,2] p"), initial="A", diagnose=False)
+    # each conjunct alone is satisfiable, the pair is not: named together
+    with pytest.raises(NoAcceptingRunError) as info:
+        find_run(CHAIN, parse("F[3,3] p & G(q -> F[0,1] p)"), initial="A")
+    assert "cannot be met together with" in str(info.value)
+    find_run(CHAIN, parse("F[3,3] p"), initial="A")
+    find_run(CHAIN, parse("G(q -> F[0,1] p)"), initial="A")
+
+
+def test_state_limit_is_not_no_run() -> None:
+    from tubempc.planning import SearchLimitError
+
+    with pytest.raises(SearchLimitError) as info:
+        find_run(CHAIN, parse(RESPONSE), initial="A", max_states=3)
+    assert info.value.limit == 3
+    assert not isinstance(info.value, NoAcceptingRunError)
+    assert "--max-states" in str(info.value) and "3" in str(info.value)
+
+
+def test_exact_search_is_optimal_where_the_first_attempt_is_late() -> None:
+    # the same formula with first_attempt=False (exact search alone) gives the same cost as the default
+    f = parse(RESPONSE)
+    alone = find_run(CHAIN, f, initial="A", first_attempt=False)
+    assert alone.run.times[-1] == 4 and alone.method == "exact search"

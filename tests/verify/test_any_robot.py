@@ -226,3 +226,279 @@ def test_twist_stamped_uses_its_header_on_the_header_time_base(tmp_path: Path) -
     fast, slow = decode_twist(raw, False), decode_twist(raw, False, fast=False)
     assert fast.fast and not slow.fast
     assert np.array_equal(fast.u, slow.u) and np.array_equal(fast.stamp_ns, slow.stamp_ns)
+
+
+# ---- polygon regions and workspaces ----------------------------------------------------------------------------------
+ROOM = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.2], [0.0, 2.2]]
+TABLE_SQ = [[2.2, 1.2], [2.8, 1.2], [2.8, 1.8], [2.2, 1.8]]  # inside the room: regions nest
+
+
+def poly_lab(**extra: Any) -> Scenario:
+    data = lab().to_dict()
+    data["regions"] = [
+        {"name": "start", "center": [0.5, 0.5], "radius": 0.45, "labels": ["home"]},
+        {"name": "dock", "center": [4.4, 3.3], "radius": 0.45, "labels": ["dock"]},
+        {"name": "room", "polygon": ROOM, "labels": ["in_room"]},
+        {"name": "table", "polygon": TABLE_SQ, "labels": ["table"], "unsafe": True},
+    ]
+    data["workspace"] = {"polygon": [[0.0, 0.0], [5.0, 0.0], [5.0, 4.0], [0.0, 4.0]]}
+    data["spec"] = "G[0,inf) !table & F[0,40] dock & F[0,1] (in_room & home)"
+    data.update(extra)
+    return scenario_from_dict(data, source="lab.yaml")
+
+
+def _table_distance(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Distance from outside points to the table square (the nearest point of an axis-aligned box)."""
+    dx = np.maximum.reduce([2.2 - x, np.zeros_like(x), x - 2.8])
+    dy = np.maximum.reduce([1.2 - y, np.zeros_like(y), y - 1.8])
+    return np.hypot(dx, dy)
+
+
+def test_polygon_room_table_and_workspace_pass(tmp_path: Path) -> None:
+    run = _run(3.4)
+    sc = poly_lab()
+    assert any("(room) and regions[3] (table) may overlap" in w for w in sc.certification_warnings())
+    cert = certify_log(_log(tmp_path, run), sc).certificate
+    assert cert["verdict"] == "pass", cert["checks"]
+    # nested regions: the start disc and the room both contain the robot at t = 0, so both labels hold
+    assert [e["region"] for e in cert["timed_run"]] == ["start+room", "room", "dock"]
+    clear = _check(cert, "obstacle_clearance")
+    want = float((_table_distance(run.x, run.y) - 0.25).min())  # the x = 3.4 leg: 0.6 m from the table's edge
+    assert clear["sample_margin_m"] == pytest.approx(want, abs=1e-12) and want == pytest.approx(0.35)
+    ws = _check(cert, "workspace")
+    assert ws["sample_margin_m"] == pytest.approx(0.5 - 0.25, abs=1e-12)  # the start, 0.5 m from two walls
+    assert cert["scenario_warnings"] == sc.certification_warnings()
+
+
+def test_polygon_obstacle_hit_has_the_right_time_and_margin(tmp_path: Path) -> None:
+    run = _run(3.0)  # 0.2 m from the table's right edge, less than the robot radius
+    cert = certify_log(_log(tmp_path, run), poly_lab()).certificate
+    clear = _check(cert, "obstacle_clearance")
+    margin = _table_distance(run.x, run.y) - 0.25
+    k = int(np.argmax(margin < 0))
+    assert clear["verdict"] == "fail" and clear["region"] == "table"
+    assert clear["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert clear["margin"] == pytest.approx(-0.05, abs=1e-12)
+    assert _check(cert, "spec_trajectory")["verdict"] == "fail"
+
+
+def test_polygon_workspace_violation(tmp_path: Path) -> None:
+    """An L-shaped workspace whose upper right part (x > 3, y > 2.8) is outside: the last leg leaves it."""
+    run = _run(3.4)
+    ell = [[0.0, 0.0], [5.0, 0.0], [5.0, 2.8], [3.0, 2.8], [3.0, 4.0], [0.0, 4.0]]
+    cert = certify_log(_log(tmp_path, run), poly_lab(workspace={"polygon": ell})).certificate
+    ws = _check(cert, "workspace")
+    k = int(np.argmax((run.x > 3.0) & (2.8 - run.y - 0.25 < 0)))
+    assert ws["verdict"] == "fail"
+    assert ws["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert ws["margin"] == pytest.approx(-(3.3 - 2.8) - 0.25, abs=1e-9)  # the dock lies 0.5 m past the wall
+
+
+def test_between_samples_a_polygon_corner_makes_the_check_inconclusive(tmp_path: Path) -> None:
+    """Two samples 1 s apart on either side of the table's corner, each clear of it: the straight path between
+    them passes 0.14 m from the corner; the robot (radius 0.25) may have touched it: inconclusive, never a pass."""
+    run = KIT.UnicycleRun(np.array([0.0, 1.0, 2.0]), np.array([2.6, 3.2, 3.2]), np.array([0.8, 1.4, 2.0]),
+                          np.zeros(3), np.zeros(3), np.zeros(3))
+    sc = poly_lab(spec="G[0,inf) !table", robot={"radius": 0.25, "max_speed": 0.9})
+    cert = certify_log(_log(tmp_path, run), sc, checks=["obstacle_clearance"]).certificate
+    clear = _check(cert, "obstacle_clearance")
+    assert clear["verdict"] == "inconclusive", clear
+    assert "between samples" in clear["reason"]
+
+
+@pytest.mark.parametrize("x_leg", [3.4, 3.0])
+def test_fast_monitor_and_general_engine_agree_on_polygons(monkeypatch: pytest.MonkeyPatch, x_leg: float) -> None:
+    """The regular-grid path (verify.regular) and the interleaved engine (verify.monitor) give the same verdict and
+    margin on a formula over polygon and disc atoms."""
+    from verify import trajectory
+
+    run = _run(x_leg)
+    sc = poly_lab(spec="G[0,inf) !table & F[0,40] dock & G[0,3] in_room")
+    t_ns = np.round(run.t_s * 1e9).astype(np.int64)
+    fast = trajectory.check_trajectory(sc.formula, t_ns, run.x, run.y, sc, max_speed_mps=0.5)
+    assert trajectory.regular_grid(t_ns) is not None
+    monkeypatch.setattr(trajectory, "regular_grid", lambda _t: None)
+    general = trajectory.check_trajectory(sc.formula, t_ns, run.x, run.y, sc, max_speed_mps=0.5)
+    assert fast.verdict == general.verdict == ("pass" if x_leg == 3.4 else "fail")
+    assert fast.margin_m == pytest.approx(general.margin_m, abs=1e-12)
+    assert fast.margin_hi_m == pytest.approx(general.margin_hi_m, abs=1e-12)
+    assert fast.time_ns == general.time_ns
+
+
+# ---- signal atoms ----------------------------------------------------------------------------------------------------
+SLOW = {"topic": "/odom", "field": "twist.twist.linear.x", "op": "<=", "value": 0.5, "unit": "m/s"}
+
+
+def _battery_log(tmp_path: Path, run: Any, times: list[float], pct: list[float],
+                 cells: list[list[float]] | None = None) -> Path:
+    msgs = KIT.odometry_messages(run, "/odom", ros1=False) + KIT.battery_messages(times, pct, "/battery_state",
+                                                                                 ros1=False, cells=cells)
+    return KIT.write_messages(tmp_path / "bat.mcap", msgs)
+
+
+def test_signal_atom_on_a_nested_field_passes_and_fails(tmp_path: Path) -> None:
+    run = _run(3.4)
+    log = _log(tmp_path, run)
+    ok = certify_log(log, lab(signals={"slow": SLOW}, spec="G[0,inf) slow & F[0,40] dock")).certificate
+    assert ok["verdict"] == "pass", ok["checks"]
+    s = ok["signals"]["slow"]
+    assert s["worst_margin"] == pytest.approx(0.1) and s["relative_worst_margin"] == pytest.approx(0.2)
+    assert s["unit"] == "m/s" and s["time_base"] == "header" and s["unknown_stretches"] == []
+    strict = dict(SLOW, value=0.3)
+    bad = certify_log(log, lab(signals={"slow": strict}, spec="G[0,inf) slow")).certificate
+    spec = _check(bad, "spec_trajectory")
+    k = int(np.argmax(run.v > 0.3))  # the first sample driving faster than 0.3 m/s
+    assert spec["verdict"] == "fail"
+    assert spec["first_violation_time"] == pytest.approx(run.t_s[k], abs=1e-9)
+    assert spec["guaranteed_margin_m"] == pytest.approx(0.3 - 0.4, abs=1e-9)  # in the field's unit (m/s)
+    assert _check(bad, "spec_timed_run")["verdict"] in ("pass", "fail")  # judged at the run's entries only
+
+
+def test_signal_atom_with_a_gap_is_unknown_there(tmp_path: Path) -> None:
+    """A battery at 1 Hz that stops reporting from 5 s to 11 s: G battery_ok cannot pass; a later value below the
+    threshold is still a fail (Kleene: false & unknown = false), at that message's time."""
+    run = _run(3.4)
+    times = [float(t) for t in range(22) if not 5 < t < 11]
+    sig = {"battery_ok": {"topic": "/battery_state", "field": "percentage", "op": ">=", "value": 0.2,
+                          "rate_hz": 1.0}}
+    log = _battery_log(tmp_path, run, times, [0.9] * len(times))
+    cert = certify_log(log, lab(signals=sig, spec="G[0,inf) battery_ok")).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert cert["verdict"] == "inconclusive" and spec["verdict"] == "inconclusive", spec
+    assert cert["signals"]["battery_ok"]["unknown_stretches"][0] == {"from_s": 6.5, "to_s": 11.0}
+    low = [0.9 if t < 15 else 0.1 for t in times]
+    (tmp_path / "low").mkdir()
+    cert = certify_log(_battery_log(tmp_path / "low", run, times, low), lab(signals=sig, spec="G[0,inf) battery_ok")
+                       ).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "fail" and spec["first_violation_time"] == pytest.approx(15.0, abs=1e-9)
+    assert cert["signals"]["battery_ok"]["worst_margin"] == pytest.approx(0.1 - 0.2, abs=1e-6)  # float32 field
+
+
+def test_signal_atom_on_an_array_element(tmp_path: Path) -> None:
+    run = _run(3.4)
+    times = [float(t) for t in range(22)]
+    cells = [[3.9, 3.8 if t < 12 else 3.4, 3.9] for t in times]
+    sig = {"cell_ok": {"topic": "/battery_state", "field": "cell_voltage[1]", "op": ">", "value": 3.5, "unit": "V"}}
+    cert = certify_log(_battery_log(tmp_path, run, times, [0.9] * len(times), cells),
+                       lab(signals=sig, spec="G[0,inf) cell_ok")).certificate
+    spec = _check(cert, "spec_trajectory")
+    assert spec["verdict"] == "fail" and spec["first_violation_time"] == pytest.approx(12.0, abs=1e-9)
+    assert spec["guaranteed_margin_m"] == pytest.approx(3.4 - 3.5, abs=1e-6)
+
+
+@pytest.mark.parametrize(("signal", "fragment"), [
+    ({"topic": "/battery", "field": "percentage", "op": ">=", "value": 0.2},
+     "signal s: topic /battery (field percentage) is absent from the log"),
+    ({"topic": "/odom", "field": "twist.twist.linear.w", "op": "<=", "value": 0.5},
+     "signal s: topic /odom (nav_msgs/msg/Odometry) has no field twist.twist.linear.w: twist.twist.linear has no "
+     "'w' (its fields: x, y, z)"),
+    ({"topic": "/odom", "field": "pose.covariance[40]", "op": "<=", "value": 0.5},
+     "has no field pose.covariance[40]: pose.covariance has 36 element(s)"),
+    ({"topic": "/odom", "field": "child_frame_id", "op": "<=", "value": 0.5},
+     "field child_frame_id is a str, not a number"),
+])
+def test_missing_signal_topic_or_field_is_exit_3_naming_both(tmp_path: Path, signal: dict[str, Any],
+                                                             fragment: str) -> None:
+    log = _log(tmp_path, _run(3.4))
+    yaml_path = tmp_path / "lab.yaml"
+    yaml_path.write_text(json.dumps(lab(signals={"s": signal}, spec="G[0,inf) s").to_dict()))
+    out = _cli("certify", log, "--scenario", yaml_path)
+    assert out.returncode == 3, out
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0] and str(log) in lines[0], lines
+
+
+# ---- clocks ----------------------------------------------------------------------------------------------------------
+def _spiky_log(tmp_path: Path, *, pose_ahead_ns: int, cmd_header_offset_ns: int = 0, stamped: bool = False) -> Path:
+    """Pose (Odometry) headers ``pose_ahead_ns`` ahead of the recorder; a command spike (w = 1.5) at 10.0 s."""
+    run = _run(3.4)
+    spike = run.w.copy()
+    spike[500] = 1.5  # t = 10.0 s at 50 Hz
+    run = KIT.UnicycleRun(run.t_s, run.x, run.y, run.theta, run.v, spike)
+    msgs = KIT.odometry_messages(run, "/odom", ros1=False, header_offset_ns=pose_ahead_ns) + KIT.command_messages(
+        run, "/cmd_vel", ros1=False, stamped=stamped, header_offset_ns=cmd_header_offset_ns)
+    return KIT.write_messages(tmp_path / "clock.mcap", msgs)
+
+
+def test_pose_clock_ahead_is_a_finding_and_a_correction_fixes_the_time(tmp_path: Path) -> None:
+    log = _spiky_log(tmp_path, pose_ahead_ns=2_000_000_000)
+    sc = lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    cert = certify_log(log, sc).certificate
+    box = _check(cert, "input_box")
+    assert box["first_violation_time"] == pytest.approx(8.0, abs=1e-9)  # misplaced: the clocks disagree by 2 s
+    assert len(cert["clock_findings"]) == 1
+    finding = cert["clock_findings"][0]
+    assert finding.startswith("/cmd_vel: its times (log time base) run 2.000 s behind the pose topic /odom")
+    assert "--clock-offset /cmd_vel=2.0" in finding
+    assert cert["data_quality"]["clocks"]["streams"]["/cmd_vel"]["suggested_correction_s"] == 2.0
+    fixed = certify_log(log, sc, clock_offsets={"/cmd_vel": 2.0}).certificate
+    assert _check(fixed, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    assert fixed["clock_findings"] == []
+    in_scenario = certify_log(log, lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"},
+                                       clock_offsets={"/cmd_vel": 2.0})).certificate
+    assert _check(in_scenario, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    # the header-vs-log offset reads header - log: the pose headers are 2 s ahead of the recorder
+    assert cert["data_quality"]["pose"]["header_vs_log_offset_s"]["median"] == pytest.approx(2.0)
+
+
+def test_stamped_commands_from_another_computer(tmp_path: Path) -> None:
+    """The commands' header clock runs 0.5 s behind the pose's: found, and corrected from the command line."""
+    log = _spiky_log(tmp_path, pose_ahead_ns=0, cmd_header_offset_ns=-500_000_000, stamped=True)
+    yaml_path = tmp_path / "lab.yaml"
+    yaml_path.write_text(json.dumps(lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"}).to_dict()))
+    out = _cli("certify", log, "--scenario", yaml_path, "--out", tmp_path / "r")
+    assert out.returncode == 1
+    cert = json.loads((tmp_path / "r" / "certificate.json").read_text())
+    assert _check(cert, "input_box")["first_violation_time"] == pytest.approx(9.5, abs=1e-9)
+    assert "/cmd_vel: its times (header time base) run 0.500 s behind" in cert["clock_findings"][0]
+    assert "Finding: /cmd_vel: its times" in (tmp_path / "r" / "report.md").read_text()
+    out = _cli("certify", log, "--scenario", yaml_path, "--clock-offset", "/cmd_vel=0.5", "--out", tmp_path / "r2")
+    cert = json.loads((tmp_path / "r2" / "certificate.json").read_text())
+    assert _check(cert, "input_box")["first_violation_time"] == pytest.approx(10.0, abs=1e-9)
+    assert cert["clock_findings"] == []
+    bad = _cli("certify", log, "--scenario", yaml_path, "--clock-offset", "cmd_vel:0.5")
+    assert bad.returncode == 3
+    assert bad.stderr.strip() == ("tubempc: error: --clock-offset 'cmd_vel:0.5': expected TOPIC=SECONDS, "
+                                  "e.g. /cmd_vel=2.0")
+
+
+def test_reports_draw_polygon_scenarios_without_a_tube(tmp_path: Path) -> None:
+    from verify.report import write_reports
+
+    sc = poly_lab(topics={"pose": "/odom", "cmd_vel": "/cmd_vel"})
+    res = certify_log(_cmd_log(tmp_path, _run(3.4), ".mcap", stamped=False), sc)
+    written = write_reports(res, sc, tmp_path / "r")
+    assert {"figures/workspace.png", "figures/inputs.png", "report.md"} <= set(written)
+    md = (tmp_path / "r" / "report.md").read_text()
+    assert "Verdict over the checks: spec, obstacle_clearance, workspace, input_box." in md
+    assert "Not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))." in md
+    assert "tube radius" not in md
+
+
+@pytest.mark.parametrize("ros1", [True, False])
+@pytest.mark.parametrize(("topic", "field"), [
+    ("/odom", "twist.twist.linear.x"), ("/odom", "pose.covariance[35]"), ("/odom", "pose.pose.orientation.z"),
+    ("/battery_state", "percentage"), ("/battery_state", "cell_voltage[1]"), ("/battery_state", "present"),
+    ("/battery_state", "power_supply_status"),
+])
+def test_bulk_field_decode_equals_deserialize(tmp_path: Path, ros1: bool, topic: str, field: str) -> None:
+    """The layout walk reads the same values and header stamps as rosbags' deserialize, in both encodings (frame ids
+    of different lengths per message, so offsets differ between messages)."""
+    from verify.ingest.fields import decode_field
+    from verify.ingest.raw import read_raw
+
+    run = _run(3.4)
+    msgs = KIT.odometry_messages(run, "/odom", ros1=ros1)
+    for k, (_, _, _, m) in enumerate(msgs):
+        m.header.frame_id = "odom" + "x" * (k % 5)
+    times = [float(t) for t in range(20)]
+    msgs += KIT.battery_messages(times, [0.9 - 0.01 * t for t in times], "/battery_state", ros1=ros1,
+                                 cells=[[3.9, 3.8 - 0.01 * t, 3.7][: 2 + int(t) % 2] for t in times])
+    log = KIT.write_messages(tmp_path / ("f.bag" if ros1 else "f.mcap"), msgs)
+    raw = read_raw(log, {topic}).topics[topic]
+    fast, slow = decode_field(raw, ros1, field), decode_field(raw, ros1, field, fast=False)
+    assert fast.fast and not slow.fast
+    assert np.array_equal(fast.value, slow.value)
+    assert fast.stamp_ns is not None and slow.stamp_ns is not None
+    assert np.array_equal(fast.stamp_ns, slow.stamp_ns)

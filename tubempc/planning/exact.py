@@ -31,32 +31,28 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Iterator
 
 import networkx as nx
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import SearchLimitError
 from tubempc.planning.automaton import AND, EV, OR, UNT, State, TimedAutomaton
 from tubempc.planning.product import DWELL, MOVE, STAY, WAIT, Found, Product, Step, accepting_cycle, assemble
 
-__all__ = ["EXACT_MODES", "SearchLimitError", "exact_search", "root_existential"]
+__all__ = ["EXACT_MODES", "exact_search", "root_anchored", "root_existential"]
 
 EXACT_MODES = ("silent", "observed", "none")
 _INF = math.inf
 
 
-class SearchLimitError(TubeMPCError, RuntimeError):
-    """The product grew past ``max_states`` before the search could decide (neither a run nor a proof of none).
-
-    ``limit`` is the limit that was reached."""
-
-    def __init__(self, message: str, *, limit: int) -> None:
-        self.limit = limit
-        super().__init__(message)
-
-
 def root_existential(aut: TimedAutomaton) -> frozenset[int]:
-    """``F``/``U`` nodes anchored only at the first position: reached from the root through ``&``/``|`` nodes and
-    no child of any temporal node (so a copy, once met or failed, never comes back)."""
+    """``F``/``U`` nodes anchored only at the first position (``root_anchored``)."""
+    return frozenset(i for i in root_anchored(aut) if aut.nodes[i].kind in (EV, UNT))
+
+
+def root_anchored(aut: TimedAutomaton) -> frozenset[int]:
+    """Temporal nodes anchored only at the first position: reached from the root through ``&``/``|`` nodes and no
+    child of any temporal node (so a copy, once met or failed, never comes back, and its age only grows)."""
     nested: set[int] = set()
     temporal = {i for i, n in enumerate(aut.nodes) if n.kind >= EV}
     stack = [c for i in temporal for c in aut.nodes[i].children]
@@ -75,7 +71,7 @@ def root_existential(aut: TimedAutomaton) -> frozenset[int]:
         top.add(c)
         if aut.nodes[c].kind in (AND, OR):
             stack.extend(aut.nodes[c].children)
-    return frozenset(i for i in top - nested if aut.nodes[i].kind in (EV, UNT))
+    return frozenset(i for i in top - nested if aut.nodes[i].kind >= EV)
 
 
 def _distances(aut: TimedAutomaton, nodes: frozenset[int], cls: list[int],
@@ -122,12 +118,12 @@ class _Exact:
         self.prod.classes = cls
         self.expanded_edges: list[bool] = []
         self.roots = root_existential(aut)
-        self.dist = _distances(aut, self.roots, cls, adj)
+        self.once = root_anchored(aut)
+        self.caps = [n.cap for n in aut.nodes]
+        self.dist = _distances(aut, frozenset(i for i, n in enumerate(aut.nodes) if n.kind in (EV, UNT)), cls, adj)
         self.reach = [n.lo if n.lo_closed else n.lo + 1 for n in aut.nodes]
-        self.closure: set[int] = set()
-        self.component: dict[int, int] = {}
-        self.component_ok: dict[int, bool] = {}
-        self.graph = nx.DiGraph()
+        self.component: dict[int, int] = {}  # state -> strongly connected component (states explored for cycles)
+        self.component_ok: dict[int, bool] = {}  # component -> cyclic and meets every Büchi set
         self.expanded = 0
 
     def bound(self, region: int, obl: State) -> float:
@@ -136,6 +132,8 @@ class _Exact:
         for nid, age in obl:
             if nid in self.roots:
                 h = max(h, self.reach[nid] - age, self.dist[nid][region])
+            elif nid in self.dist and self.dist[nid][region] == _INF:
+                return _INF  # a pending F/U copy that no reachable region can meet: a dead state
         return h
 
     def state(self, region: int, obl: State, pos: bool) -> int:
@@ -174,43 +172,75 @@ class _Exact:
         return out
 
     def on_accepting_cycle(self, sid: int) -> bool:
-        """Whether ``sid`` lies on a cycle (with at least one position) that meets every Büchi set."""
-        if sid not in self.closure:
-            stack = [sid]
-            added = False
-            while stack:
-                s = stack.pop()
-                if s in self.closure:
-                    continue
-                self.closure.add(s)
-                added = True
-                self.graph.add_node(s)
-                for v, d, kind, waited in self.successors(s):
-                    if not self.graph.has_edge(s, v) or self.graph.edges[s, v]["d"] > d:
-                        self.graph.add_edge(s, v, d=d, kind=kind, wait=waited)
-                    if v not in self.closure:
-                        stack.append(v)
-            if added:
-                # the old closure is closed under successors: new components lie among the new states only
-                fresh = [s for s in self.closure if s not in self.component]
-                nb = len(self.aut.buchi)
-                for comp in nx.strongly_connected_components(self.graph.subgraph(fresh)):
-                    k = len(self.component_ok)
-                    for s in comp:
-                        self.component[s] = k
-                    if len(comp) == 1:
-                        (only,) = comp
-                        if not self.graph.has_edge(only, only):
-                            self.component_ok[k] = False
-                            continue
-                    self.component_ok[k] = all(any(self.aut.accepting(self.prod.obl[s])[b] for s in comp)
-                                               for b in range(nb))
+        """Whether ``sid`` lies on a cycle (with at least one position) that meets every Büchi set: the strongly
+        connected components of the product reachable from ``sid`` (iterative Tarjan; states already in a
+        component are skipped: the explored part is closed under successors, so old components never change)."""
+        caps = self.caps
+        if any(nid in self.once and age < caps[nid] for nid, age in self.prod.obl[sid]):
+            return False  # a copy anchored only at the first position, still ageing: the state cannot recur
+        if sid not in self.component:
+            self._tarjan(sid)
         return self.component_ok[self.component[sid]]
+
+    def _tarjan(self, root: int) -> None:
+        component = self.component
+        index: dict[int, int] = {}
+        low: dict[int, int] = {}
+        stack: list[int] = []
+        on_stack: set[int] = set()
+        work: list[tuple[int, Iterator[int]]] = []
+
+        def push(v: int) -> None:
+            index[v] = low[v] = len(index)
+            stack.append(v)
+            on_stack.add(v)
+            work.append((v, iter([e[0] for e in self.successors(v)])))
+
+        push(root)
+        nb = len(self.aut.buchi)
+        while work:
+            v, it = work[-1]
+            descended = False
+            for w in it:
+                if w in component:
+                    continue
+                if w not in index:
+                    push(w)
+                    descended = True
+                    break
+                if w in on_stack:
+                    low[v] = min(low[v], index[w])
+            if descended:
+                continue
+            work.pop()
+            if work:
+                u = work[-1][0]
+                low[u] = min(low[u], low[v])
+            if low[v] == index[v]:
+                comp: list[int] = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                k = len(self.component_ok)
+                for w in comp:
+                    component[w] = k
+                cyclic = len(comp) > 1 or any(e[0] == v for e in self.successors(v))
+                self.component_ok[k] = cyclic and all(
+                    any(self.aut.accepting(self.prod.obl[w])[b] for w in comp) for b in range(nb))
 
     def cycle(self, sid: int) -> list[Step]:
         k = self.component[sid]
-        comp = [s for s, c in self.component.items() if c == k]
-        return accepting_cycle(self.graph.subgraph(comp), sid, self.aut, self.prod, len(self.aut.buchi))
+        comp = {s for s, c in self.component.items() if c == k}
+        g = nx.DiGraph()
+        g.add_nodes_from(comp)
+        for s in comp:
+            for v, d, kind, waited in self.successors(s):
+                if v in comp and (not g.has_edge(s, v) or g.edges[s, v]["d"] > d):
+                    g.add_edge(s, v, d=d, kind=kind, wait=waited)
+        return accepting_cycle(g, sid, self.aut, self.prod, len(self.aut.buchi))
 
 
 def exact_search(aut: TimedAutomaton, names: list[str], cls: list[int], adj: list[list[tuple[int, int]]], r0: int,

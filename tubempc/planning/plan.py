@@ -20,17 +20,18 @@ from typing import TYPE_CHECKING, Any
 
 import networkx as nx
 
+from tubempc.errors import DesignError
 from tubempc.mitl import Formula
-from tubempc.planning.retime import retime
+from tubempc.planning.retime import OBJECTIVES, retime
 from tubempc.planning.search import DEFAULT_MAX_STATES, DWELL_MODES, SILENT, SearchResult, find_run
 from tubempc.planning.semantics import LassoRun
-from tubempc.planning.wts import LABELS, ORACLE, TransitionOracle, build_wts
+from tubempc.planning.wts import FAILED, LABELS, ORACLE, TransitionOracle, build_wts
 from tubempc.scenario import Scenario
 
 if TYPE_CHECKING:
     from tubempc.control.closed_loop import Target
 
-__all__ = ["Plan", "PlannedTarget", "plan_from_wts", "plan_mission"]
+__all__ = ["Plan", "PlannedTarget", "plan_from_wts", "plan_mission", "require_transitions"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +65,8 @@ class Plan:
     oracle: str
     search_s: float
     product_states: int
+    objective: str = "time"  # "time": the cost is the search's optimum; "margin": re-timed for margin alone
+    method: str = ""  # how the search established the run (exact search, or first attempt proved optimal)
 
     def __post_init__(self) -> None:
         if not self.run or self.run[0][1] != 0.0:
@@ -90,6 +93,7 @@ class Plan:
             "wait": self.wait,
             "dwell": self.dwell,
             "retimed": self.retimed,
+            "objective": self.objective,
             "tick_s": str(self.tick_s),
             "oracle": self.oracle,
         }
@@ -131,13 +135,36 @@ def _silent_targets(run: LassoRun, weights: list[Fraction]) -> tuple[PlannedTarg
     return tuple(out)
 
 
-def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
-                  max_states: int = DEFAULT_MAX_STATES, dwell: str = SILENT) -> Plan:
-    """Search, re-time and map to targets (raises ``NoAcceptingRunError`` when no run exists).
+def require_transitions(wts: nx.DiGraph) -> None:
+    """Raise ``DesignError`` (unusable input, exit 3) when the abstraction has no usable transition because every
+    region pair failed (the controller's design check, or its runs): the message names the failed quantity."""
+    failed: dict[tuple[str, str], str] = wts.graph.get(FAILED) or {}
+    if wts.number_of_edges() > 0 or not failed:
+        return
+    counts: dict[str, list[tuple[str, str]]] = {}
+    for pair, reason in failed.items():
+        counts.setdefault(reason, []).append(pair)
+    reason, pairs = max(counts.items(), key=lambda kv: (len(kv[1]), kv[0]))
+    a, b = sorted(pairs)[0]
+    others = "" if len(counts) == 1 else f"; {len(counts) - 1} other reason(s) for the other pairs"
+    raise DesignError(f"the abstraction has no usable transition: all {len(failed)} region pairs failed; "
+                      f"{len(pairs)} of them (e.g. {a}->{b}) with {reason}{others}")
 
-    ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` or ``observed``."""
+
+def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
+                  max_states: int = DEFAULT_MAX_STATES, dwell: str = SILENT, objective: str = "time") -> Plan:
+    """Search, re-time and map to targets (raises ``NoAcceptingRunError`` when no run exists, ``SearchLimitError``
+    when the search reaches ``max_states`` before it can decide, ``DesignError`` when every region pair of the
+    abstraction failed: ``require_transitions``).
+
+    ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` or ``observed``.
+    ``objective``: ``time`` (default) re-times for margin without making the run's cost later than the search's
+    optimum; ``margin`` maximises the margin even if the last obligation is then met later."""
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective={objective!r} must be one of {OBJECTIVES}")
+    require_transitions(wts)
     found: SearchResult = find_run(wts, formula, wait=wait, initial=initial, max_states=max_states, dwell=dwell)
     labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
     silent = found.dwell == SILENT
@@ -145,7 +172,7 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
     weights = [Fraction(0)] + [found.run.times[k] - found.run.times[k - 1] - found.waits_s[k]
                                for k in range(1, found.run.size)]
     re = retime(found.run, found.kinds, formula, labels, min_dwell_s=found.tick_s,
-                waits_s=found.waits_s if silent else None)
+                waits_s=found.waits_s if silent else None, objective=objective)
     run = re.run
     loop = run.loop_start if run.loop_start is not None else run.size - 1
     period = run.period if run.period is not None else Fraction(0)
@@ -166,14 +193,17 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
         oracle=str(wts.graph.get(ORACLE, "?")),
         search_s=found.seconds,
         product_states=found.states,
+        objective=objective,
+        method=found.method,
     )
 
 
 def plan_mission(scenario: Scenario, *, formula: Formula | None = None, wait: bool = True, dwell: str = SILENT,
                  wts: nx.DiGraph | None = None, oracle: TransitionOracle | None = None, use_cache: bool = True,
-                 workers: int | None = None, dask: Any = None, progress: bool | None = None) -> Plan:
+                 workers: int | None = None, dask: Any = None, progress: bool | None = None,
+                 objective: str = "time") -> Plan:
     """Build (or reuse) the scenario's WTS and plan ``formula`` (default: the scenario's spec) on it."""
     graph = wts if wts is not None else build_wts(scenario, oracle=oracle, use_cache=use_cache, workers=workers,
                                                   dask=dask, progress=progress)
     return plan_from_wts(graph, formula if formula is not None else scenario.formula, wait=wait, dwell=dwell,
-                         initial=scenario.initial_region)
+                         initial=scenario.initial_region, objective=objective)

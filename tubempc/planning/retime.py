@@ -14,6 +14,8 @@ sub-formula that the verdict uses, so the re-timed run satisfies the formula (an
 Three linear programs (cvxpy): maximise the smallest slack (the margin); at that margin, maximise the sum of the
 slacks of the two-sided windows (each capped at its half width: witnesses move towards the window centres); at
 both optima, minimise the total duration. Durations of the repeating part stay fixed (the suffix is periodic).
+Objective ``time`` (default) adds one constraint: the run's cost (its last position, or its repeating part's first)
+stays at or before the search's, so the re-timing never gives up time-optimality for margin; ``margin`` drops it.
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ import numpy as np
 from tubempc.mitl import Always, And, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, subformulas
 from tubempc.planning.semantics import LassoRun, holds, truth_table
 
-__all__ = ["Retimed", "retime"]
+__all__ = ["OBJECTIVES", "Retimed", "retime"]
+
+OBJECTIVES = ("time", "margin")
 
 _MARGIN_CAP_S = 1e4  # bounds the LP when nothing limits the margin
 _ROUND = Fraction(1, 1000)  # re-timed dwells are rounded to the millisecond
@@ -137,12 +141,17 @@ def _keeps(formula: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]],
 
 
 def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mapping[str, Sequence[str]], *,
-           min_dwell_s: Fraction, waits_s: Sequence[Fraction] | None = None) -> Retimed:
+           min_dwell_s: Fraction, waits_s: Sequence[Fraction] | None = None, objective: str = "time") -> Retimed:
     """Maximise the margin over the free durations of the prefix of ``run`` (see the module docstring).
 
     Observed dwells (``kinds[p] == "dwell"``) last at least ``min_dwell_s``. With ``waits_s`` (silent mode: the
     wait before the move into each position), every prefix move is free: it lasts at least its WTS weight
-    (``times[p] - times[p - 1] - waits_s[p]``), the excess being the silent wait before its departure."""
+    (``times[p] - times[p - 1] - waits_s[p]``), the excess being the silent wait before its departure.
+    ``objective="time"`` (default): the run's cost (its last position, or its repeating part's first one) stays
+    at or before the search's, so a time-optimal run stays time-optimal; ``"margin"``: the margin alone counts
+    (the cost may grow)."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective={objective!r} must be one of {OBJECTIVES}")
     loop = run.loop_start if run.loop_start is not None else run.size - 1
     span = _max_constant(formula) + (run.period or 0) + 1
     horizon = 0
@@ -161,16 +170,25 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
             free[p] = run.times[p] - run.times[p - 1] - waits_s[p]
     if not free:
         return Retimed(run, margin0, False)
-    new = _solve(run, keeps, originals, free, loop=loop)
+    new = _solve(run, keeps, originals, free, loop=loop, keep_cost=objective == "time")
     if new is None:
         return Retimed(run, margin0, False)
     durations = {p: max(lo, round(Fraction(x) / _ROUND) * _ROUND) for (p, lo), x in zip(free.items(), new,
                                                                                           strict=True)}
+    if objective == "time":
+        # millisecond rounding may push the cost a little past the optimum: take the excess off a free step
+        excess = sum(durations.values()) - sum(run.times[p] - run.times[p - 1] for p in free)
+        if excess > 0:
+            slackest = max(free, key=lambda p: durations[p] - free[p])
+            if durations[slackest] - free[slackest] >= excess:
+                durations[slackest] -= excess
     times = [Fraction(0)]
     for p in range(1, run.size):
         step = durations.get(p, run.times[p] - run.times[p - 1])
         times.append(times[-1] + step)
     candidate = LassoRun(run.regions, tuple(times), run.loop_start, run.period)
+    if objective == "time" and candidate.times[loop] > run.times[loop]:
+        return Retimed(run, margin0, False)  # rounding moved the cost past the optimum
     if not holds(formula, candidate, labels):
         return Retimed(run, margin0, False)
     margin = min(_slack(candidate.time(k.j) - candidate.time(k.i), k, d) for d, k in zip(originals, keeps, strict=True))
@@ -180,7 +198,7 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
 
 
 def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: Mapping[int, Fraction], *,
-           loop: int) -> list[float] | None:
+           loop: int, keep_cost: bool) -> list[float] | None:
     import cvxpy as cp
 
     positions = list(free)
@@ -220,13 +238,22 @@ def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: M
     x = cp.Variable(len(positions))
     m = cp.Variable()
     base_cons = [x >= lower, m <= _MARGIN_CAP_S]
+    if keep_cost:
+        # every free step lies before the loop start (or the last position): their sum fixes the cost
+        base_cons.append(cp.sum(x) <= float(x0.sum()))  # type: ignore[attr-defined]
     centred = [k for k, h in enumerate(half) if h > 0]
     try:
         p1 = cp.Problem(cp.Maximize(m), [*base_cons, a @ x + b >= m])
         p1.solve(solver=cp.CLARABEL)  # type: ignore[no-untyped-call]
-        if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None or float(m.value) <= 1e-6:
+        if p1.status not in ("optimal", "optimal_inaccurate") or m.value is None:
             return None
-        best = float(m.value) * (1 - 1e-6) - 1e-9
+        if float(m.value) <= 1e-6:
+            if not keep_cost:
+                return None
+            # the optimum sits on a window end (margin 0): still centre the other witnesses at that cost
+            best = 0.0
+        else:
+            best = float(m.value) * (1 - 1e-6) - 1e-9
         cons = [*base_cons, a @ x + b >= best]
         if centred:
             # each two-sided window's own slack s_k (<= both sides, <= half width), summed: witnesses move to centres

@@ -8,22 +8,19 @@ next move arrives later; ``observed`` — a position of the run) -> output: a ``
 
 Times are scaled to integer ticks (the gcd of all weights and interval endpoints, halved when waiting is allowed
 so that "strictly after a constant" is one tick after it); every clock value is then an integer and the product is
-a finite graph. The search is Dijkstra over product states ``(region, automaton state)`` by (time, travel time):
-* moves follow WTS edges (one new position at the arrival);
-* silent waits (default): a move may first wait an *event-driven* number of ticks, so that its arrival, or the
-  arrival after it, lands where a pending obligation changes status there (``TimedAutomaton.silent_goals``); a
-  state whose pending obligations all accept the end of the run (``final``) may stay forever (a finite run);
-* observed dwells: a dwell creates one new position in the same region after an *event-driven* duration: until a pending
-  obligation changes status at the dwell position, or so that the next arrival in a region where the obligation
-  can change value lands exactly on its window's lower end (or just past the upper end of a G/R window), or one
-  tick (see ``TimedAutomaton.event_delays`` / ``targeted_delays``);
-* with waiting allowed, a state is pruned when an earlier state in the same region, after one dwell (silent:
-  aging without a position) up to the same time, has a weaker obligation set (it can do all the pruned state can);
-* the first state (in time order) with an accepting dwell self-loop ends the search; then the strongly connected
-  components of the explored graph that contain a cycle through every Büchi set give the accepting lassos, and the
-  one entered earliest is returned (the cycle visits one accepting state per Büchi set). Without waiting, the
-  finite product is explored completely.
-If the pruned search finds nothing, it is repeated without pruning before reporting that no run exists.
+a finite graph. Cost of a run: the time of its last position (a finite run) or of its repeating part's first one.
+
+With waiting, two stages:
+1. a fast first attempt (this module's ``_search``): Dijkstra over ``(region, automaton state)`` by (time, travel)
+   with *event-driven* waits only — a silent wait lands the next arrival, or the one after it, where a pending
+   obligation changes status (``TimedAutomaton.silent_goals``); an observed dwell lasts until an obligation changes
+   status (``event_delays`` / ``targeted_delays``) — and pruning by dominance. It may miss a run or find a late
+   one, so its answer is re-checked by the reference semantics and only used as an upper bound;
+2. the exact search (``tubempc.planning.exact``): waiting as one-tick delay transitions, A* below the first
+   attempt's cost. It finds a cheaper run, or proves that none exists (then the first attempt's run is optimal),
+   or — without a first run — proves that no run exists at all. "No accepting run" is never said by stage 1.
+Without waiting the product is finite and stage 1 explores it completely (no pruning): it is exact on its own.
+Past ``max_states`` product states a search raises ``SearchLimitError`` (undecided, not "no run").
 """
 
 from __future__ import annotations
@@ -36,11 +33,11 @@ from fractions import Fraction
 
 import networkx as nx
 
-from tubempc.errors import NoAcceptingRunError
+from tubempc.errors import NoAcceptingRunError, SearchLimitError
 from tubempc.mitl import And, Formula, Interval, subformulas
 from tubempc.mitl.ast import Always, Eventually, Next, Until
 from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, tick_of
-from tubempc.planning.exact import SearchLimitError, exact_search
+from tubempc.planning.exact import exact_search
 from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
 from tubempc.planning.semantics import LassoRun, holds
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
@@ -48,11 +45,12 @@ from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
            "find_run"]
 
-DEFAULT_MAX_STATES = 2_000_000
+DEFAULT_MAX_STATES = 500_000  # about 40 s and a few hundred MB of product; raise with --max-states
 SILENT, OBSERVED = "silent", "observed"
 DWELL_MODES = (SILENT, OBSERVED)
 FAST = "first attempt, proved optimal by the exact search"
 EXACT = "exact search"
+_DIAGNOSIS_STATES = 100_000  # per conjunct set checked while naming the obligation (undecided: named nothing)
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
 
@@ -63,7 +61,11 @@ class SearchResult:
     ``waits_s[i]`` is the silent wait (seconds) in the previous region before the move that arrives at position
     ``i`` (0 for the start, dwells and moves without a wait); ``closing_wait_s`` that of the move from the last
     position back to ``loop_start`` (0 for a finite run). ``dwell`` is ``silent``, ``observed`` or ``none``.
-    A finite run (``run.loop_start is None``) stays in its last region forever without a further position."""
+    A finite run (``run.loop_start is None``) stays in its last region forever without a further position.
+
+    ``method`` says how the run was established: by the exact search, or by the fast first attempt with the exact
+    search proving that no cheaper run exists; ``exact_s`` is the time spent in the exact search (the cost of
+    exactness), ``states`` the product states created by both."""
 
     run: LassoRun
     kinds: tuple[str, ...]
@@ -75,6 +77,7 @@ class SearchResult:
     closing_wait_s: Fraction
     dwell: str
     method: str
+    exact_s: float
     automaton: TimedAutomaton = field(compare=False, repr=False)
     product: Product = field(compare=False, repr=False)
     region_names: tuple[str, ...] = field(compare=False, repr=False, default=())
@@ -89,11 +92,18 @@ def _intervals(formula: Formula) -> list[Interval]:
 
 
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
-             max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT) -> SearchResult:
+             max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT,
+             first_attempt: bool = True, optimal: bool = True) -> SearchResult:
     """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring).
 
     ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` (a wait adds no
-    position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run)."""
+    position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run).
+    ``first_attempt=False`` skips the fast event-driven stage (the exact search alone decides; same answer, usually
+    slower); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
+    exists (a satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a
+    run, that run is returned with ``method`` saying that its optimality is not proved. Raises
+    ``NoAcceptingRunError`` only when the exact search proves that no run exists, and ``SearchLimitError`` when a
+    search reaches ``max_states`` product states first."""
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()
@@ -114,6 +124,7 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
     labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in names}
     states = 0
+    exact_s = 0.0
     if not wait:
         # without waiting the product is finite and explored completely: the event-driven search is exact
         result = _search(wts, aut, init, wait=False, silent=False, prune=False, max_states=max_states)
@@ -123,21 +134,37 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     else:
         # a fast first attempt (event-driven waits, pruning by dominance); it may miss runs or find a late one, so
         # the exact search (delay transitions) runs below its cost: it finds a cheaper run or proves there is none
-        fast: Found | None
-        try:
-            fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
-        except SearchLimitError:
-            fast = None
+        fast: Found | None = None
+        if first_attempt:
+            try:
+                fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
+            except SearchLimitError:
+                fast = None
         if fast is not None:
             states += len(fast[4].region)
             if not holds(formula, fast[0], labels):
                 fast = None  # never trust the first attempt's answer unchecked
         bound = math.inf if fast is None else float(_cost(fast[0]) / tick)
-        adj = _adjacency(wts, names, idx, tick)
-        exact, exact_states = exact_search(aut, names, cls, adj, idx[init], mode=SILENT if silent else OBSERVED,
-                                           bound=bound, max_states=max_states)
-        states += exact_states
-        method = FAST if exact is None and fast is not None else EXACT
+        exact: Found | None = None
+        if fast is None or optimal:
+            adj = _adjacency(wts, names, idx, tick)
+            exact_start = time.perf_counter()
+            try:
+                exact, exact_states = exact_search(aut, names, cls, adj, idx[init],
+                                                   mode=SILENT if silent else OBSERVED, bound=bound,
+                                                   max_states=max_states)
+            except SearchLimitError:
+                if fast is None:
+                    raise  # undecided: neither a run nor a proof that none exists
+                # a valid run is known, only its optimality is undecided: return it and say so
+                method = f"first attempt; optimality not proved (the exact search reached {max_states} states)"
+                exact_states = max_states
+            else:
+                method = FAST if exact is None and fast is not None else EXACT
+            states += exact_states
+            exact_s = time.perf_counter() - exact_start
+        else:
+            method = "first attempt (optimality not checked)"
         result = exact if exact is not None else fast
     if result is None:
         if diagnose:
@@ -147,7 +174,7 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     return SearchResult(run=run, kinds=kinds, tick_s=tick, states=states, expanded=expanded,
                         seconds=time.perf_counter() - start, waits_s=tuple(w * tick for w in waits),
                         closing_wait_s=closing * tick, dwell=(dwell if wait else "none"), automaton=aut,
-                        product=prod, region_names=tuple(names), method=method)
+                        product=prod, region_names=tuple(names), method=method, exact_s=exact_s)
 
 
 def _cost(run: LassoRun) -> Fraction:
@@ -348,9 +375,12 @@ def _no_run_error(wts: nx.DiGraph, formula: Formula, *, wait: bool, dwell: str, 
     conjuncts = list(formula.args) if isinstance(formula, And) else [formula]
     mode = f"with {dwell} waiting" if wait else "without waiting (--no-wait)"
 
+    budget = min(max_states, _DIAGNOSIS_STATES)
+
     def unsatisfiable(f: Formula) -> bool:
         try:
-            find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=max_states, diagnose=False)
+            find_run(wts, f, wait=wait, dwell=dwell, initial=initial, max_states=budget, diagnose=False,
+                     optimal=False)
         except NoAcceptingRunError:
             return True
         except SearchLimitError:

@@ -8,18 +8,19 @@ Semantics (the same as the certifier's timed-run monitor): ``p`` holds at ``i`` 
 ``a U_I b`` at ``i`` iff some ``j >= i`` with ``t_j - t_i in I`` has ``b`` and ``a`` holds at every ``k`` in
 ``[i, j)``; ``F_I a = true U_I a``; ``G_I a = !F_I !a``; ``X_I a`` at ``i`` iff ``t_{i+1} - t_i in I`` and ``a`` holds
 at ``i + 1``. Positions of the repeating part have identical futures in every copy, so one copy carries their truth.
-Used to cross-check the product search (brute-force tests) and to validate re-timed plans.
+Used to cross-check the product search (brute-force tests) and to validate re-timed plans; ``brute_force_silent``
+enumerates every finite run with silent waits on a time grid (the planner's independent reference for tests).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until, subformulas
 
-__all__ = ["LassoRun", "holds", "truth_table"]
+__all__ = ["LassoRun", "brute_force_silent", "holds", "truth_table"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,3 +162,37 @@ def _values(f: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]], tabl
 def holds(formula: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]]) -> bool:
     """Whether the run satisfies ``formula`` at position 0."""
     return truth_table(formula, run, labels)[formula][0]
+
+
+def brute_force_silent(labels: Mapping[str, Sequence[str]], weights: Mapping[tuple[str, str], Fraction | int],
+                       formula: Formula, *, initial: str, grid_s: Fraction, max_moves: int,
+                       until_s: Fraction, dead: Callable[[LassoRun], bool] | None = None) -> LassoRun | None:
+    """The earliest-ending satisfying finite run, by brute force: every run of at most ``max_moves`` moves along
+    ``weights`` (``(a, b) -> seconds``) from ``initial``, with every silent wait on the ``grid_s`` grid before every
+    departure (the first included), every position at or before ``until_s``; the robot stays in its last region
+    forever without a further position. Ties: fewer positions first. ``None`` when no such run satisfies
+    ``formula``. ``dead(run)`` (optional) says that no extension of the finite run by later positions can satisfy
+    the formula (the caller vouches for it); such runs are not extended. Exponential: for tests on small WTSs."""
+    if grid_s <= 0 or max_moves < 0:
+        raise ValueError(f"grid_s={grid_s} must be positive and max_moves={max_moves} non-negative")
+    out: dict[str, list[tuple[str, Fraction]]] = {}
+    for (a, b), w in weights.items():
+        out.setdefault(a, []).append((b, Fraction(w)))
+    best: LassoRun | None = None
+    stack: list[tuple[tuple[str, ...], tuple[Fraction, ...]]] = [((initial,), (Fraction(0),))]
+    while stack:
+        regions, times = stack.pop()
+        if best is not None and (times[-1], len(times)) >= (best.times[-1], best.size):
+            continue  # every extension ends later
+        run = LassoRun(regions, times)
+        if holds(formula, run, labels):
+            best = run
+            continue
+        if len(regions) > max_moves or (dead is not None and dead(run)):
+            continue
+        for b, w in out.get(regions[-1], ()):
+            t = times[-1] + w
+            while t <= until_s:
+                stack.append(((*regions, b), (*times, t)))
+                t += grid_s
+    return best

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from tubempc.errors import ScenarioError
 from tubempc.mitl import Formula, atoms, parse
-from tubempc.scenario.polygon import polygon_bounds, polygon_problem
+from tubempc.scenario.polygon import disc_within_polygon, polygon_bounds, polygon_problem, polygon_within_polygon
 
 __all__ = [
     "CHECK_NAMES",
@@ -134,15 +134,15 @@ class Region(_Frozen):
     def center(self) -> tuple[float, float]:
         """Centre of a disc region (the planner's regions are discs: ``Scenario.planning_problems``)."""
         if self.disc_center is None:
-            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
-                                field=f"regions.{self.name}")
+            raise ScenarioError("is a polygon: this part of tubempc (the planner, the controller, the online monitor) "
+                                "takes disc regions only", field=f"regions.{self.name}")
         return self.disc_center
 
     @property
     def radius(self) -> float:
         if self.disc_radius is None:
-            raise ScenarioError("the planner and controller need disc regions; this one is a polygon",
-                                field=f"regions.{self.name}")
+            raise ScenarioError("is a polygon: this part of tubempc (the planner, the controller, the online monitor) "
+                                "takes disc regions only", field=f"regions.{self.name}")
         return self.disc_radius
 
     @property
@@ -450,10 +450,12 @@ class Scenario(_Frozen):
         eta = self.robot.radius
         for i, r in enumerate(self.regions):
             x0, y0, x1, y1 = r.bounds
-            if ws.is_box and (x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1):
-                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace box")
-            elif not ws.is_box and (x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1):
-                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace polygon's bounding box")
+            if ws.polygon is None:
+                if x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1:
+                    out.append(f"regions[{i}] ({r.name}): reaches outside the workspace box")
+            elif not (polygon_within_polygon(r.polygon, ws.polygon) if r.polygon is not None
+                      else disc_within_polygon(r.center, r.radius, ws.polygon)):
+                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace polygon")
             if not r.unsafe:
                 w, h = x1 - x0, y1 - y0
                 if min(w, h) <= 2 * eta:

@@ -7,9 +7,10 @@ touch) or None. Exact predicates on floats (orientation signs), no tolerance: a 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
-__all__ = ["polygon_bounds", "polygon_problem", "signed_area"]
+__all__ = ["disc_within_polygon", "polygon_bounds", "polygon_problem", "polygon_within_polygon", "signed_area"]
 
 Point = tuple[float, float]
 
@@ -72,3 +73,47 @@ def polygon_problem(vertices: Sequence[Point]) -> str | None:
             if _segments_meet(a, b, c, d):
                 return f"edges {i} and {j} cross or touch (the polygon is not simple)"
     return None
+
+
+def _inside(p: Point, vertices: Sequence[Point]) -> bool:
+    """Even-odd rule (a point on the boundary may go either way; callers check the boundary distance)."""
+    x, y = p
+    inside = False
+    n = len(vertices)
+    for i in range(n):
+        (x0, y0), (x1, y1) = vertices[i], vertices[(i + 1) % n]
+        if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+            inside = not inside
+    return inside
+
+
+def _boundary_distance(p: Point, vertices: Sequence[Point]) -> float:
+    best = math.inf
+    n = len(vertices)
+    for i in range(n):
+        (ax, ay), (bx, by) = vertices[i], vertices[(i + 1) % n]
+        ex, ey = bx - ax, by - ay
+        t = max(0.0, min(1.0, ((p[0] - ax) * ex + (p[1] - ay) * ey) / (ex * ex + ey * ey)))
+        best = min(best, math.hypot(p[0] - ax - t * ex, p[1] - ay - t * ey))
+    return best
+
+
+def disc_within_polygon(center: Point, radius: float, vertices: Sequence[Point]) -> bool:
+    """The closed disc lies inside the polygon (touching the boundary from inside allowed)."""
+    return _inside(center, vertices) and _boundary_distance(center, vertices) >= radius
+
+
+def polygon_within_polygon(inner: Sequence[Point], outer: Sequence[Point]) -> bool:
+    """Every vertex of ``inner`` is inside or on ``outer`` and no edges cross properly (so ``inner`` is inside)."""
+    for p in inner:
+        if not (_inside(p, outer) or _boundary_distance(p, outer) == 0.0):
+            return False
+    n, m = len(inner), len(outer)
+    for i in range(n):
+        a, b = inner[i], inner[(i + 1) % n]
+        for j in range(m):
+            c, d = outer[j], outer[(j + 1) % m]
+            o1, o2, o3, o4 = _orient(a, b, c), _orient(a, b, d), _orient(c, d, a), _orient(c, d, b)
+            if o1 * o2 < 0 and o3 * o4 < 0:
+                return False
+    return True

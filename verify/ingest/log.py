@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -21,8 +21,10 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
+from verify.ingest.clocks import clock_report, median_offset_s
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
+from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
@@ -69,6 +71,7 @@ class LogData:
     time_base_note: str | None = None
     samples: dict[str, dict[str, int]] = field(default_factory=dict)  # per stream: read, judged, merged, ...
     stream_problems: dict[str, str] = field(default_factory=dict)  # stream -> why nothing judged on it can pass
+    signals: dict[str, SignalStream] = field(default_factory=dict)  # signal atoms (verify.ingest.fields)
 
 
 
@@ -144,10 +147,12 @@ def _check_path(p: Path) -> None:
 
 
 def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", salvage: bool = False,
-             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST) -> LogData:
-    """The log at ``path`` as the certifier sees it; its digest (``digest``: "blake3" or "sha256") is computed in
-    a thread beside the reading. Any error of the readers on damaged bytes is a ``LogReadError`` (exit 3) naming
-    the file and the problem in words, never an internal error."""
+             time0_ns: int | None = None, digest: str = DEFAULT_DIGEST,
+             clock_offsets: Mapping[str, float] | None = None) -> LogData:
+    """Read and judge-ready the log at ``path``; any error of the readers on damaged bytes is a ``LogReadError``
+    (exit 3) naming the file and the problem in words, never an internal error. Its digest (``digest``: "blake3" or
+    "sha256") is computed in a thread beside the reading. ``clock_offsets`` (topic -> seconds, added to that topic's
+    times) extends and overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
@@ -157,7 +162,9 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
     except ValueError as err:
         raise UnusableInputError(str(err)) from err
     try:
-        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job)
+        offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
+        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
+                         offsets_s=offsets)
     except VerifyError:
         job.cancel()
         raise
@@ -182,9 +189,12 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
 
 
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob) -> LogData:
+              job: DigestJob, offsets_s: dict[str, float]) -> LogData:
+    offsets_ns = {topic: round(sec * 1e9) for topic, sec in offsets_s.items()}
+    clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
     wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
+    wanted |= {sig.topic for sig in scenario.signals.values()}
     raw = read_raw(p, wanted, salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
@@ -207,7 +217,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
     base = choose_time_base(cols.stamp_ns, cols.log_ns, time_base)
-    stamps = base.t_ns
+    stamps = base.t_ns + offsets_ns.get(pose_topic, 0)
+    clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
     pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
     t0 = int(pose.t_ns[0]) if time0_ns is None else int(time0_ns)
@@ -240,11 +251,13 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     nominal = None
     nraw = raw.topics.get(t.nominal) if t.nominal is not None else None
     ncols = None
-    if nraw is not None and nraw.payloads:
-        ncols = _decode_optional("nominal", nraw.topic, lambda: decode_pose(nraw, raw.ros1), quality)
+    if nraw is not None and nraw.payloads and t.nominal is not None:
+        nominal_topic = t.nominal
+        ncols = _decode_optional("nominal", nominal_topic, lambda: decode_pose(nraw, raw.ros1), quality)
     if ncols is not None:
         nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
-        nst = nbase.t_ns
+        nst = nbase.t_ns + offsets_ns.get(nominal_topic, 0)
+        clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
         nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
         quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
@@ -259,24 +272,36 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     cmd_t = cmd_u = None
     craw = raw.topics.get(t.cmd_vel) if t.cmd_vel is not None else None
     tw = None
-    if craw is not None and craw.payloads:
-        tw = _decode_optional("cmd_vel", craw.topic, lambda: decode_twist(craw, raw.ros1), quality)
-    if tw is not None and craw is not None:
+    if craw is not None and craw.payloads and t.cmd_vel is not None:
+        cmd_topic = t.cmd_vel
+        tw = _decode_optional("cmd_vel", cmd_topic, lambda: decode_twist(craw, raw.ros1), quality)
+    if tw is not None:
         # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
-        cst = tw.stamp_ns if (tw.stamp_ns is not None and base.name == "header") else tw.log_ns
+        header_cmd = tw.stamp_ns is not None and base.name != "log"
+        cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + offsets_ns.get(cmd_topic, 0)
+        clock_streams[cmd_topic] = ("header" if header_cmd else "log", median_offset_s(cst, tw.log_ns))
         corder = clean_order(cst)
         cjs = judged_samples(cst, tw.u)
         cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
-        cq = stream_findings(cst, tw.log_ns if cst is not tw.log_ns else None, corder,
-                             expected_rate_hz=scenario.mocap.rate_hz, time0_ns=t0)
+        cq = stream_findings(cst, tw.log_ns if header_cmd else None, corder, expected_rate_hz=scenario.mocap.rate_hz,
+                             time0_ns=t0)
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         cq.update(cjs.counts())
-        cq["type"] = craw.msgtype
-        cq["time_base"] = "header" if cst is not tw.log_ns else "log"
+        cq["type"] = craw.msgtype if craw is not None else "?"
+        cq["time_base"] = "header" if header_cmd else "log"
         quality["cmd_vel"] = cq
         samples["cmd_vel"] = cjs.counts()
     elif "cmd_vel" not in quality:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
+
+    signals, signal_quality = read_signals(raw, scenario, base.name, str(p), offsets_ns)
+    if signal_quality:
+        quality["signals"] = signal_quality
+        for sq in signal_quality.values():
+            clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
+    clocks = clock_report(pose_topic, clock_streams, offsets_s)
+    quality["clocks"] = clocks
+    quality["notes"].extend(clocks["findings"])
 
     statuses, bad_status = _json_objects(raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
@@ -297,4 +322,4 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                    {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
                    nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
                    pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,
-                   samples=samples, stream_problems=problems)
+                   samples=samples, stream_problems=problems, signals=signals)

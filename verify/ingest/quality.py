@@ -69,9 +69,11 @@ def stream_findings(stamps_ns: IntArray, log_ns: IntArray | None, order: CleanOr
     near = int(np.count_nonzero(stamps_ns < NEAR_1970_NS))
     out["stamps_near_1970"] = near
     if log_ns is not None and log_ns.shape == stamps_ns.shape and stamps_ns.size:
-        off = (log_ns - stamps_ns).astype(np.float64) * 1e-9
+        # header stamp minus log (receive) time: negative when the header lags the recorder's clock (latency)
+        off = (stamps_ns - log_ns).astype(np.float64) * 1e-9
         out["header_vs_log_offset_s"] = {"median": round(float(np.median(off)), 9),
-                                         "max_abs": round(float(np.max(np.abs(off))), 9)}
+                                         "max_abs": round(float(np.max(np.abs(off))), 9),
+                                         "convention": "header stamp - log time"}
     return out
 
 

@@ -13,8 +13,9 @@ right connection id, time equal to the index), and the payloads are copied out w
 Python object). Messages are ordered as ``rosbags`` yields them: by (time, chunk position, offset). The file is
 opened read-only and read with positioned reads; chunks without a wanted connection are not read, and from an
 uncompressed chunk whose records are not all wanted only the wanted records are read (``verify.ingest.records``,
-at the index offsets). Compressed chunks are decompressed whole, one at a time; what is kept is copied out of them,
-so the working set is one chunk plus the wanted payloads, whatever the file's size.
+at the index offsets). Compressed chunks are decompressed whole, a few ahead of the parser in threads
+(``verify.ingest.records.in_order``); what is kept is copied out of them, so the working set is a few chunks plus
+the wanted payloads, whatever the file's size.
 """
 
 from __future__ import annotations

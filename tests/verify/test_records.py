@@ -1,0 +1,95 @@
+"""Message-level reads (``verify.ingest.records``): the records an index points at, and nothing that is not one;
+chunks processed ahead in threads come back in order, a bounded number at a time, errors where they are due."""
+
+from __future__ import annotations
+
+import os
+import struct
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from verify.ingest.records import MCAP, ROS1, SpanError, in_order, read_records
+
+
+def _ros1_record(data: bytes) -> bytes:
+    header = b"\x03\x00\x00\x00op=\x02"
+    return struct.pack("<I", len(header)) + header + struct.pack("<I", len(data)) + data
+
+
+def _mcap_record(content: bytes) -> bytes:
+    return b"\x05" + struct.pack("<Q", len(content)) + content
+
+
+def _file(tmp_path: Path, body: bytes) -> tuple[int, int]:
+    path = tmp_path / "chunk.bin"
+    path.write_bytes(b"HEAD" + body + b"TAIL")
+    return os.open(path, os.O_RDONLY), len(body)
+
+
+@pytest.mark.parametrize("kind", [ROS1, MCAP])
+def test_reads_exactly_the_indexed_records(tmp_path: Path, kind: str) -> None:
+    make = _ros1_record if kind == ROS1 else _mcap_record
+    records = [make(bytes([k]) * (10 + 7 * k)) for k in range(6)]
+    filler = make(b"\xff" * 200_000)  # a camera frame between the wanted records: far apart, not read
+    body = records[0] + records[1] + filler + records[2] + filler + records[3] + records[4] + records[5]
+    starts = [body.index(r) for r in records]
+    fd, size = _file(tmp_path, body)
+    try:
+        wanted = np.array([starts[0], starts[2], starts[3], starts[5]], dtype=np.int64)
+        u8, pos = read_records(fd, 4, size, wanted, kind, gap_b=1 << 16)
+        got = [u8[int(p) : int(p) + len(records[k])].tobytes() for p, k in zip(pos, (0, 2, 3, 5), strict=True)]
+        assert got == [records[k] for k in (0, 2, 3, 5)]
+        assert u8.shape[0] < 2 * sum(len(r) for r in records)  # neither filler was read
+    finally:
+        os.close(fd)
+
+
+@pytest.mark.parametrize("kind", [ROS1, MCAP])
+def test_offsets_that_are_not_records_are_refused(tmp_path: Path, kind: str) -> None:
+    make = _ros1_record if kind == ROS1 else _mcap_record
+    a, b = make(b"a" * 40), make(b"b" * 40)
+    body = a + b
+    fd, size = _file(tmp_path, body)
+    try:
+        with pytest.raises(SpanError):  # the second offset points inside the first record
+            read_records(fd, 4, size, np.array([0, 5], dtype=np.int64), kind)
+        with pytest.raises(SpanError):  # a record that runs past the chunk's end
+            read_records(fd, 4, size - 3, np.array([0, len(a)], dtype=np.int64), kind)
+        with pytest.raises(SpanError):  # unsorted
+            read_records(fd, 4, size, np.array([len(a), 0], dtype=np.int64), kind)
+        u8, pos = read_records(fd, 4, size, np.array([0, len(a)], dtype=np.int64), kind)
+        assert u8.tobytes() == body and pos.tolist() == [0, len(a)]
+    finally:
+        os.close(fd)
+
+
+def test_in_order_keeps_order_bounds_work_ahead_and_raises_where_due() -> None:
+    alive = [0]
+    most = [0]
+    lock = threading.Lock()
+
+    def work(k: int) -> int:
+        with lock:
+            alive[0] += 1
+            most[0] = max(most[0], alive[0])
+        if k == 7:
+            raise ValueError("chunk 7 is damaged")
+        return k
+
+    got: list[int] = []
+
+    def consume() -> None:
+        for k in in_order(work, range(20), workers=3):
+            got.append(k)
+            with lock:
+                alive[0] -= 1
+
+    with pytest.raises(ValueError, match="chunk 7"):
+        consume()
+    assert got == list(range(7))
+    assert most[0] <= 3 + 1
+    assert list(in_order(lambda k: k * k, range(50), workers=4)) == [k * k for k in range(50)]
+    assert list(in_order(lambda k: k, range(5), workers=1)) == list(range(5))
