@@ -1,4 +1,5 @@
-"""Test-session set-up shared by every suite: hypothesis profiles and a temporary abstraction cache.
+"""Test-session set-up shared by every suite: hypothesis profiles, a temporary abstraction cache, and the check that
+every certificate the tests write matches the published schema.
 
 Profiles, chosen with HYPOTHESIS_PROFILE=dev|ci|nightly (default dev). ci: derandomized (reproducible in CI), modest
 example counts so that the whole property suite stays within five minutes on two cores; nightly: many more examples,
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -57,3 +59,31 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_unconfigure(config: pytest.Config) -> None:
     if _SESSION_CACHE is not None:
         _SESSION_CACHE.cleanup()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _written_certificates_match_the_schema(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """After the session: every ``certificate.json`` any test wrote under the session's temporary folders (in
+    process or by a ``tubempc`` subprocess) is validated against the published JSON Schema of the certificate."""
+    yield
+    files = sorted(tmp_path_factory.getbasetemp().rglob("certificate.json"))
+    if not files:
+        return
+    import json
+
+    import jsonschema
+
+    from verify.certificate import certificate_schema
+
+    validator = jsonschema.Draft202012Validator(certificate_schema())
+    bad = []
+    for path in files:
+        try:
+            errors = [e.message for e in validator.iter_errors(json.loads(path.read_text(encoding="utf-8")))]
+        except (OSError, ValueError) as err:
+            errors = [f"unreadable: {err}"]
+        if errors:
+            bad.append(f"{path}: {errors[0]}")
+    if bad:
+        pytest.fail(f"{len(bad)} of {len(files)} certificate(s) written by the tests break the schema:\n"
+                    + "\n".join(bad[:10]))

@@ -93,3 +93,12 @@ def test_plan_impossible_design_is_exit_3_naming_the_file(tmp_path: Path) -> Non
     out = run("plan", "--scenario", str(path), "--no-cache")
     assert out.returncode == EXIT_UNUSABLE and str(path) in out.stderr and "cannot be designed" in out.stderr
     assert out.stderr.strip().count("\n") == 0
+
+
+def test_simulate_impossible_design_is_exit_3_naming_the_file(tmp_path: Path) -> None:
+    text = run("scenario", "show").stdout
+    path = tmp_path / "heavy.yaml"
+    path.write_text(text.replace("bound: 0.02}", "bound: 5.0}"))
+    out = run("simulate", "--scenario", str(path), "--to", "R2", "--out", str(tmp_path / "x.mcap"))
+    assert out.returncode == EXIT_UNUSABLE and str(path) in out.stderr and "cannot be designed" in out.stderr
+    assert out.stderr.strip().count("\n") == 0 and not (tmp_path / "x.mcap").exists()

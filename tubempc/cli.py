@@ -17,6 +17,7 @@ from typing import NoReturn
 import click
 
 from tubempc.commands.demo import demo
+from tubempc.commands.falsify import falsify
 from tubempc.commands.output import add_verbosity_options, say
 from tubempc.commands.plan import plan
 from tubempc.commands.regress import regress
@@ -93,6 +94,31 @@ def scenario_validate(path: str) -> None:
         say(f"{path}: certification only: the planner cannot use it: {field}: {what}{more}")
 
 
+@cli.group("schema")
+def schema() -> None:
+    """Print the JSON Schema of an output other programs parse."""
+
+
+@schema.command("certificate")
+def schema_certificate() -> None:
+    """The JSON Schema of certificate.json and of `certify --json` (also docs/certificate.schema.json)."""
+    import json
+
+    from verify.certificate import certificate_schema
+
+    click.echo(json.dumps(certificate_schema(), indent=2))
+
+
+@schema.command("certify-json")
+def schema_certify_json() -> None:
+    """The JSON Schema of `certify --json`: a certificate, or a list of certificates and unusable logs."""
+    import json
+
+    from verify.certificate import certify_json_schema
+
+    click.echo(json.dumps(certify_json_schema(), indent=2))
+
+
 @cli.command("spec")
 @click.argument("text")
 def spec(text: str) -> None:
@@ -106,6 +132,7 @@ cli.add_command(plan)
 cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
+cli.add_command(falsify)
 add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
 
 

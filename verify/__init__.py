@@ -3,7 +3,7 @@
 It judges any log, whoever produced it; it shares only the MITL language and the scenario model with ``tubempc``.
 """
 
-from verify.certify import CertifyResult, certify_log, write_certificate
+from verify.certify import CertifyResult, certify_data, certify_log, write_certificate
 from verify.errors import (
     LogReadError,
     MissingTopicError,
@@ -25,6 +25,7 @@ __all__ = [
     "TruncatedLogError",
     "UnusableInputError",
     "VerifyError",
+    "certify_data",
     "certify_log",
     "check_timed_run",
     "write_certificate",

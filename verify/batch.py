@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate
 from verify.errors import UnusableInputError, VerifyError
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
 from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
@@ -164,16 +165,18 @@ class BatchResult:
             failed = [str(c.get("name")) for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"]
             unknown = [str(c.get("name")) for c in checks
                        if isinstance(c, dict) and c.get("verdict") not in ("pass", "fail")]
-            # a failed log's worst margin is its most negative failed check's, never a passing check's
+            # a failed log's worst margin is its most negative failed check's, never a passing check's;
+            # metres only: seconds and m/s do not compare
             judged = [c for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"] or checks
             margins = [float(c["margin"]) for c in judged
-                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)]
+                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)
+                       and c.get("margin_unit") == "m"]
             first = [float(c["first_violation_time"]) for c in checks if isinstance(c, dict)
                      and c.get("verdict") == "fail" and isinstance(c.get("first_violation_time"), int | float)]
             rows.append({
                 "log": item.path, "folder": item.name, "verdict": item.verdict, "exit_code": item.exit_code,
                 "checks": len(checks), "failed_checks": " ".join(failed), "inconclusive_checks": " ".join(unknown),
-                "worst_margin": min(margins) if margins else None,
+                "worst_margin_m": min(margins) if margins else None,
                 "first_violation_s": min(first) if first else None,
                 "error": item.error or "", "elapsed_s": round(item.elapsed_s, 3),
             })
@@ -435,7 +438,8 @@ def _write_item(job: _WriteJob) -> JUnitSuite:
         if job.reports:
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
                           junit_inconclusive=job.junit_inconclusive)
-        suite = certificate_suite(item.result.certificate, suite_name=item.name, inconclusive=job.junit_inconclusive)
+        suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
+                                  inconclusive=job.junit_inconclusive)
         return dataclasses.replace(suite, time_s=item.elapsed_s)
     (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
     case = JUnitCase("read log", item.name, "error", item.verdict, item.error or "")
@@ -459,7 +463,7 @@ def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool)
         colour = colours.get(row["verdict"], "#555")
         body.append(f'<tr><td>{link}</td><td style="color:{colour}">{e(row["verdict"])}</td>'
                     f"<td>{e(row['exit_code'])}</td><td>{e(row['failed_checks'])}</td>"
-                    f"<td>{e(row['inconclusive_checks'])}</td><td>{e(row['worst_margin'])}</td>"
+                    f"<td>{e(row['inconclusive_checks'])}</td><td>{e(row['worst_margin_m'])}</td>"
                     f"<td>{e(row['first_violation_s'])}</td><td>{e(row['error'])}</td></tr>")
     counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>Batch certification</title>"
@@ -468,7 +472,7 @@ def _summary_html(batch: BatchResult, rows: list[dict[str, Any]], reports: bool)
             f"<h1>Batch certification: exit code {batch.exit_code}</h1>"
             f"<p>Scenario {e(batch.scenario.name)}; {len(batch.items)} log(s): {e(counts)}.</p>"
             "<table><tr><th>log</th><th>verdict</th><th>exit</th><th>failed checks</th><th>inconclusive checks</th>"
-            "<th>worst margin</th><th>first violation [s]</th><th>error</th></tr>"
+            "<th>worst margin [m]</th><th>first violation [s]</th><th>error</th></tr>"
             + "".join(body) + "</table></body></html>\n")
 
 
@@ -497,14 +501,14 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     lines = [f"# Batch certification: exit code {batch.exit_code}", "",
              f"Scenario `{_md_cell(batch.scenario.name)}`; {len(batch.items)} log(s): "
              + ", ".join(f"{n} {k}" for k, n in counts.items() if n) + ".", "",
-             "| log | verdict | exit | failed checks | inconclusive checks | worst margin | first violation [s] "
+             "| log | verdict | exit | failed checks | inconclusive checks | worst margin [m] | first violation [s] "
              "| error |", "|---|---|---|---|---|---|---|---|"]
     target = "report.md" if reports else "certificate.json"
     for row in rows:
         link = (f"[{_md_cell(row['log'])}]({row['folder']}/{target})" if row["exit_code"] in (0, 1, 2)
                 else _md_cell(row["log"]))
         lines.append(f"| {link} | {row['verdict']} | {row['exit_code']} | {_md_cell(row['failed_checks'])} | "
-                     f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin'])} | "
+                     f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin_m'])} | "
                      f"{_md_cell(row['first_violation_s'])} | {_md_cell(row['error'])} |")
     (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (out / "summary.html").write_text(_summary_html(batch, rows, reports), encoding="utf-8")

@@ -23,21 +23,25 @@ import pandas as pd
 
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
+from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError, SpecError
-from verify.geometry import containment
+from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
-from verify.signals import signal_bounds, signal_summary, values_at
+from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
 from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
 from verify.trajectory import check_trajectory, reported_margin
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_log", "check_lines",
-           "resolve_scenario", "verdict_line", "write_certificate"]
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
+           "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
 
-CERTIFICATE_VERSION = 2  # 2: log_digest + log_digest_algorithm (log_sha256 only for the sha256 digest)
+#: added to the tube's tolerance: logged positions are absolute float64 (metres from the workspace origin), so a
+#: deviation computed from two of them carries ~1e-15 m of rounding; a run that rides the tube's boundary exactly (the
+#: lemma's worst case) must not fail on it
+POSITION_ROUNDING_M = 1e-9
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
@@ -55,6 +59,11 @@ class CertifyResult:
     @property
     def verdict(self) -> str:
         return str(self.certificate["verdict"])
+
+    @property
+    def model(self) -> Certificate:
+        """The certificate as the typed model (``verify.certificate``)."""
+        return Certificate.model_validate(self.certificate)
 
 
 def resolve_scenario(scenario: Scenario | str | Path) -> Scenario:
@@ -77,10 +86,16 @@ def _rel_s(t_ns: int | None, time0_ns: int) -> float | None:
     return None if t_ns is None else round((t_ns - time0_ns) * 1e-9, 9)
 
 
+#: unit of each check's margin (a check may state its own as ``details["margin_unit"]``)
+MARGIN_UNITS = {"spec_trajectory": "m", "spec_timed_run": "s", "tube": "m", "input_box": "m/s or rad/s",
+                "workspace": "m", "obstacle_clearance": "m"}
+
+
 def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
-    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin),
+    unit = c.details.get("margin_unit", MARGIN_UNITS.get(c.name))
+    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin), "margin_unit": unit,
             "first_violation_time": _rel_s(c.first_violation_ns, time0_ns),
-            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin")}}
+            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin", "margin_unit")}}
 
 
 def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
@@ -110,16 +125,51 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
+    formula_text = _formula_text(sc, spec)
+    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
+                   clock_offsets=clock_offsets)
+    return _judge(log, sc, formula_text=formula_text, selection=selection)
+
+
+def certify_data(log: LogData, scenario: Scenario | str | Path, *, spec: str | None = None,
+                 checks: Sequence[str] | None = None) -> CertifyResult:
+    """Judge streams already in memory (e.g. a simulated run, never written) exactly as ``certify_log`` judges the
+    streams it reads from a file: same checks, same margins, same verdicts."""
+    sc = resolve_scenario(scenario)
+    selection = select_checks(sc, checks)
+    return _judge(log, sc, formula_text=_formula_text(sc, spec), selection=selection)
+
+
+def _formula_text(sc: Scenario, spec: str | None) -> str:
     formula = parse_spec(spec if spec is not None else sc.spec)
     known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
     unknown = sorted(atoms(formula) - known)
     if unknown:
         raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region and name no "
                         f"signal of scenario {sc.name!r}")
-    log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
-                   clock_offsets=clock_offsets)
-    with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
-        return _judge(log, sc, formula_text=str(formula), selection=selection)
+    return str(formula)
+
+
+def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[str] | frozenset[str],
+                  streams: Mapping[str, SignalStream]) -> dict[str, dict[str, Any]]:
+    """Per atom of the formula: its least and largest margin at the pose samples (regions: metres, as the
+    trajectory semantics defines them; signals: over their messages, in the field's unit, and relative to the
+    threshold, unit-free)."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, m in label_margins(x_m, y_m, sc, labels).items():
+        finite = m[np.isfinite(m)]
+        out[name] = {"min": _num(float(finite.min())) if finite.size else None,
+                     "max": _num(float(finite.max())) if finite.size else None, "unit": "m"}
+    for name, stream in streams.items():
+        sm = signal_margin(stream.spec, stream.value)
+        finite = sm[np.isfinite(sm)]
+        lo = float(finite.min()) if finite.size else None
+        hi = float(finite.max()) if finite.size else None
+        scale = abs(stream.spec.value)
+        out[name] = {"min": _num(lo), "max": _num(hi), "unit": stream.spec.unit,
+                     "relative_min": _num(lo / scale) if lo is not None and scale > 0 else None,
+                     "relative_max": _num(hi / scale) if hi is not None and scale > 0 else None}
+    return dict(sorted(out.items()))
 
 
 def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
@@ -132,8 +182,12 @@ def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
 
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
            selection: Selection | None = None) -> CertifyResult:
-    if selection is None:
-        selection = select_checks(sc)
+    with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
+        return _judge_streams(log, sc, formula_text=formula_text,
+                              selection=selection if selection is not None else select_checks(sc))
+
+
+def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: Selection) -> CertifyResult:
     formula = parse_spec(formula_text)
     t0 = log.time0_ns
     pose = log.pose
@@ -145,12 +199,14 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
                             signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
     spec_traj = CheckResult(
+        # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
         "spec_trajectory", traj.verdict, reported_margin(traj.verdict, traj.margin_m, traj.margin_hi_m),
         traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",
          "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
          "margin_unit": _spec_unit(streams),
+         "atom_margins": _atom_margins(sc, pose.x_m, pose.y_m, used - set(streams), streams),
          **({"subformula": traj.subformula, "reason": traj.reason,
              "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
             if traj.verdict != "pass" else {})})
@@ -163,13 +219,13 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,
                          atom_values={k: values_at(v, entry_ns) for k, v in streams.items()})
     spec_run = CheckResult(
-        "spec_timed_run", tr.verdict, None,
+        "spec_timed_run", tr.verdict, tr.margin_s,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
     checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
-    tol_m = 3.0 * sc.mocap.noise_std
+    tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
     tube_info: dict[str, Any] | None = None
     if "tube" in selection:
@@ -180,7 +236,7 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         checks.append(check_tube(every.t_ns, every.x_m, every.y_m, nominal, radius_m=sc.tube_radius_m,
                                  tolerance_m=tol_m, match_ns=period_ns // 2))
         tube_info = {"radius_m": sc.tube_radius_m, "noise_tolerance_m": tol_m,
-                     "noise_tolerance_rule": "3 * scenario.mocap.noise_std"}
+                     "noise_tolerance_rule": "3 * scenario.mocap.noise_std + 1e-9 m (rounding of logged positions)"}
     if "input_box" in selection:
         checks.append(check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs))
     if "workspace" in selection:
@@ -240,7 +296,8 @@ def _judge(log: LogData, sc: Scenario, *, formula_text: str,
         inputs_df = pd.DataFrame({"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
                                   "u3": log.cmd_u[:, 2]})
     rob = pd.DataFrame({"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}) if t_rel.size else None
-    return CertifyResult(_jsonable(cert), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
+    typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
+    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
 
 
 def _jsonable(obj: Any) -> Any:
@@ -292,7 +349,9 @@ class HasCertificate(Protocol):
 
 
 def write_certificate(result: HasCertificate, out_dir: str | Path) -> Path:
-    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path."""
+    """Write ``certificate.json`` into ``out_dir`` (created if needed); returns its path. The certificate is
+    validated against the model first (``verify.certificate``): nothing that breaks the schema is written."""
+    Certificate.model_validate(result.certificate)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "certificate.json"

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,6 +24,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate, Verdict
 from verify.geometry import region_margins, workspace_margin
 from verify.obligations import Obligation, obligations_of
 from verify.workspace_map import tube_radius_or_nan, workspace_figure
@@ -87,19 +88,13 @@ def _usable(frame: pd.DataFrame | None, columns: Sequence[str]) -> bool:
     return frame is not None and len(frame) > 0 and all(c in frame.columns for c in columns)
 
 
-def failed_checks(certificate: Mapping[str, Any]) -> list[tuple[str, float]]:
-    """(check name, first violation time in s) of every failed check that states a time."""
-    out: list[tuple[str, float]] = []
-    for check in certificate.get("checks", []) or []:
-        if not isinstance(check, Mapping) or check.get("verdict") != "fail":
-            continue
-        t = check.get("first_violation_time")
-        if isinstance(t, int | float) and math.isfinite(float(t)):
-            out.append((str(check.get("name", "?")), float(t)))
-    return out
+def failed_checks(certificate: Certificate) -> list[tuple[str, float]]:
+    """(check name, first violation time in s) of every failed check."""
+    return [(c.name, c.first_violation_time) for c in certificate.checks
+            if c.verdict is Verdict.FAIL and c.first_violation_time is not None]
 
 
-def _mark_violations(axes: Sequence[Any], certificate: Mapping[str, Any], *,
+def _mark_violations(axes: Sequence[Any], certificate: Certificate, *,
                      names: Sequence[str] | None = None) -> None:
     """A dotted line at each failed check's first violation (only the checks in ``names`` when given)."""
     for ax in axes:
@@ -118,7 +113,7 @@ def _unwrapped(frame: pd.DataFrame) -> pd.DataFrame:
     return frame.assign(theta_rad=theta)
 
 
-def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def states_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                   nominal: pd.DataFrame | None) -> bytes | None:
     """x(t), y(t), theta(t); nominal and its tube band; the bounds on the robot's centre from the workspace."""
     if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m", "theta_rad")):
@@ -154,7 +149,7 @@ def states_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     return _png(fig)
 
 
-def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd.DataFrame | None) -> bytes | None:
+def inputs_figure(certificate: Certificate, scenario: Scenario, inputs: pd.DataFrame | None) -> bytes | None:
     """u1, u2, u3 over time with the input box ``|u_i| <= max_abs[i]``."""
     if inputs is None or not _usable(inputs, ("t_s", "u1", "u2", "u3")):
         return None
@@ -181,7 +176,7 @@ def inputs_figure(certificate: Mapping[str, Any], scenario: Scenario, inputs: pd
     return _png(fig)
 
 
-def tube_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def tube_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                 nominal: pd.DataFrame | None) -> bytes | None:
     """Tube error ``|p - p_hat|`` over time (nominal interpolated at the pose stamps) against ``r_q``."""
     cols = ("t_s", "x_m", "y_m")
@@ -240,8 +235,9 @@ def obligations_figure(obligations: Sequence[Obligation], duration_s: float | No
             lo, hi = ob.window_s
             if lo < last:
                 ax.axvspan(lo, min(hi, last), color="#1f77b4", alpha=0.12, lw=0, label=_window_label(ob.window_s))
-            note = ("" if hi <= last else f"{_window_label(ob.window_s)} opens after the log ends" if lo >= last
-                    else "the window continues past the log end")
+            # an unbounded window ranges to the end of the log (finite-log semantics): nothing to say about it
+            note = ("" if hi <= last or math.isinf(hi) else f"{_window_label(ob.window_s)} opens after the log ends"
+                    if lo >= last else "the window continues past the log end: undecided there")
             if note:
                 ax.annotate(note, (0.995, 0.96), xycoords="axes fraction", ha="right", va="top", fontsize=7,
                             color="#1f77b4", bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none"})
@@ -263,7 +259,7 @@ def obligations_figure(obligations: Sequence[Obligation], duration_s: float | No
                      loc="left", weight="bold")
         ax.set_ylabel("margin [m]")
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", fontsize=7)
+        ax.legend(loc="best", fontsize=7)
         if end is not None:
             ax.set_xlim(min(0.0, float(t[0])) if t.size else 0.0, end)
     axes[-1].set_xlabel("t [s]")
@@ -275,7 +271,7 @@ def _short(text: str, limit: int = 40) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def clearance_figure(certificate: Mapping[str, Any], scenario: Scenario,
+def clearance_figure(certificate: Certificate, scenario: Scenario,
                      trajectory: pd.DataFrame | None) -> bytes | None:
     """Distance from the robot disc to the nearest unsafe region and to the workspace edge (negative: touching)."""
     if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m")):
@@ -331,18 +327,16 @@ def sampling_figure(scenario: Scenario, trajectory: pd.DataFrame | None) -> byte
     return _png(fig)
 
 
-def render_figures(certificate: Mapping[str, Any], scenario: Scenario, *, trajectory: pd.DataFrame | None,
+def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: pd.DataFrame | None,
                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
                    robustness: pd.DataFrame | None) -> list[FigureSpec]:
     """Every figure that the data allows, in the order a reader asks: the map and the obligations, clearance, then
     states, tube and inputs, then data quality. (``robustness``, the whole formula's signal, is not drawn: one
     curve for a conjunction hides which obligation failed; each obligation gets its own panel instead.)"""
     del robustness
-    formula = certificate.get("formula")
-    duration = certificate.get("duration_s")
-    duration_s = float(duration) if isinstance(duration, int | float) else None
-    obligations = (obligations_of(formula, trajectory, scenario, max_speed_mps=scenario.max_speed_mps)
-                   if isinstance(formula, str) and trajectory is not None else ())
+    obligations = (obligations_of(certificate.formula, trajectory, scenario, max_speed_mps=scenario.max_speed_mps)
+                   if trajectory is not None else ())
+    duration_s = certificate.duration_s
     out: list[FigureSpec] = [FigureSpec(
         "workspace", "Workspace map: regions, the path coloured by time with its direction, the tube band around the "
         "nominal, the timed run (numbered), and each first violation with what failed.",

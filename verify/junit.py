@@ -14,10 +14,12 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
+
+from verify.certificate import Certificate, Verdict
 
 __all__ = ["INCONCLUSIVE_AS", "InconclusiveAs", "JUnitCase", "JUnitSuite", "certificate_suite", "suite_element",
            "write_junit"]
@@ -94,13 +96,11 @@ def write_junit(suites: Sequence[JUnitSuite], path: str | Path) -> Path:
     return target
 
 
-def _num(value: Any, unit: str = "") -> str:
-    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
-        return f"{value:.4g}{unit}"
-    return "-"
+def _num(value: float | None, unit: str = "") -> str:
+    return f"{value:.4g}{unit}" if value is not None and math.isfinite(value) else "-"
 
 
-def certificate_suite(certificate: Mapping[str, Any], *, suite_name: str,
+def certificate_suite(certificate: Certificate, *, suite_name: str,
                       inconclusive: InconclusiveAs = "failure") -> JUnitSuite:
     """One test case per check of a certificate: a failed check is a ``failure`` of type ``violation``; an
     inconclusive one a ``failure`` of type ``inconclusive`` (or ``skipped``); properties carry the verdict, the
@@ -108,25 +108,24 @@ def certificate_suite(certificate: Mapping[str, Any], *, suite_name: str,
     if inconclusive not in INCONCLUSIVE_AS:
         raise ValueError(f"inconclusive={inconclusive!r} is not one of {INCONCLUSIVE_AS}")
     cases = []
-    for check in certificate.get("checks", []) or []:
-        if not isinstance(check, Mapping):
-            continue
-        verdict = str(check.get("verdict"))
-        unit = check.get("margin_unit")
-        summary = (f"{verdict}: margin {_num(check.get('margin'), f' {unit}' if unit else '')}, first violation at "
-                   f"{_num(check.get('first_violation_time'), ' s')}")
-        details = "; ".join(f"{k}: {v}" for k, v in check.items()
-                            if k not in ("name", "verdict", "margin", "margin_unit", "first_violation_time"))
-        name = str(check.get("name", "?"))
-        if verdict == "pass":
-            cases.append(JUnitCase(name, suite_name))
-        elif verdict == "fail":
-            cases.append(JUnitCase(name, suite_name, "failure", "violation", summary, details or summary))
+    for check in certificate.checks:
+        unit = f" {check.margin_unit}" if check.margin_unit else ""
+        summary = (f"{check.verdict.value}: margin {_num(check.margin, unit)}, first violation at "
+                   f"{_num(check.first_violation_time, ' s')}")
+        details = "; ".join(f"{k}: {v}" for k, v in check.details.items())
+        if check.verdict is Verdict.PASS:
+            cases.append(JUnitCase(check.name, suite_name))
+        elif check.verdict is Verdict.FAIL:
+            cases.append(JUnitCase(check.name, suite_name, "failure", "violation", summary, details or summary))
         elif inconclusive == "skipped":
-            cases.append(JUnitCase(name, suite_name, "skipped", message=f"{summary}. {details}".strip(" .")))
+            cases.append(JUnitCase(check.name, suite_name, "skipped", message=f"{summary}. {details}".strip(" .")))
         else:
-            cases.append(JUnitCase(name, suite_name, "failure", "inconclusive",
+            cases.append(JUnitCase(check.name, suite_name, "failure", "inconclusive",
                                    f"{summary} (the check could not be decided: not a pass)", details or summary))
-    keys = ("verdict", "formula", "scenario_sha256", "log_digest", "log_digest_algorithm", "log_sha256", "partial")
-    props = tuple((key, str(certificate[key])) for key in keys if key in certificate)
-    return JUnitSuite(suite_name, tuple(cases), props)
+    props = [("verdict", certificate.verdict.value), ("formula", certificate.formula),
+             ("scenario_sha256", certificate.scenario_sha256), ("log_digest", certificate.log_digest),
+             ("log_digest_algorithm", certificate.log_digest_algorithm)]
+    if certificate.log_sha256 is not None:
+        props.append(("log_sha256", certificate.log_sha256))
+    props.append(("partial", str(certificate.partial)))
+    return JUnitSuite(suite_name, tuple(cases), tuple(props))

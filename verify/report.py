@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import pandas as pd
 
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate, CheckEntry
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
@@ -40,7 +41,6 @@ __all__ = [
     "write_reports",
 ]
 
-_MAIN_KEYS = ("checks", "timed_run", "data_quality")
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
 _MD_ENTITY = re.compile(r"&(?=#?\w+;)")  # only an '&' that would start an entity is escaped: 'a & b' stays
 _MD_SPECIAL = re.compile(r"([\\`*\[\]|~]|(?<!\w)_|_(?!\w))")  # links, emphasis, code, tables; not intraword _
@@ -96,20 +96,13 @@ def _flatten(data: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
         yield prefix or "value", data
 
 
-def _check_rows(certificate: Mapping[str, Any]) -> list[dict[str, Any]]:
-    rows = []
-    for check in certificate.get("checks", []) or []:
-        if isinstance(check, Mapping):
-            rows.append(dict(check))
-    return rows
+def typed(result: CertifyResultLike) -> Certificate:
+    """The result's certificate as the typed model (``verify.certificate``): what every report reads."""
+    return Certificate.model_validate(result.certificate)
 
 
-_ROW_KEYS = ("name", "verdict", "margin", "margin_unit", "first_violation_time")
-
-
-def _check_details(check: Mapping[str, Any]) -> str:
-    extra = {k: v for k, v in check.items() if k not in _ROW_KEYS}
-    return "; ".join(f"{k}: {_fmt(v)}" for k, v in sorted(extra.items(), key=lambda kv: str(kv[0])))
+def _check_details(check: CheckEntry) -> str:
+    return "; ".join(f"{k}: {_fmt(v)}" for k, v in sorted(check.details.items(), key=lambda kv: str(kv[0])))
 
 
 def fmt_time(value: Any) -> str:
@@ -119,54 +112,44 @@ def fmt_time(value: Any) -> str:
     return "-"
 
 
-def fmt_margin(check: Mapping[str, Any]) -> str:
+def fmt_margin(check: CheckEntry) -> str:
     """A margin with 4 significant digits and its unit (``-0.004 m``), ``-`` when absent."""
-    value = check.get("margin")
-    if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
+    if check.margin is None or not math.isfinite(check.margin):
         return "-"
-    unit = check.get("margin_unit")
-    return f"{value:.4g} {unit}" if isinstance(unit, str) and unit else f"{value:.4g}"
+    return f"{check.margin:.4g} {check.margin_unit}" if check.margin_unit else f"{check.margin:.4g}"
 
 
-_SUMMARY_KEYS = ("formula", "scenario", "log", "duration_s", "verdict_reason")
-
-
-def _summary_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
+def _summary_rows(cert: Certificate) -> list[tuple[str, str]]:
     """The few facts a reader needs beside the verdict; everything else is under "Certificate details"."""
-    rows: list[tuple[str, str]] = []
-    for key in _SUMMARY_KEYS:
-        if key not in certificate and key != "scenario":
-            continue
-        value = certificate.get(key, scenario.name)
-        rows.append(("duration", fmt_time(value)) if key == "duration_s" else (key.replace("_", " "), _fmt(value)))
+    rows = [("formula", cert.formula), ("scenario", cert.scenario), ("log", cert.log),
+            ("duration", fmt_time(cert.duration_s))]
+    if cert.verdict_reason:
+        rows.append(("verdict reason", cert.verdict_reason))
     return rows
 
 
-def _meta_rows(certificate: Mapping[str, Any], scenario: Scenario) -> list[tuple[str, str]]:
-    rows = [] if "scenario" in certificate else [("scenario", scenario.name)]
-    for key in sorted(certificate, key=str):
-        if key in _MAIN_KEYS or key == "verdict":
-            continue
-        rows.append((str(key), _fmt(certificate[key])))
-    if isinstance(certificate.get("tube"), Mapping):
-        rows.append(("tube radius r_q (scenario)", f"{certificate['tube']['radius_m']:.6g} m"))
+_MAIN_FIELDS = ("verdict", "checks", "timed_run", "data_quality")
+
+
+def _meta_rows(cert: Certificate, scenario: Scenario) -> list[tuple[str, str]]:
+    data = cert.to_json_dict()
+    rows = [(key, _fmt(data[key])) for key in sorted(data) if key not in _MAIN_FIELDS]
+    if cert.tube is not None:
+        rows.append(("tube radius r_q (scenario)", f"{cert.tube.radius_m:.6g} m"))
     return rows
 
 
-def _top_lines(certificate: Mapping[str, Any]) -> list[str]:
-    """Which checks made the verdict, which were not run and why, and findings a reader must see first (clock
-    offsets between topics, lenient scenario geometry)."""
-    lines: list[str] = []
-    chosen = certificate.get("checks_selected")
-    if isinstance(chosen, list):
-        lines.append(f"Verdict over the checks: {', '.join(map(str, chosen)) or 'none'}.")
-    for item in certificate.get("not_checked", []) or []:
-        if isinstance(item, Mapping):
-            lines.append(f"Not checked: {item.get('name')} ({item.get('reason')}).")
-    for key in ("clock_findings", "scenario_warnings"):
-        for text in certificate.get(key, []) or []:
-            lines.append(f"Finding: {text}")
+def _top_lines(cert: Certificate) -> list[str]:
+    """Which checks made the verdict, and findings a reader must see first (clock offsets between topics)."""
+    lines = [f"Verdict over the checks: {', '.join(cert.checks_selected) or 'none'}."]
+    lines += [f"Finding: {text}" for text in cert.clock_findings or []]
     return lines
+
+
+def _not_run_notes(cert: Certificate) -> list[str]:
+    """Checks that did not run and scenario warnings: said under the checks table, where a reader looks."""
+    notes = [f"not checked: {n.name} ({n.reason})" for n in cert.not_checked]
+    return notes + [f"scenario warning: {w}" for w in cert.scenario_warnings]
 
 
 def _is_quiet(value: Any) -> bool:
@@ -174,9 +157,9 @@ def _is_quiet(value: Any) -> bool:
     return value in (0, 0.0, False, None, "", "{}", "[]") or (isinstance(value, list | dict) and not value)
 
 
-def _quality_rows(certificate: Mapping[str, Any]) -> list[tuple[str, Any]]:
+def _quality_rows(cert: Certificate) -> list[tuple[str, Any]]:
     """Flattened data-quality entries, the ones that report something first (their order otherwise kept)."""
-    rows = list(_flatten(certificate.get("data_quality", {}) or {}))
+    rows = list(_flatten(cert.data_quality))
     return [r for r in rows if not _is_quiet(r[1])] + [r for r in rows if _is_quiet(r[1])]
 
 
@@ -187,10 +170,6 @@ def _figure_groups(figures: Sequence[FigureSpec]) -> dict[str, list[FigureSpec]]
                "quality" if fig.stem == "sampling" else "states")
         groups[key].append(fig)
     return groups
-
-
-def _verdict(certificate: Mapping[str, Any]) -> str:
-    return str(certificate.get("verdict", "inconclusive"))
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,7 +201,7 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
                     figure_dir: str = "figures", sections: Sequence[ReportSection] = ()) -> str:
     """The report as Markdown, in the order a reader asks: verdict and checks, map and obligations, states and
     inputs, data quality, certificate details; figures are referenced as ``figure_dir/<stem>.png``."""
-    cert = result.certificate
+    cert = typed(result)
     groups = _figure_groups(figures)
 
     def figs(key: str) -> list[str]:
@@ -231,22 +210,22 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
             out += [f"![{_md(fig.caption)}]({figure_dir}/{fig.stem}.png)", "", f"*{_md(fig.caption)}*", ""]
         return out
 
-    lines = [f"# Certificate: {_md(_verdict(cert)).upper()}", "",
+    lines = [f"# Certificate: {_md(cert.verdict.value).upper()}", "",
              f"Exit code {result.exit_code} (0 pass, 1 violation, 2 inconclusive).", ""]
-    lines += [f"- {_md(t)}" for t in _top_lines(cert)] + ([""] if _top_lines(cert) else [])
+    lines += [f"- {_md(t)}" for t in _top_lines(cert)] + [""]
     lines += ["| | |", "|---|---|"]
-    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _summary_rows(cert, scenario)]
+    lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _summary_rows(cert)]
     lines += ["", "## Checks", "", "| check | verdict | margin | first violation | details |",
               "|---|---|---|---|---|"]
-    for check in _check_rows(cert):
-        lines.append(f"| {_md(check.get('name', '?'))} | {_md(check.get('verdict', '?'))} | "
-                     f"{_md(fmt_margin(check))} | {_md(fmt_time(check.get('first_violation_time')))} | "
-                     f"{_md(_check_details(check))} |")
+    for check in cert.checks:
+        lines.append(f"| {_md(check.name)} | {_md(check.verdict.value)} | {_md(fmt_margin(check))} | "
+                     f"{_md(fmt_time(check.first_violation_time))} | {_md(_check_details(check))} |")
+    lines += [""] + [f"- {_md(note)}" for note in _not_run_notes(cert)]
     lines += ["", "## Map and obligations", "", *figs("map"), "### Timed run", ""]
-    run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
+    run = cert.timed_run
     if run:
         lines += ["| # | region | entered at |", "|---|---|---|"]
-        lines += [f"| {i} | {_md(e.get('region', '?'))} | {_md(fmt_time(e.get('time')))} |" for i, e in enumerate(run)]
+        lines += [f"| {i} | {_md(e.region)} | {_md(fmt_time(e.time))} |" for i, e in enumerate(run)]
     else:
         lines.append("The robot disc was never fully inside a region.")
     lines += ["", "## States and inputs", "", *figs("states"), "## Data quality", ""]
@@ -290,8 +269,8 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
     """A self-contained HTML page: inline CSS, figures as ``data:image/png;base64`` URIs, no script, no links.
     Order: verdict and checks, map and obligations, states and inputs, then data quality and the certificate's
     details collapsed (``<details>``)."""
-    cert = result.certificate
-    verdict = _verdict(cert)
+    cert = typed(result)
+    verdict = cert.verdict.value
     groups = _figure_groups(figures)
 
     def figs(key: str) -> list[str]:
@@ -309,18 +288,22 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
              *([("<ul>" + "".join(f"<li>{_e(t)}</li>" for t in _top_lines(cert)) + "</ul>")]
                if _top_lines(cert) else []),
              '<table class="summary">']
-    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _summary_rows(cert, scenario)]
+    parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _summary_rows(cert)]
     parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'
               "<th>margin</th><th>first violation</th><th>details</th></tr>"]
-    for check in _check_rows(cert):
-        parts.append(f"<tr><td>{_e(check.get('name', '?'))}</td><td>{_badge(str(check.get('verdict', '?')))}</td>"
-                     f"<td>{_e(fmt_margin(check))}</td><td>{_e(fmt_time(check.get('first_violation_time')))}</td>"
+    for check in cert.checks:
+        parts.append(f"<tr><td>{_e(check.name)}</td><td>{_badge(check.verdict.value)}</td>"
+                     f"<td>{_e(fmt_margin(check))}</td><td>{_e(fmt_time(check.first_violation_time))}</td>"
                      f"<td>{_e(_check_details(check))}</td></tr>")
-    parts += ["</table>", "<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
-    run = [e for e in cert.get("timed_run", []) or [] if isinstance(e, Mapping)]
+    parts.append("</table>")
+    notes = _not_run_notes(cert)
+    if notes:
+        parts.append('<ul class="not-run">' + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ul>")
+    parts += ["<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
+    run = cert.timed_run
     if run:
         parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at</th></tr>')
-        parts += [f"<tr><td>{i}</td><td>{_e(e.get('region', '?'))}</td><td>{_e(fmt_time(e.get('time')))}</td></tr>"
+        parts += [f"<tr><td>{i}</td><td>{_e(e.region)}</td><td>{_e(fmt_time(e.time))}</td></tr>"
                   for i, e in enumerate(run)]
         parts.append("</table>")
     else:
@@ -357,7 +340,7 @@ def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify",
               inconclusive: InconclusiveAs = "failure") -> ET.Element:
     """``<testsuite>`` with one ``<testcase>`` per check (``verify.junit``: a failed check is a ``failure`` of type
     ``violation``, an inconclusive one a ``failure`` of type ``inconclusive`` unless ``inconclusive="skipped"``)."""
-    return suite_element(certificate_suite(result.certificate, suite_name=suite_name, inconclusive=inconclusive))
+    return suite_element(certificate_suite(typed(result), suite_name=suite_name, inconclusive=inconclusive))
 
 
 # ---- writing ------------------------------------------------------------------------------------------------------
@@ -372,7 +355,8 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
     ``junit_inconclusive``: how ``junit.xml`` reports an inconclusive check (``verify.junit``).
     """
     out = Path(out_dir)
-    figures = render_figures(result.certificate, scenario, trajectory=result.trajectory, nominal=result.nominal,
+    cert = typed(result)
+    figures = render_figures(cert, scenario, trajectory=result.trajectory, nominal=result.nominal,
                              inputs=result.inputs, robustness=result.robustness)
     written: dict[str, Path] = {}
     try:
@@ -387,7 +371,7 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
         page = out / "report.html"
         page.write_text(html_report(result, scenario, figures, sections=sections), encoding="utf-8")
         written["report.html"] = page
-        suite = certificate_suite(result.certificate, suite_name=suite_name, inconclusive=junit_inconclusive)
+        suite = certificate_suite(cert, suite_name=suite_name, inconclusive=junit_inconclusive)
         written["junit.xml"] = write_junit([suite], out / "junit.xml")
     except OSError as err:
         raise ReportWriteError(f"{out}: cannot write the reports ({err.__class__.__name__}: {err})") from err

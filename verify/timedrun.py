@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.mitl import Formula, SpecSyntaxError, atoms, parse
+from tubempc.mitl import Eventually, Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
 from verify.monitor import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
@@ -38,6 +39,7 @@ class TimedRunVerdict:
     subformula: str | None = None
     time_s: float | None = None
     reason: str | None = None
+    margin_s: float | None = None  # a fail's margin in seconds (<= 0; see ``_time_margin_s``)
 
     @property
     def first_violation_time(self) -> float | None:
@@ -86,7 +88,34 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
     if verdict == "pass":
         return TimedRunVerdict("pass", str(f))
     why = explain(f, 0, pos, values)
-    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason)
+    margin = _time_margin_s(values, why.subformula, why.time_ns, times, end_ns) if verdict == "fail" else None
+    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason, margin)
+
+
+def _time_margin_s(values: Mapping[Formula, Any], subformula: str | None, time_ns: int, times: npt.NDArray[np.int64],
+                   end_ns: int) -> float | None:
+    """How far in time the run is from satisfying the witnessed sub-formula (seconds, <= 0).
+
+    The pointwise semantics are boolean, so the margin is temporal: for ``F[a,b] phi`` never met, minus the time
+    from the window to the nearest entry at which ``phi`` held (the log's end when it never did: at least that
+    late); for any other false sub-formula, minus how long it stayed false from the witness on (until the next
+    entry at which it is not false, or the log's end).
+    """
+    g = next((h for h in values if str(h) == subformula), None)
+    if g is None:
+        return None
+    if isinstance(g, Eventually) and g.interval.bounded:
+        hi_ns, lo_ns = time_ns, time_ns - round((g.interval.hi_s - g.interval.lo_s) * 1e9)
+        held = times[np.asarray(values[g.arg].lo) > 0]
+        if held.size == 0:
+            return -max(end_ns - hi_ns, 0) / 1e9
+        gap = np.where(held > hi_ns, held - hi_ns, np.where(held < lo_ns, lo_ns - held, 0))
+        return -float(gap.min()) / 1e9
+    false = np.asarray(values[g].hi) < 0
+    k = int(np.searchsorted(times, time_ns))
+    after = np.flatnonzero(~false[k:])
+    stop = int(times[k + int(after[0])]) if after.size else end_ns
+    return -max(stop - time_ns, 0) / 1e9
 
 
 def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.float64],

@@ -51,14 +51,18 @@ class TrajectoryVerdict:
 
 
 def reported_margin(verdict: str, lo_m: float, hi_m: float) -> float | None:
-    """The margin a certificate states for the formula: the guaranteed one (``lo_m``); for a fail whose guaranteed
-    margin is unbounded (a window with no sample in it), the optimistic one, so a failed formula always states by how
-    much; None when undecided, or when no spatial margin exists (a formula failing on constants)."""
+    """The margin a certificate states for the formula (certify and the online monitor alike): on a pass the
+    guaranteed one (``lo_m``); on a fail the optimistic one (``hi_m`` < 0: violated by at least that much), or the
+    guaranteed one where the optimistic one is unbounded, so a failed formula always states by how much; None when
+    undecided, or when no finite margin exists (a formula failing on constants)."""
     if verdict == "inconclusive":
         return None
-    if math.isfinite(lo_m) or verdict == "pass":
+    if verdict == "pass":
         return lo_m
-    return hi_m if math.isfinite(hi_m) else None
+    for value in (hi_m, lo_m):
+        if math.isfinite(value):
+            return value
+    return None
 
 
 def trajectory_positions(t_ns: IntArray) -> tuple[Positions, IntArray, IntArray]:

@@ -19,7 +19,7 @@ a label with no free place is hidden (the report's tables still list it) and cou
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -35,6 +35,7 @@ from matplotlib.text import Annotation, Text
 from matplotlib.transforms import Bbox
 
 from tubempc.scenario import Region, Scenario, ScenarioError
+from verify.certificate import Certificate, CheckEntry, Verdict
 
 __all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "place_texts", "region_caption", "text_box",
            "violations_of", "workspace_figure", "workspace_map"]
@@ -81,27 +82,24 @@ def region_caption(name: str, labels: Sequence[str]) -> str:
     return f"{name}: {', '.join(extra)}" if extra else name
 
 
-def _describe(check: Mapping[str, Any]) -> str:
-    sub = check.get("subformula")
-    if isinstance(sub, str) and sub:
-        return f"{sub} violated"
-    region = check.get("region")
+def _describe(check: CheckEntry) -> str:
+    if check.subformula:
+        return f"{check.subformula} violated"
+    region = check.details.get("region")
     if isinstance(region, str) and region:
-        return f"{check.get('name', '?')}: {region}"
-    return str(check.get("name", "?"))
+        return f"{check.name}: {region}"
+    return check.name
 
 
-def violations_of(certificate: Mapping[str, Any]) -> list[Violation]:
+def violations_of(certificate: Certificate) -> list[Violation]:
     """First violations of the failed checks, grouped by time (to the hundredth of a second)."""
     groups: dict[float, tuple[list[str], list[str]]] = {}
-    for check in certificate.get("checks", []) or []:
-        if not isinstance(check, Mapping) or check.get("verdict") != "fail":
+    for check in certificate.checks:
+        t = check.first_violation_time
+        if check.verdict is not Verdict.FAIL or t is None or not math.isfinite(t):
             continue
-        t = check.get("first_violation_time")
-        if not isinstance(t, int | float) or not math.isfinite(float(t)):
-            continue
-        names, whats = groups.setdefault(round(float(t), 2), ([], []))
-        names.append(str(check.get("name", "?")))
+        names, whats = groups.setdefault(round(t, 2), ([], []))
+        names.append(check.name)
         what = _describe(check)
         if what not in whats:
             whats.append(what)
@@ -258,41 +256,36 @@ def tube_radius_or_nan(scenario: Scenario) -> float:
         return math.nan
 
 
-def _anchor(region: Region) -> tuple[float, float]:
-    """Where a region's caption goes: a disc's centre, a polygon's bounding-box centre."""
-    if region.polygon is None:
-        return region.center
-    x0, y0, x1, y1 = region.bounds
-    return 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-
-
-def _size_m(region: Region) -> float:
-    """A disc's radius; half the shorter side of a polygon's bounding box."""
-    if region.polygon is None:
-        return region.radius
-    x0, y0, x1, y1 = region.bounds
-    return 0.5 * min(x1 - x0, y1 - y0)
-
-
 def _draw_regions(ax: Axes, scenario: Scenario, *, with_legend: bool) -> None:
     seen: set[str] = set()
     for region in scenario.regions:
         kind = _region_kind(region.labels, region.unsafe)
         colour = _KIND_COLOURS[kind]
         name = {"unsafe": "unsafe region", "labelled": "labelled region", "free": "unlabelled region"}[kind]
-        label = name if with_legend and kind not in seen else None
+        legend = name if with_legend and kind not in seen else None
         if region.polygon is not None:
-            ax.add_patch(Polygon(region.polygon, closed=True, fc=colour, ec=colour, alpha=0.25, label=label))
+            ax.add_patch(Polygon(np.asarray(region.polygon, dtype=float), closed=True, fc=colour, ec=colour,
+                                 alpha=0.25, label=legend))
         else:
-            ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25, label=label))
+            ax.add_patch(Circle(region.center, region.radius, fc=colour, ec=colour, alpha=0.25, label=legend))
         seen.add(kind)
+
+
+def _anchor(region: Region) -> tuple[tuple[float, float], float]:
+    """Where a region's label goes around: a disc's centre and radius; a polygon's bounding-box centre and half
+    its larger side."""
+    if region.polygon is None:
+        return region.center, region.radius
+    x0, y0, x1, y1 = region.bounds
+    return ((x0 + x1) / 2, (y0 + y1) / 2), max(x1 - x0, y1 - y0) / 2
 
 
 def _draw_small_region_markers(ax: Axes, scenario: Scenario, px_per_m: float) -> None:
     for region in scenario.regions:
-        if _size_m(region) * px_per_m < _MIN_REGION_PX:
+        center, size_m = _anchor(region)
+        if size_m * px_per_m < _MIN_REGION_PX:
             colour = _KIND_COLOURS[_region_kind(region.labels, region.unsafe)]
-            ax.plot(*_anchor(region), "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
+            ax.plot(*center, "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
 
 
 def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: int) -> LineCollection:
@@ -343,7 +336,7 @@ def _letter(i: int) -> str:
     return chr(ord("A") + i)
 
 
-def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                   nominal: pd.DataFrame | None) -> MapFigure:
     """The map (see the module docstring) and the number of labels that found no free place."""
     ws = scenario.workspace
@@ -372,7 +365,8 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     ax = fig.add_axes((0.07, map_in / fig_h_in, 0.64, map_h_in / fig_h_in))
     cax = fig.add_axes((0.07, cbar_in / fig_h_in, 0.64, 0.16 / fig_h_in))
     if ws.polygon is not None:
-        ax.add_patch(Polygon(ws.polygon, closed=True, fill=False, lw=1.5, ec="black", label="workspace"))
+        ax.add_patch(Polygon(np.asarray(ws.polygon, dtype=float), closed=True, fill=False, lw=1.5, ec="black",
+                             label="workspace"))
     else:
         ax.add_patch(Rectangle((ws.x[0], ws.y[0]), width_m, height_m, fill=False, lw=1.5, ec="black",
                                label="workspace"))
@@ -405,9 +399,8 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
             ax.plot(*last, "s", ms=6, mfc="black", mec="black", zorder=6, label="end")
             labels.append(_Label(ax.annotate(f"end, t = {t[-1]:.2f} s", last, xytext=(0, 0), textcoords="offset points",
                                              fontsize=8), _ring(5.0 * pt_per_px)))
-        for i, entry in enumerate(certificate.get("timed_run", []) or []):
-            te = entry.get("time") if isinstance(entry, Mapping) else None
-            pos = _position_at(trajectory, float(te)) if isinstance(te, int | float) else None
+        for i, entry in enumerate(certificate.timed_run):
+            pos = _position_at(trajectory, entry.time)
             if pos is None:
                 continue
             markers.append(pos)
@@ -432,8 +425,9 @@ def workspace_map(certificate: Mapping[str, Any], scenario: Scenario, trajectory
     else:
         cax.set_visible(False)
     for region in scenario.regions:
-        r_pt = max(_size_m(region) * px_per_m, _MIN_REGION_PX) * pt_per_px
-        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), _anchor(region),
+        center, size_m = _anchor(region)
+        r_pt = max(size_m * px_per_m, _MIN_REGION_PX) * pt_per_px
+        labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), center,
                                          xytext=(0, 0), textcoords="offset points", fontsize=8), _ring(r_pt)))
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
@@ -474,9 +468,10 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
         if len(part) > 1:
             _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0)
     for region in scenario.regions:
-        cx, cy = _anchor(region)
+        (cx, cy), _ = _anchor(region)
         if abs(cx - pos[0]) < half_m and abs(cy - pos[1]) < half_m:
-            ax.text(cx, cy, region.name, ha="center", va="center", fontsize=7, clip_on=True)
+            ax.text(cx, cy, region.name, ha="center", va="center", fontsize=7,
+                    clip_on=True)
     ax.add_patch(Circle(pos, scenario.robot.radius, fill=False, ec=_FAIL_COLOUR, lw=1.2, zorder=6))
     ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=9, mec="white", mew=0.8, zorder=7)
     ax.set_xlim(pos[0] - half_m, pos[0] + half_m)
@@ -488,7 +483,7 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
                              ec=_FAIL_COLOUR, lw=1.0, ls="--", zorder=8))
 
 
-def workspace_figure(certificate: Mapping[str, Any], scenario: Scenario, trajectory: pd.DataFrame | None,
+def workspace_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                      nominal: pd.DataFrame | None) -> bytes:
     """The map as PNG bytes."""
     import io

@@ -23,6 +23,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from tubempc.scenario import builtin_scenario
 from verify import certify_log
+from verify.errors import LogReadError
 from verify.ingest import read_log
 from verify.ingest.salvage import walk_mcap, walk_ros1
 from verify.online import OnlineMonitor
@@ -205,3 +206,33 @@ def test_watch_copy_of_input_is_not_modified(tmp_path: Path) -> None:
     res = watch_log(src, OnlineMonitor(builtin_scenario()))
     assert src.read_bytes() == before
     assert res.partial and res.result.verdict == "inconclusive"
+
+
+def test_watch_a_sqlite3_bag_folder(tmp_path: Path) -> None:
+    """sqlite3 storage is read row by row (the rows added since the last read); a closed bag equals certify."""
+    src = LOGS / "late_mission.mcap"
+    folder = tmp_path / "bag"
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader2(src) as r, Writer2(folder, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store) for c in r.connections}
+        for c, t, data in r.messages():
+            w.write(conns[c.id], t, data)
+    res = watch_log(folder, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=0.5, poll_s=0.05)
+    assert res.finished
+    _assert_same_as_certify(folder, res, salvage=False)
+
+
+def test_watch_waits_for_the_recorder_to_create_the_log(tmp_path: Path) -> None:
+    """With --follow the log may appear after watch starts (within the idle timeout); without it, exit 3 at once."""
+    target = tmp_path / "late.mcap"
+    data = (LOGS / "tube_breach.mcap").read_bytes()
+
+    def later() -> None:
+        time.sleep(0.3)
+        target.write_bytes(data)
+
+    threading.Thread(target=later, daemon=True).start()
+    res = watch_log(target, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=3.0, poll_s=0.05)
+    assert res.finished and res.result.verdict == "fail"
+    with pytest.raises(LogReadError, match="no such file"):
+        watch_log(tmp_path / "never.mcap", OnlineMonitor(builtin_scenario()))

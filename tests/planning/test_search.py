@@ -234,3 +234,19 @@ def test_exact_search_is_optimal_where_the_first_attempt_is_late() -> None:
     f = parse(RESPONSE)
     alone = find_run(CHAIN, f, initial="A", first_attempt=False)
     assert alone.run.times[-1] == 4 and alone.method == "exact search"
+
+
+@pytest.mark.parametrize(("text", "first_attempt_cost", "cost"), [
+    ("G[2,2] p", Fraction(4), Fraction(2)),  # the first attempt's lasso enters its repeating part late
+    ("G(2,inf) p", None, Fraction(5, 2)),  # the first attempt (with its pruning) finds nothing
+])
+def test_observed_exact_search_beats_the_first_attempt(text: str, first_attempt_cost: Fraction | None,
+                                                       cost: Fraction) -> None:
+    from tubempc.planning.automaton import compile_formula
+    from tubempc.planning.search import _cost, _search
+
+    found = plan(text, dwell="observed")
+    assert found.method == "exact search" and _cost(found.run) == cost
+    fast = _search(WTS, compile_formula(parse(text), found.tick_s), "A", wait=True, silent=False, prune=True,
+                   max_states=10_000)
+    assert (None if fast is None else _cost(fast[0])) == first_attempt_cost

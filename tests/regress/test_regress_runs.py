@@ -16,6 +16,7 @@ from tubempc.control import closed_loop
 from tubempc.regress import (
     compare,
     default_baseline_path,
+    expand_falsify,
     expand_suite,
     format_diff,
     load_suite,
@@ -96,16 +97,18 @@ def test_scaled_down_gain_is_caught(small_suite: Path, monkeypatch: pytest.Monke
     assert any(m.startswith("check.") and m.endswith(".verdict") for m in regressed)  # the certificate's tube check
 
 
-@pytest.mark.slow  # 10 closed-loop runs (about 15 s idle, 30 s on a loaded runner)
+@pytest.mark.slow  # 10 closed-loop runs + a 10-simulation search (about 20 s idle, 40 s on a loaded runner)
 def test_default_suite_matches_the_shipped_baseline(tmp_path: Path) -> None:
     out = _regress("--workers", "2", "--out", str(tmp_path / "out"))
     assert out.returncode == 0, out.stdout + out.stderr
-    assert out.stdout.strip().splitlines()[-1].startswith("OK: 10 runs")
+    assert out.stdout.strip().splitlines()[-1].startswith("OK: 11 runs")
     junit = ET.parse(tmp_path / "out" / "junit.xml").getroot()
-    assert len(list(junit.iter("testcase"))) == 10 and junit.get("failures") == "0"
+    assert len(list(junit.iter("testcase"))) == 11 and junit.get("failures") == "0"
     runs = read_baseline(default_baseline_path())["runs"]
-    assert len(runs) == len(expand_suite(load_suite())) == 10
-    assert all(r["metrics"]["verdict"] == "pass" for r in runs.values())
+    loaded = load_suite()
+    assert len(runs) == len(expand_suite(loaded)) + len(expand_falsify(loaded)) == 11
+    assert all(r["metrics"]["verdict"] == "pass" for k, r in runs.items() if ".falsify." not in k)
+    assert runs["nexus-sml.falsify.R4-R5"]["metrics"]["falsify.violation"] is False
 
 
 def test_runs_on_dask_like_inline(small_suite: Path) -> None:

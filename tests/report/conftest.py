@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from tubempc.scenario import Scenario, builtin_scenario
+from verify.certificate import CERTIFICATE_VERSION
 
 EVIL = '<script>alert("x")</script><img src="http://evil.example/x.png">&'
 
@@ -46,26 +47,48 @@ def _frames(n: int = 2000, rate_hz: float = 100.0) -> tuple[pd.DataFrame, pd.Dat
 
 
 def make_certificate(*, verdict: str = "fail", evil: bool = False) -> dict[str, Any]:
+    """A certificate that the model (``verify.certificate``) accepts, with a failed, an inconclusive and passing
+    checks (``evil``: strings that must be escaped in every report)."""
     name = EVIL if evil else "clearance"
     return {
+        "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,
         "checks": [
-            {"name": "mitl_timed_run", "verdict": "pass", "margin": 0.12, "first_violation_time": None},
-            {"name": "tube", "verdict": "fail" if verdict == "fail" else "pass", "margin": -0.004,
+            {"name": "mitl_timed_run", "verdict": "pass", "margin": 0.12, "margin_unit": "m",
+             "first_violation_time": None},
+            {"name": "tube", "verdict": "fail" if verdict == "fail" else "pass", "margin": -0.004, "margin_unit": "m",
              "first_violation_time": 12.5 if verdict == "fail" else None, "subformula": "|p - p_hat| <= r_q"},
             {"name": "inputs", "verdict": "inconclusive" if verdict != "pass" else "pass", "margin": None,
-             "first_violation_time": None, "reason": "cmd_vel topic missing"},
-            {"name": name, "verdict": "pass", "margin": 0.31, "first_violation_time": None},
+             "margin_unit": "m/s or rad/s", "first_violation_time": None, "reason": "cmd_vel topic missing"},
+            {"name": name, "verdict": "pass", "margin": 0.31, "margin_unit": "m", "first_violation_time": None},
         ],
         "timed_run": [{"region": "R1", "time": 0.0}, {"region": "R3", "time": 19.2}],
         "data_quality": {"dropouts": {"count": 1, "longest_gap_s": 0.51},
                          "topics": {EVIL if evil else "/qualisys/nexus/pose": {"rate_hz": 99.8}},
                          "findings": ["one dropout of 0.51 s"]},
         "formula": "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)",
+        "scenario": "nexus-sml",
         "scenario_sha256": "ab" * 32,
-        "log_sha256": "cd" * 32,
         "log": EVIL if evil else "run.mcap",
+        "log_format": "mcap",
+        "log_digest": "cd" * 32,
+        "log_digest_algorithm": "sha256",
+        "log_sha256": "cd" * 32,
         "partial": False,
+        "time_base": "header",
+        "time0_ns": 0,
+        "duration_s": 19.99,
+        "judged_span_s": [0.0, 19.99],
+        "samples": {"pose": {"read": 1950, "judged": 1950}},
+        "pose_source": {"topic": "/qualisys/nexus/pose", "type": "geometry_msgs/msg/PoseStamped"},
+        "speed_bound_mps": 0.283,
+        "robot_radius_m": 0.27,
+        "tube": {"radius_m": 0.01, "noise_tolerance_m": 0.0, "noise_tolerance_rule": "3 * scenario.mocap.noise_std"},
+        "input_model": "holonomic",
+        "checks_selected": ["spec", "tube", "input_box", "workspace", "obstacle_clearance"],
+        "checks_source": "default",
+        "not_checked": [{"name": "signals", "reason": "the scenario names no signal"}],
+        "scenario_warnings": [],
     }
 
 

@@ -136,17 +136,18 @@ def test_worst_margin_of_a_failed_log_is_its_failed_checks(scenario: Scenario) -
 
     from verify.batch import BatchItem, BatchResult
 
-    checks = [{"name": "workspace", "verdict": "pass", "margin": 0.3},
-              {"name": "spec_trajectory", "verdict": "fail", "margin": -0.2},
-              {"name": "obstacle_clearance", "verdict": "fail", "margin": -0.5},
-              {"name": "tube", "verdict": "pass", "margin": -0.9}]  # a pass below the fails: must not be chosen
+    checks = [{"name": "workspace", "verdict": "pass", "margin": 0.3, "margin_unit": "m"},
+              {"name": "spec_trajectory", "verdict": "fail", "margin": -0.2, "margin_unit": "m"},
+              {"name": "obstacle_clearance", "verdict": "fail", "margin": -0.5, "margin_unit": "m"},
+              {"name": "spec_timed_run", "verdict": "fail", "margin": -7.0, "margin_unit": "s"},  # seconds: not m
+              {"name": "tube", "verdict": "pass", "margin": -0.9, "margin_unit": "m"}]  # a pass below the fails
     result = SimpleNamespace(certificate={"checks": checks}, exit_code=1)
     item = BatchItem("a.bag", "a", 1, "fail", None, 0.1, result)  # type: ignore[arg-type]
     row = BatchResult((item,), scenario, None).rows()[0]
-    assert row["worst_margin"] == -0.5
+    assert row["worst_margin_m"] == -0.5
     ok = BatchItem("b.bag", "b", 0, "pass", None, 0.1,
                    SimpleNamespace(certificate={"checks": checks[:1]}, exit_code=0))  # type: ignore[arg-type]
-    assert BatchResult((ok,), scenario, None).rows()[0]["worst_margin"] == 0.3
+    assert BatchResult((ok,), scenario, None).rows()[0]["worst_margin_m"] == 0.3
 
 
 def test_a_worker_that_dies_twice_is_exit_70_and_the_batch_goes_on() -> None:

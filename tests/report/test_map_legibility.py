@@ -15,10 +15,11 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from tubempc.scenario import Scenario, builtin_scenario, load_scenario
+from verify.certificate import Certificate
 from verify.figures import render_figures
 from verify.obligations import obligations_of
 from verify.report import write_reports
-from verify.workspace_map import map_texts, text_box, workspace_map
+from verify.workspace_map import map_texts, text_box, workspace_figure, workspace_map
 
 OUTDOOR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "outdoor-150m.yaml"
 
@@ -31,7 +32,8 @@ def _patrol(points: list[tuple[float, float]], speed_mps: float, rate_hz: float 
                          "y_m": np.interp(t * speed_mps, arc, xy[:, 1]), "theta_rad": 0.05 * t})
 
 
-def _crowded_certificate(scenario: Scenario, trajectory: pd.DataFrame, n_violations: int) -> dict[str, Any]:
+def _crowded_certificate(base: dict[str, Any], scenario: Scenario, trajectory: pd.DataFrame,
+                         n_violations: int) -> Certificate:
     """Several failed checks with violations close together in time (their labels compete for the same space),
     and a long timed run (numbered markers everywhere)."""
     t_end = float(trajectory["t_s"].iloc[-1])
@@ -40,8 +42,8 @@ def _crowded_certificate(scenario: Scenario, trajectory: pd.DataFrame, n_violati
         checks.append({"name": f"check_{k}", "verdict": "fail", "margin": -0.1, "margin_unit": "m",
                        "first_violation_time": t_end * (0.3 + 0.04 * k), "subformula": f"F[{k},{k + 5}] mission_x"})
     run = [{"region": r.name, "time": t_end * i / (2 * len(scenario.regions))} for i, r in enumerate(scenario.regions)]
-    return {"verdict": "fail", "formula": scenario.spec, "checks": checks, "timed_run": run,
-            "duration_s": t_end}
+    return Certificate.model_validate({**base, "verdict": "fail", "formula": scenario.spec,
+                                       "checks": checks, "timed_run": run, "duration_s": t_end})
 
 
 def _assert_no_overlap(fig: Any) -> None:
@@ -55,15 +57,20 @@ def _assert_no_overlap(fig: Any) -> None:
 
 
 @pytest.mark.parametrize("scale", ["lab-5m", "field-150m"])
-def test_map_annotations_never_overlap(scale: str) -> None:
+def test_map_annotations_never_overlap(scale: str, make_result: Callable[..., Any], tmp_path: Path) -> None:
     if scale == "lab-5m":
         scenario = builtin_scenario()
         trajectory = _patrol([(-1.99, -1.78), (-0.6, -0.5), (0.16, 0.40), (1.3, -0.4), (2.02, -1.63)], 0.15)
     else:
         scenario = load_scenario(OUTDOOR)
         trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
-    cert = _crowded_certificate(scenario, trajectory, n_violations=4)
+    cert = _crowded_certificate(make_result().certificate, scenario, trajectory, n_violations=4)
+    result = make_result()
+    written = write_reports(type(result)(cert.to_json_dict(), 1, trajectory), scenario, tmp_path)
+    assert {"report.html", "figures/workspace.png", "figures/obligations.png"} <= set(written)
     rendered = workspace_map(cert, scenario, trajectory, None)
+    # the figure checked below is the report's map, byte for byte
+    assert workspace_figure(cert, scenario, trajectory, None) == written["figures/workspace.png"].read_bytes()
     _assert_no_overlap(rendered.figure)
     shown = [t.get_text() for t in map_texts(rendered.figure) if t.axes is rendered.figure.axes[0]]
     # every violation names what failed beside its marker, even where labels crowd
@@ -77,11 +84,12 @@ def test_map_annotations_never_overlap(scale: str) -> None:
         assert len(rendered.figure.axes) >= 3  # map, colour bar, and zoomed panels around the violations
 
 
-def test_labels_without_placement_would_overlap() -> None:
+def test_labels_without_placement_would_overlap(make_result: Callable[..., Any]) -> None:
     """The crowded field map is a real test of the placement: the same texts all at offset 0 do overlap."""
     scenario = load_scenario(OUTDOOR)
     trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90), (135, 85), (60, 95), (20, 90)], 1.2)
-    fig = workspace_map(_crowded_certificate(scenario, trajectory, 4), scenario, trajectory, None).figure
+    cert = _crowded_certificate(make_result().certificate, scenario, trajectory, 4)
+    fig = workspace_map(cert, scenario, trajectory, None).figure
     for text in map_texts(fig):
         text.set_position((0.0, 0.0))
     with pytest.raises(AssertionError, match="overlaps"):
@@ -116,6 +124,8 @@ def test_page_order_and_readable_formula(tmp_path: Path, make_result: Callable[.
     assert order == sorted(order)
     assert page.index('id="fig-workspace"') < page.index('id="fig-obligations"') < page.index('id="fig-states"')
     assert "<details><summary><h2>Data quality</h2>" in page
+    # a check that did not run is said right under the checks table, not only in the collapsed details
+    assert page.index("not checked: signals (the scenario names no signal)") < page.index("<h2>Map and obligations")
     assert page.index("dropouts.count") < page.index("zeros.a")  # the finding that reports something comes first
     md = written["report.md"].read_text()
     assert "!obs_1 & F[30,50]" in md.replace("\\[", "[").replace("\\]", "]") and "&amp;" not in md
@@ -126,8 +136,9 @@ def test_theta_is_unwrapped_and_times_have_sensible_precision(tmp_path: Path,
     result = make_result(verdict="fail")
     theta = np.mod(np.linspace(0, 12 * np.pi, len(result.trajectory)) + np.pi, 2 * np.pi) - np.pi  # a sawtooth
     traj = result.trajectory.assign(theta_rad=theta)
-    figs = {f.stem: f for f in render_figures(result.certificate, builtin_scenario(), trajectory=traj, nominal=None,
-                                              inputs=None, robustness=None)}
+    cert = Certificate.model_validate(result.certificate)
+    figs = {f.stem: f for f in render_figures(cert, builtin_scenario(), trajectory=traj, nominal=None, inputs=None,
+                                              robustness=None)}
     assert "states" in figs
     from verify.figures import _unwrapped
 
@@ -135,3 +146,24 @@ def test_theta_is_unwrapped_and_times_have_sensible_precision(tmp_path: Path,
     assert np.max(np.abs(np.diff(unwrapped))) < 1.0 and unwrapped[-1] > 30.0
     md = write_reports(result, builtin_scenario(), tmp_path)["report.md"].read_text()
     assert "| 12.50 s |" in md and "| R3 | 19.20 s |" in md
+
+
+def test_polygon_workspace_and_regions_are_drawn_and_named(make_result: Callable[..., Any]) -> None:
+    """Any robot's scenario: a polygon workspace and polygon regions are drawn as polygons, named beside them."""
+    from tubempc.scenario import scenario_from_dict
+
+    data = load_scenario(OUTDOOR).to_dict()
+    data["workspace"] = {"polygon": [[0, 0], [150, 0], [150, 100], [60, 100], [0, 60]]}
+    data["regions"][1] = {"name": "survey_a", "polygon": [[45, 65], [68, 66], [64, 85], [47, 82]],
+                          "labels": ["survey_a"]}
+    scenario = scenario_from_dict(data, source="<polygons>")
+    trajectory = _patrol([(10, 10), (35.4, 43.2), (55, 75), (95, 90)], 1.2)
+    rendered = workspace_map(_crowded_certificate(make_result().certificate, scenario, trajectory, 2), scenario,
+                             trajectory, None)
+    _assert_no_overlap(rendered.figure)
+    shown = [t.get_text() for t in map_texts(rendered.figure)]
+    assert "survey_a" in shown
+    from matplotlib.patches import Polygon
+
+    polygons = [p for p in rendered.figure.axes[0].patches if isinstance(p, Polygon)]
+    assert len(polygons) >= 2  # the workspace outline and the survey field

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate
 from verify.figures import workspace_figure
 from verify.report import write_reports
 
@@ -159,9 +160,11 @@ def test_violation_is_drawn_on_the_map(scenario: Scenario, make_result: Callable
     failing = make_result(verdict="fail")
     passing_cert = {**failing.certificate, "checks": [c for c in failing.certificate["checks"]
                                                       if c["verdict"] != "fail"]}
-    with_mark = workspace_figure(failing.certificate, scenario, failing.trajectory, failing.nominal)
-    without = workspace_figure(passing_cert, scenario, failing.trajectory, failing.nominal)
-    assert workspace_figure(passing_cert, scenario, failing.trajectory, failing.nominal) == without  # deterministic
+    with_mark = workspace_figure(Certificate.model_validate(failing.certificate), scenario, failing.trajectory,
+                                 failing.nominal)
+    without = workspace_figure(Certificate.model_validate(passing_cert), scenario, failing.trajectory, failing.nominal)
+    again = workspace_figure(Certificate.model_validate(passing_cert), scenario, failing.trajectory, failing.nominal)
+    assert again == without  # deterministic
     # the difference is the violation drawn in the failure colour: more pixels of that colour on the failing map
     from matplotlib.colors import to_rgb
 

@@ -155,14 +155,19 @@ def test_plan_and_simulate_name_what_the_planner_lacks(tmp_path: Path) -> None:
         assert out.returncode == 3, out
         lines = out.stderr.strip().splitlines()
         assert len(lines) == 1, out.stderr
-        assert "disturbance: cannot plan on this scenario: required for planning and simulation" in lines[0]
+        assert ("disturbance: cannot plan or simulate on this scenario: required for planning and simulation"
+                in lines[0])
     full = lab(disturbance={"bound": 0.02}, tube={"sigma_low": 2.0}, initial_region="start",
                mpc={"h": 0.1, "horizon": 1.2, "Q": [1, 1, 1], "R": [1, 1, 1], "P": [1, 1, 1]})
     yaml_path.write_text(json.dumps(full.to_dict()))
-    out = _cli("plan", "--scenario", yaml_path)
-    assert out.returncode == 3
-    assert out.stderr.strip() == ("tubempc: error: diffdrive-lab: inputs.model: cannot plan on this scenario: "
-                                  "unicycle: the paper's tube MPC needs a fully actuated (holonomic) input model")
+    for args in (("plan", "--scenario", yaml_path), ("simulate", "--scenario", yaml_path, "--to", "dock",
+                                                      "--out", tmp_path / "x.mcap")):
+        out = _cli(*args)
+        assert out.returncode == 3
+        assert out.stderr.strip() == ("tubempc: error: diffdrive-lab: inputs.model: cannot plan or simulate on this "
+                                      "scenario: unicycle: the paper's tube MPC needs a fully actuated (holonomic) "
+                                      "input model")
+    assert not (tmp_path / "x.mcap").exists()
 
 
 # ---- input models: holonomic / unicycle, Twist / TwistStamped ------------------------------------------------------
@@ -344,6 +349,10 @@ def test_signal_atom_on_a_nested_field_passes_and_fails(tmp_path: Path) -> None:
     s = ok["signals"]["slow"]
     assert s["worst_margin"] == pytest.approx(0.1) and s["relative_worst_margin"] == pytest.approx(0.2)
     assert s["unit"] == "m/s" and s["time_base"] == "header" and s["unknown_stretches"] == []
+    atom = _check(ok, "spec_trajectory")["atom_margins"]
+    assert atom["slow"]["min"] == pytest.approx(0.1) and atom["slow"]["relative_min"] == pytest.approx(0.2)
+    assert atom["slow"]["max"] == pytest.approx(0.5) and atom["slow"]["unit"] == "m/s"
+    assert atom["dock"]["unit"] == "m" and atom["dock"]["max"] == pytest.approx(0.45 - 0.25)  # at its centre
     strict = dict(SLOW, value=0.3)
     bad = certify_log(log, lab(signals={"slow": strict}, spec="G[0,inf) slow")).certificate
     spec = _check(bad, "spec_trajectory")
@@ -472,7 +481,7 @@ def test_reports_draw_polygon_scenarios_without_a_tube(tmp_path: Path) -> None:
     assert {"figures/workspace.png", "figures/inputs.png", "report.md"} <= set(written)
     md = (tmp_path / "r" / "report.md").read_text()
     assert "Verdict over the checks: spec, obstacle_clearance, workspace, input_box." in md
-    assert "Not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))." in md
+    assert "not checked: tube (not selected: the scenario names no nominal-state topic (topics.nominal))" in md
     assert "tube radius" not in md
 
 

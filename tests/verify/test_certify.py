@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import blake3
+import jsonschema
 import numpy as np
 import pytest
 
@@ -26,6 +27,7 @@ from verify import (
     certify_log,
     write_certificate,
 )
+from verify.certificate import certify_json_schema
 from verify.ingest.digest import digest_path
 
 MakeLog = Callable[..., Path]
@@ -263,6 +265,8 @@ def test_cli_json_quiet_verbose_and_time_precision(make_log: MakeLog, good: Any)
     assert [e["verdict"] for e in entries] == ["pass", "unusable"]
     # -q silences the summary, never an error line
     assert many.stderr.splitlines() == [f"tubempc: error: {ok.parent / 'missing.mcap'}: file not found"]
+    jsonschema.validate(entries, certify_json_schema())
+    jsonschema.validate(json.loads(one.stdout), certify_json_schema())
     assert entries[1]["exit_code"] == 3 and "missing.mcap" in entries[1]["error"]
     fail = run("certify", str(ok), "--scenario", "nexus-sml", "--spec", "F[0,10] obs_1", "-v")
     assert fail.returncode == 1
@@ -279,3 +283,28 @@ def test_a_failed_formula_always_states_its_margin(make_log: MakeLog, scenario: 
     check = _check(cert, "spec_trajectory")
     assert check["verdict"] == "fail"
     assert isinstance(check["margin"], float) and check["margin"] < 0
+
+
+@pytest.mark.parametrize("log", ["late_mission.mcap", "obstacle_touch.bag", "tube_breach.mcap"])
+def test_every_failed_check_states_time_margin_and_unit(log: str, scenario: Scenario) -> None:
+    cert = certify_log(Path(__file__).resolve().parents[2] / "logs" / log, scenario).certificate
+    failed = [c for c in cert["checks"] if c["verdict"] == "fail"]
+    assert failed
+    for check in failed:
+        assert isinstance(check["first_violation_time"], float), check
+        assert isinstance(check["margin"], float) and check["margin"] <= 0, check
+        assert check["margin_unit"] in ("m", "s", "m/s or rad/s"), check
+    for check in cert["checks"]:
+        assert "margin_unit" in check
+
+
+def test_missed_window_margin_is_how_late_in_seconds() -> None:
+    from verify.timedrun import check_timed_run
+
+    labels = {"R1": ["mission_1"], "R3": ["mission_2"], "R8": ["obs_3"]}
+    late = check_timed_run("F[30,50] mission_2", [("R1", 0.0), ("R3", 56.0)], labels, end=60.0)
+    assert (late.verdict, late.time_s, late.margin_s) == ("fail", 50.0, pytest.approx(-6.0))
+    never = check_timed_run("F[30,50] mission_2", [("R1", 0.0)], labels, end=60.0)
+    assert never.margin_s == pytest.approx(-10.0)  # not reached by the log's end: at least 10 s late
+    touch = check_timed_run("G[0,inf) !obs_3", [("R1", 0.0), ("R8", 6.5), ("R1", 9.0)], labels, end=20.0)
+    assert (touch.time_s, touch.margin_s) == (6.5, pytest.approx(-2.5))  # inside the obstacle for 2.5 s

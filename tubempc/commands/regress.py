@@ -1,7 +1,8 @@
 """The `tubempc regress` subcommand: run a suite with the current controller, compare with a baseline.
 
 input: a suite YAML (default: the shipped one), a baseline JSON -> output: a readable diff on stdout, exit 0 when
-nothing regressed and 1 otherwise; ``--update-baseline`` writes the current metrics as the new baseline (exit 0).
+nothing regressed and 1 otherwise (a falsification case regresses when it finds a counterexample the baseline did
+not); ``--update-baseline`` writes the current metrics as the new baseline (exit 0).
 With ``--out DIR``: every run's log and certificate under ``DIR/<run>/``, plus ``diff.txt`` and ``junit.xml``.
 """
 
@@ -35,9 +36,12 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
             dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None) -> None:
     """Run a regression suite with the current controller and compare it with a stored baseline."""
     from tubempc.regress import (
+        FalsifyCase,
+        RunCase,
         compare,
         comparison_junit,
         default_baseline_path,
+        expand_falsify,
         expand_suite,
         format_diff,
         load_suite,
@@ -60,7 +64,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         from verify.outputs import prepare_output_dir
 
         prepare_output_dir(out_dir, force=force)
-    cases = expand_suite(loaded)
+    cases: list[RunCase | FalsifyCase] = [*expand_suite(loaded), *expand_falsify(loaded)]
     if update_baseline:
         progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
         outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)

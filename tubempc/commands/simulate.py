@@ -38,6 +38,7 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     import numpy as np
 
     from tubempc.control import Target, run_closed_loop
+    from tubempc.errors import DesignError
     from tubempc.rosio import write_log
     from tubempc.scenario import load_scenario
     from verify.outputs import prepare_output_log, replace_output_log
@@ -45,8 +46,11 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     prepare_output_log(out_path, force=force)
     scenario = load_scenario(scenario_path)
     scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
-    result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
-                             t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    try:
+        result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
+                                 t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    except DesignError as err:  # exit 3, and the line names the scenario file
+        raise DesignError(f"{scenario_path}: the tube MPC cannot be designed for this scenario: {err}") from err
     if force:
         replace_output_log(out_path)
     path = write_log(result, scenario, out_path)

@@ -23,7 +23,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from tubempc.control.disturbance import Disturbance, InvalidArgumentError, make_disturbance
+from tubempc.control.disturbance import DisturbanceLike, InvalidArgumentError, make_disturbance
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel, model_for
 from tubempc.control.fhocp import FAR_AWAY_M, NominalMPC, build_fhocp
 from tubempc.control.guide import GuidePath, guide_path, references
@@ -158,14 +158,14 @@ def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Funct
 
 
 def _casadi_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np.ndarray, *, xs: np.ndarray,
-                  xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t0_s: float, dist: Disturbance,
+                  xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t0_s: float, dist: DisturbanceLike,
                   rng: np.random.Generator, sigma: float, dt: float, noise_m: float,
                   fn: ca.Function, samples: int) -> tuple[np.ndarray, np.ndarray]:
     """``m_blk`` (<= samples) samples through ``_block_function``; the arrays get the sample-start values."""
     noise = np.zeros((samples, STATE_DIM))
     if noise_m > 0:
         noise[:, :2] = rng.normal(scale=noise_m, size=(samples, 2))
-    worst = dist.kind == "worst"
+    worst = dist.worst_at(t0_s)
     deltas = np.zeros((samples, STATE_DIM)) if worst else dist.batch(t0_s + dt * np.arange(samples))
     states, nominal, inputs, x_end, xh_end = fn(x, x_hat, u_hat, noise.T, deltas.T, float(worst), dist.bound,
                                                 dist.direction, sigma)
@@ -230,13 +230,13 @@ def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
 
 
 def _world_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np.ndarray, *, xs: np.ndarray,
-                 xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t_arr: np.ndarray, dist: Disturbance,
+                 xms: np.ndarray, xhs: np.ndarray, uw: np.ndarray, t_arr: np.ndarray, dist: DisturbanceLike,
                  rng: np.random.Generator, sigma: float, dt: float, noise_m: float, powers: np.ndarray,
                  lower: np.ndarray, k_dt: np.ndarray | None = None,
                  drift: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``m_blk`` samples of the linear world model in closed form (exactly the per-sample recursion).
 
-    q_k = x_k - x_hat_k obeys ``q+ = a q + dt (delta - sigma n)`` with a = 1 - sigma dt. Under ``worst`` (no
+    q_k = x_k - x_hat_k obeys ``q+ = a q + dt (delta - sigma n)`` with a = 1 - sigma dt. Under the outward push (no
     noise) q keeps its direction e and ``|q|+ = a |q| + dt delta_bar``. ``k_dt`` ((m+1) x 1, k dt) and ``drift``
     (m+1, the delta_bar part of |q|_k) are per-run constants for ``m_blk <= m`` (computed here when omitted).
     """
@@ -248,7 +248,7 @@ def _world_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np
     if noise_m > 0:
         noise = np.zeros((m_blk, 3))
         noise[:, :2] = rng.normal(scale=noise_m, size=(m_blk, 2))
-    if dist.kind == "worst":
+    if dist.worst_at(float(t_arr[i])):
         r0 = math.sqrt(float(q0.dot(q0)))  # np.linalg.norm's own formula
         e = q0 / r0 if r0 > 1e-15 else dist.direction
         if drift is None:
@@ -272,9 +272,15 @@ def _world_block(i: int, m_blk: int, x: np.ndarray, x_hat: np.ndarray, u_hat: np
 
 
 def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
-                    disturbance: str = "random", seed: int = 0, t_end_s: float | None = None,
-                    mocap_noise_m: float = 0.0, model: DynamicsModel | None = None) -> ClosedLoopResult:
-    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring)."""
+                    disturbance: str | DisturbanceLike = "random", seed: int = 0, t_end_s: float | None = None,
+                    mocap_noise_m: float = 0.0, model: DynamicsModel | None = None,
+                    start_pose: Sequence[float] | None = None) -> ClosedLoopResult:
+    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring).
+
+    ``disturbance``: a model name (``DISTURBANCE_MODELS``, drawn from ``seed``) or a ``DisturbanceLike`` signal.
+    ``start_pose``: (x, y, theta) where the robot and the nominal start (default: the start region's centre with
+    the scenario's initial heading). ``seed`` also draws the MoCap noise.
+    """
     if not targets:
         raise InvalidArgumentError("targets: at least one target is required")
     if not (math.isfinite(mocap_noise_m) and mocap_noise_m >= 0):
@@ -287,10 +293,17 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             raise InvalidArgumentError(f"region={name!r} is not in scenario {scenario.name!r}")
     if scenario.region(source).unsafe:
         raise DesignError(f"start region {source} is an unsafe region")
+    if start_pose is not None and not (len(start_pose) == STATE_DIM and all(math.isfinite(v) for v in start_pose)):
+        raise InvalidArgumentError(f"start_pose={start_pose!r} must be {STATE_DIM} finite numbers (x, y, theta)")
     model = model or model_for(scenario)
     tube = design_tube(scenario, model)
     rng = np.random.default_rng(seed)
-    dist = make_disturbance(disturbance, scenario.disturbance.bound, rng)
+    if isinstance(disturbance, str):
+        dist: DisturbanceLike = make_disturbance(disturbance, scenario.disturbance.bound, rng)
+    else:
+        dist = disturbance
+        if not (math.isfinite(dist.bound) and dist.bound >= 0):
+            raise InvalidArgumentError(f"disturbance bound={dist.bound!r} must be a finite non-negative number")
     h = scenario.mpc.h
     dt = 1.0 / scenario.mocap.rate_hz
     per_step = round(h / dt)
@@ -303,11 +316,12 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     problem = build_fhocp(scenario, model, tube, MIN_OBSTACLE_SLOTS)
     chord = problem.chord_margin_m
     mpc_by_slots: dict[int, NominalMPC] = {}
-    fast = model.linear_world and not (disturbance == "worst" and mocap_noise_m > 0)
+    fast = model.linear_world and not (dist.may_be_worst and mocap_noise_m > 0)
     block_fn = None if fast else _block_function(model, dt, per_step)
 
     start = scenario.region(source)
-    x = np.array([start.center[0], start.center[1], scenario.initial_heading], dtype=float)
+    x = np.array([start.center[0], start.center[1], scenario.initial_heading] if start_pose is None
+                 else [float(v) for v in start_pose], dtype=float)
     x_hat = x.copy()
     if t_end_s is None:
         budget = 0.0
@@ -419,5 +433,5 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
     return ClosedLoopResult(t_s=t_arr[:n].copy(), x=xs[:n].copy(), x_measured=xms[:n].copy(), x_hat=xhs[:n].copy(),
                             u_world=uw[:n].copy(), u_body=ub[:n].copy(), solver=tuple(records), arrivals=arrivals,
                             targets=tuple(targets), start_region=source, tube_radius_m=tube.radius_m,
-                            sigma=tube.sigma, seed=seed, disturbance=disturbance, disturbance_params=dist.params,
+                            sigma=tube.sigma, seed=seed, disturbance=dist.kind, disturbance_params=dist.params,
                             mocap_noise_m=mocap_noise_m, ok=ok, reason=reason)

@@ -8,19 +8,23 @@ whose ``sample(t_s, q)`` gives ``delta`` with ``|delta|_2 <= delta_bar`` (held o
 - ``worst``: ``delta_bar q / |q|`` (pushes the tube error outward; a fixed random direction while q = 0);
 - ``bias``: a constant vector of norm delta_bar in a random direction;
 - ``sine``: ``delta_bar sin(2 pi f t + phase) d`` with a random unit direction d and phase, f = 0.2 Hz.
+
+The closed loop takes any ``DisturbanceLike`` (these models, or signals built elsewhere, e.g. by the falsifier):
+``batch(t)`` for the state-independent part and ``worst_at(t)`` for the MPC steps on which the disturbance is the
+outward push ``delta_bar q/|q|`` (decided per MPC step, at its start time).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from tubempc.errors import TubeMPCError
 
-__all__ = ["DISTURBANCE_MODELS", "Disturbance", "InvalidArgumentError", "make_disturbance"]
+__all__ = ["DISTURBANCE_MODELS", "Disturbance", "DisturbanceLike", "InvalidArgumentError", "make_disturbance"]
 
 DISTURBANCE_MODELS = ("none", "random", "worst", "bias", "sine")
 _SINE_FREQUENCY_HZ = 0.2
@@ -28,6 +32,29 @@ _SINE_FREQUENCY_HZ = 0.2
 
 class InvalidArgumentError(TubeMPCError, ValueError):
     """An argument of a control function is out of its domain; the message names it and its value."""
+
+
+class DisturbanceLike(Protocol):
+    """What the closed loop needs from a disturbance: ``|delta|_2 <= bound`` at every sample."""
+
+    @property
+    def kind(self) -> str: ...
+
+    @property
+    def bound(self) -> float: ...
+
+    @property
+    def direction(self) -> np.ndarray: ...  # the outward push's direction while q = 0
+
+    @property
+    def params(self) -> dict[str, Any]: ...
+
+    @property
+    def may_be_worst(self) -> bool: ...  # worst_at(t) is true for some t
+
+    def worst_at(self, t_s: float) -> bool: ...
+
+    def batch(self, t_s: np.ndarray) -> np.ndarray: ...
 
 
 def _unit(rng: np.random.Generator, dim: int) -> np.ndarray:
@@ -42,6 +69,14 @@ class Disturbance:
     direction: np.ndarray
     phase_rad: float
     rng: np.random.Generator = field(repr=False, compare=False)
+
+    @property
+    def may_be_worst(self) -> bool:
+        return self.kind == "worst"
+
+    def worst_at(self, t_s: float) -> bool:
+        """True when the disturbance is the outward push ``delta_bar q/|q|`` (for ``worst``: always)."""
+        return self.kind == "worst"
 
     def sample(self, t_s: float, q: np.ndarray) -> np.ndarray:
         dim = len(self.direction)

@@ -15,8 +15,10 @@ from tubempc.regress.compare import (
     read_baseline,
     write_baseline,
 )
-from tubempc.regress.runner import RunJob, RunOutcome, closed_loop_metrics, run_case, run_cases
+from tubempc.regress.runner import RunJob, RunOutcome, closed_loop_metrics, falsify_metrics, run_case, run_cases
 from tubempc.regress.suite import (
+    FalsifyCase,
+    FalsifySpec,
     LoadedSuite,
     RunCase,
     Suite,
@@ -25,6 +27,7 @@ from tubempc.regress.suite import (
     Tolerances,
     default_suite_path,
     derived_spec,
+    expand_falsify,
     expand_suite,
     load_suite,
 )
@@ -34,6 +37,8 @@ __all__ = [
     "BaselineError",
     "Comparison",
     "DiffRow",
+    "FalsifyCase",
+    "FalsifySpec",
     "LoadedSuite",
     "RunCase",
     "RunJob",
@@ -48,7 +53,9 @@ __all__ = [
     "default_baseline_path",
     "default_suite_path",
     "derived_spec",
+    "expand_falsify",
     "expand_suite",
+    "falsify_metrics",
     "format_diff",
     "load_suite",
     "read_baseline",

@@ -6,7 +6,9 @@ renders it as text; ``Comparison.regressed`` decides the exit code. ``write_base
 
 Direction of "worse" per metric: verdicts pass < inconclusive < fail (no tolerance); larger is worse for transition
 times, tube ratio/error, solver failures/backups and solve times; smaller is worse for clearances and margins.
-A transition that is no longer reached (t_ij None), a run that errors, or a run without a baseline regresses.
+A transition that is no longer reached (t_ij None), a run that errors, or a run without a baseline regresses; so does
+a falsification case that finds a counterexample (``falsify.violation``) where the baseline found none (its margin
+and simulation counts are reported only through the verdict: a search's lowest margin is not a tolerance metric).
 """
 
 from __future__ import annotations
@@ -89,11 +91,13 @@ class Comparison:
 
 # ---- per-metric rules ---------------------------------------------------------------------------------------------
 def _rule(metric: str, tol: Tolerances) -> tuple[str, Tolerance | None]:
-    """(direction, tolerance): direction ``verdict``, ``higher_worse`` or ``lower_worse``."""
+    """(direction, tolerance): direction ``verdict``, ``flag`` / ``flag_bad``, ``higher_worse`` or ``lower_worse``."""
     if metric == "verdict" or metric.endswith(".verdict"):
         return "verdict", None
     if metric == "arrived":
         return "flag", None
+    if metric == "falsify.violation":
+        return "flag_bad", None
     if metric.startswith("t_ij_s."):
         return "higher_worse", tol.t_ij_s
     if metric.startswith("check.") and metric.endswith(".margin"):
@@ -128,6 +132,10 @@ def _compare_metric(run_id: str, metric: str, base: Any, cur: Any, tol: Toleranc
         if c > b or (c == b == 3 and base != cur):
             return DiffRow(run_id, metric, "regressed", base, cur, None)
         return DiffRow(run_id, metric, "improved", base, cur, None) if c < b else None
+    if direction == "flag_bad":  # true is the bad state: a counterexample found
+        if bool(cur) and not bool(base):
+            return DiffRow(run_id, metric, "regressed", base, cur, None)
+        return DiffRow(run_id, metric, "improved", base, cur, None) if bool(base) and not bool(cur) else None
     if direction == "flag":
         if bool(base) and not bool(cur):
             return DiffRow(run_id, metric, "regressed", base, cur, None)

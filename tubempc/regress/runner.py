@@ -7,6 +7,11 @@ input: ``RunCase`` values (from ``expand_suite``) -> output: one ``RunOutcome`` 
 ``input_margin`` (min over time and axes of max_abs_i - |u_i| of the logged body-frame command),
 ``solver_failures``, ``solver_backups``, ``solve_time_p50_ms``, ``solve_time_p95_ms``.
 
+A falsification case (``FalsifyCase``) searches its run with its budget (``tubempc falsify``, in the worker, one
+simulation at a time) and has the metrics ``falsify.violation`` (a counterexample was found: regresses where the
+baseline had none), ``falsify.margin`` (the lowest margin found), ``falsify.first_violation_sim`` and
+``falsify.simulations``; with ``out_dir`` its ``falsify.json`` and the worst case's log and certificate are kept.
+
 A run that cannot be executed (design refused, log not certifiable) is an outcome with ``error`` set, never an
 exception, so that one broken case does not hide the others.
 """
@@ -16,6 +21,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,10 +29,10 @@ from typing import Any
 import numpy as np
 
 from tubempc.errors import TubeMPCError
-from tubempc.regress.suite import RunCase
+from tubempc.regress.suite import FalsifyCase, RunCase
 from tubempc.scenario import Scenario
 
-__all__ = ["RunJob", "RunOutcome", "closed_loop_metrics", "run_case", "run_cases"]
+__all__ = ["RunJob", "RunOutcome", "closed_loop_metrics", "falsify_metrics", "run_case", "run_cases"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,7 +48,7 @@ class RunOutcome:
 class RunJob:
     """A case plus where to put its log and certificate (``out_dir`` None: a temporary folder, removed)."""
 
-    case: RunCase
+    case: RunCase | FalsifyCase
     out_dir: str | None
     reports: bool = False
 
@@ -113,6 +119,24 @@ def _run_in(case: RunCase, folder: Path, reports: bool) -> tuple[dict[str, Any],
     return metrics, str(log)
 
 
+def falsify_metrics(case: FalsifyCase, out_dir: Path | None) -> dict[str, Any]:
+    """Run one falsification case (inline); its metrics. With ``out_dir``: falsify.json and the worst case there."""
+    from tubempc.falsify import FalsifyRequest, run_falsify, write_outcome
+
+    f = case.spec
+    req = FalsifyRequest(scenario_ref=case.scenario_ref, source=f.start, target=f.target, plan=f.plan,
+                         method=f.method, budget=f.budget, seed=f.seed, family=f.family, knots=f.knots,
+                         switches=f.switches, bound_scale=f.bound_scale, vary_start=not f.fixed_start)
+    outcome = run_falsify(req, case.scenario, workers=1)
+    if out_dir is not None:
+        outcome = write_outcome(outcome, out_dir)
+    worst = outcome.result.worst
+    return {"falsify.violation": outcome.verdict == "fail",
+            "falsify.margin": None if worst is None or not math.isfinite(worst.margin) else worst.margin,
+            "falsify.first_violation_sim": outcome.result.first_violation,
+            "falsify.simulations": len(outcome.result.evaluations)}
+
+
 def run_case(job: RunJob) -> RunOutcome:
     """Execute one case (module level: runs in worker processes and on Dask workers)."""
     from verify.errors import VerifyError
@@ -120,6 +144,11 @@ def run_case(job: RunJob) -> RunOutcome:
     start = time.perf_counter()
     case = job.case
     try:
+        if isinstance(case, FalsifyCase):
+            folder = None if job.out_dir is None else Path(job.out_dir) / case.run_id
+            metrics = falsify_metrics(case, folder)
+            return RunOutcome(case.run_id, metrics, None, time.perf_counter() - start,
+                              None if folder is None else str(folder / "worst" / "run.mcap"))
         if job.out_dir is None:
             with tempfile.TemporaryDirectory(prefix="tubempc-regress-") as tmp:
                 metrics, _ = _run_in(case, Path(tmp), job.reports)
@@ -134,12 +163,13 @@ def run_case(job: RunJob) -> RunOutcome:
     return RunOutcome(case.run_id, metrics, None, time.perf_counter() - start, log_path)
 
 
-def run_cases(cases: list[RunCase], *, out_dir: str | Path | None = None, reports: bool = False,
+def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | None = None, reports: bool = False,
               workers: int | None = None, dask: str | None = None, progress: bool | None = None) -> list[RunOutcome]:
     """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address)."""
     from verify.batch import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports) for case in cases]
-    preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio")
+    preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",
+               "tubempc.falsify")
     return parallel_map(run_case, jobs, workers=workers, dask=dask, progress=progress, desc="regress",
                         preload=preload)

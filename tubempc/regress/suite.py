@@ -1,7 +1,8 @@
 """Regression suite files -> validated ``Suite`` values and the list of runs they stand for.
 
-input: a suite YAML (scenarios with their runs x seeds x disturbance models, tolerances per metric)
--> output: a frozen ``Suite`` and, by ``expand_suite``, one ``RunCase`` per (scenario, run, disturbance, seed).
+input: a suite YAML (scenarios with their runs x seeds x disturbance models, tolerances per metric, and optional
+falsification cases) -> output: a frozen ``Suite`` and, by ``expand_suite``, one ``RunCase`` per (scenario, run,
+disturbance, seed); by ``expand_falsify``, one ``FalsifyCase`` per falsification case (a search with its budget).
 Scenario references are built-in names (``nexus-sml``) or paths relative to the suite file. Every problem raises
 ``SuiteError`` naming the file and the field.
 """
@@ -13,7 +14,7 @@ import json
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -25,6 +26,8 @@ from tubempc.scenario import Scenario, load_scenario
 
 __all__ = [
     "DEFAULT_SUITE",
+    "FalsifyCase",
+    "FalsifySpec",
     "RunCase",
     "RunSpec",
     "Suite",
@@ -35,6 +38,7 @@ __all__ = [
     "Tolerances",
     "default_suite_path",
     "derived_spec",
+    "expand_falsify",
     "expand_suite",
     "load_suite",
 ]
@@ -131,6 +135,31 @@ class SuiteScenario(_Frozen):
     runs: tuple[RunSpec, ...] = Field(min_length=1)
 
 
+class FalsifySpec(_Frozen):
+    """A falsification case: search one run of a suite scenario with a budget of simulations (``tubempc
+    falsify``); the suite regresses when it finds a counterexample where the baseline found none."""
+
+    name: Annotated[str, Field(pattern=_NAME)]
+    scenario: str  # the name of one of the suite's scenarios
+    start: str | None = None  # default: the scenario's initial region
+    target: str | None = None  # one transition; or
+    plan: bool = False  # the scenario's planned mission
+    method: Literal["random", "targeted", "optimizer"] = "optimizer"
+    budget: Annotated[int, Field(ge=1)] = 20
+    seed: Annotated[int, Field(ge=0)] = 0
+    family: Literal["steps", "sine", "switch"] = "steps"
+    knots: Annotated[int, Field(ge=1)] = 4
+    switches: Annotated[int, Field(ge=1)] = 3
+    bound_scale: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1.0
+    fixed_start: bool = False
+
+    @model_validator(mode="after")
+    def _one_run(self) -> FalsifySpec:
+        if self.plan == (self.target is not None):
+            raise ValueError("give either target (one transition) or plan: true")
+        return self
+
+
 class Suite(_Frozen):
     name: Annotated[str, Field(pattern=_NAME)]
     scenarios: tuple[SuiteScenario, ...] = Field(min_length=1)
@@ -138,6 +167,7 @@ class Suite(_Frozen):
     disturbances: tuple[str, ...] = Field(min_length=1)
     mocap_noise_m: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
     tolerances: Tolerances = Tolerances()
+    falsify: tuple[FalsifySpec, ...] = ()
 
     @field_validator("disturbances")
     @classmethod
@@ -156,10 +186,19 @@ class Suite(_Frozen):
             runs = [r.name for r in s.runs]
             if len(set(runs)) != len(runs):
                 raise ValueError(f"scenarios ({s.name}): duplicate run names in {runs}")
+        cases = [f.name for f in self.falsify]
+        if len(set(cases)) != len(cases):
+            raise ValueError(f"falsify: duplicate case names in {cases}")
+        for f in self.falsify:
+            if f.scenario not in names:
+                raise ValueError(f"falsify ({f.name}): scenario {f.scenario!r} is not one of the suite's {names}")
         return self
 
     def sha256(self) -> str:
-        blob = json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":")).encode()
+        data = self.model_dump(mode="json")
+        if not data["falsify"]:
+            del data["falsify"]  # suites without falsification cases keep the hash they had before the field
+        blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()
 
 
@@ -182,6 +221,7 @@ class LoadedSuite:
     suite: Suite
     scenarios: dict[str, Scenario]
     source: str
+    scenario_refs: dict[str, str] | None = None  # suite scenario name -> the file path or built-in name it loaded
 
 
 def load_suite(path: str | Path | None = None) -> LoadedSuite:
@@ -207,10 +247,12 @@ def load_suite(path: str | Path | None = None) -> LoadedSuite:
             msg = "unknown field (check the spelling)"
         raise SuiteError(msg, source=source, field=_field_path(tuple(first["loc"])) or None) from None
     scenarios: dict[str, Scenario] = {}
+    refs: dict[str, str] = {}
     for i, entry in enumerate(suite.scenarios):
         ref = entry.scenario
         candidate = p.parent / ref
-        scenario = load_scenario(candidate if candidate.exists() else ref)
+        refs[entry.name] = str(candidate) if candidate.exists() else ref
+        scenario = load_scenario(refs[entry.name])
         names = {r.name for r in scenario.regions}
         for j, run in enumerate(entry.runs):
             for where, region in [("start", run.start)] + [(f"targets[{k}]", t.region)
@@ -219,7 +261,13 @@ def load_suite(path: str | Path | None = None) -> LoadedSuite:
                     raise SuiteError(f"region {region!r} is not in scenario {scenario.name!r}", source=source,
                                      field=f"scenarios[{i}].runs[{j}].{where}")
         scenarios[entry.name] = scenario
-    return LoadedSuite(suite, scenarios, source)
+    for i, case in enumerate(suite.falsify):
+        names = {r.name for r in scenarios[case.scenario].regions}
+        for where, maybe in (("start", case.start), ("target", case.target)):
+            if maybe is not None and maybe not in names:
+                raise SuiteError(f"region {maybe!r} is not in scenario {scenarios[case.scenario].name!r}",
+                                 source=source, field=f"falsify[{i}].{where}")
+    return LoadedSuite(suite, scenarios, source, refs)
 
 
 def derived_spec(scenario: Scenario, last_target: str) -> str:
@@ -266,3 +314,20 @@ def expand_suite(loaded: LoadedSuite) -> list[RunCase]:
                     cases.append(RunCase(f"{entry.name}.{run.name}.{disturbance}.s{seed}", scenario, run.start,
                                          targets, spec, disturbance, seed, run.t_end_s, suite.mocap_noise_m))
     return cases
+
+
+@dataclass(frozen=True, slots=True)
+class FalsifyCase:
+    """One falsification case of the suite, ready to run in any process (``spec`` as in ``FalsifySpec``)."""
+
+    run_id: str
+    scenario: Scenario
+    scenario_ref: str
+    spec: FalsifySpec
+
+
+def expand_falsify(loaded: LoadedSuite) -> list[FalsifyCase]:
+    """The suite's falsification cases, ids ``<scenario>.falsify.<case>``."""
+    refs = loaded.scenario_refs or {}
+    return [FalsifyCase(f"{f.scenario}.falsify.{f.name}", loaded.scenarios[f.scenario],
+                        refs.get(f.scenario, loaded.scenarios[f.scenario].name), f) for f in loaded.suite.falsify]

@@ -28,7 +28,7 @@ from tubempc.control.closed_loop import ClosedLoopResult
 from tubempc.errors import LogWriteError
 from tubempc.scenario import DEFAULT_TOPICS, Scenario, dump_scenario
 
-__all__ = ["POSE_FRAME", "TIME0_NS", "metadata_document", "write_log"]
+__all__ = ["POSE_FRAME", "TIME0_NS", "metadata_document", "stamps_ns", "write_log"]
 
 TIME0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z: simulated runs start here
 POSE_FRAME = "world"
@@ -36,7 +36,8 @@ _PROTECTED = ("generator", "scenario_sha256", "scenario_yaml", "time0_ns")
 _ROS2_VERSION: Literal[8, 9] = 9
 
 
-def _stamps_ns(t_s: np.ndarray) -> np.ndarray:
+def stamps_ns(t_s: np.ndarray) -> np.ndarray:
+    """Header stamps (int ns) of samples at ``t_s`` seconds from the start of a simulated run."""
     return TIME0_NS + np.rint(np.asarray(t_s, dtype=float) * 1e9).astype(np.int64)
 
 
@@ -77,7 +78,7 @@ def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, seri
     twist_t, vec_t = types["geometry_msgs/msg/Twist"], types["geometry_msgs/msg/Vector3"]
     string_t = types["std_msgs/msg/String"]
     topics = scenario.topics
-    stamps = _stamps_ns(result.t_s)
+    stamps = stamps_ns(result.t_s)
     out: list[tuple[str, str, int, bytes | memoryview]] = []
     meta = json.dumps(metadata_document(result, scenario, extra), sort_keys=True)
     out.append((topics.metadata, "std_msgs/msg/String", int(stamps[0]) if len(stamps) else TIME0_NS,
@@ -109,7 +110,7 @@ def _messages(result: ClosedLoopResult, scenario: Scenario, typestore: Any, seri
     for rec in result.solver:
         doc = {"t_s": rec.t_s, "status": rec.status, "success": rec.success, "iterations": rec.iterations,
                "solve_time_s": rec.solve_time_s, "backup": rec.backup, "target": rec.target}
-        stamp = int(_stamps_ns(np.array([rec.t_s]))[0])
+        stamp = int(stamps_ns(np.array([rec.t_s]))[0])
         out.append((topics.solver, "std_msgs/msg/String", stamp,
                     serialize(string_t(data=json.dumps(doc)), "std_msgs/msg/String")))
     out.sort(key=lambda m: m[2])  # stable: per-topic order is kept

@@ -439,7 +439,8 @@ class Scenario(_Frozen):
             field, what = problems[0]
             more = f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})" \
                 if len(problems) > 1 else ""
-            raise ScenarioError(f"cannot plan on this scenario: {what}{more}", source=self.name, field=field)
+            raise ScenarioError(f"cannot plan or simulate on this scenario: {what}{more}", source=self.name,
+                                field=field)
 
     def certification_warnings(self) -> list[str]:
         """Geometry the certifier accepts but a user may not mean, one line each naming the field: regions that

@@ -39,8 +39,11 @@ def _certified_path(path: Path, finished: bool) -> Path:
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here at the end, as certify does.")
 @click.option("--no-report", is_flag=True, help="With --out: write only certificate.json.")
+@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
+              help="Checks to run, as certify's --checks (default: the scenario's checks:, else every check whose "
+                   "data the scenario names).")
 def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout: float,  # noqa: PLR0917
-          poll_s: float, time_base: str, out_dir: Path | None, no_report: bool) -> None:
+          poll_s: float, time_base: str, out_dir: Path | None, no_report: bool, checks_text: str | None) -> None:
     """Certify a log while it is being recorded: one line per decision, as soon as it is decided.
 
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
@@ -48,9 +51,11 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
     from verify.certify import resolve_scenario
     from verify.online.monitor import OnlineMonitor
     from verify.online.watch import watch_log
+    from verify.selection import parse_check_list
 
     sc = resolve_scenario(scenario)
-    monitor = OnlineMonitor(sc, spec=spec)
+    checks = parse_check_list(checks_text) if checks_text is not None else None
+    monitor = OnlineMonitor(sc, spec=spec, checks=checks)
 
     def show(d: object) -> None:
         click.echo(d.line())  # type: ignore[attr-defined]
@@ -58,19 +63,22 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
 
     res = watch_log(log, monitor, follow=follow, idle_timeout_s=idle_timeout, poll_s=poll_s, time_base=time_base,
                     on_decision=show)
-    for note in res.notes:
+    ctx = click.get_current_context(silent=True)
+    quiet = ctx is not None and int(ctx.meta.get("verbosity", 0)) < 0  # -q: the decisions and the exit code only
+    for note in [] if quiet else res.notes:
         click.echo(f"note: {note}")
     line = f"{log}: {res.result.verdict} ({res.stop_reason}; {monitor.counts['pose']} pose samples)"
     if out_dir is not None:
         from verify.certify import certify_log, write_certificate
 
         result = certify_log(_certified_path(log, res.finished), sc, spec=spec, time_base=time_base,
-                             salvage=not res.finished)
+                             salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
         if not no_report:
             from verify.report import write_reports
 
             write_reports(result, sc, out_dir, suite_name=log.name)
-    click.echo(line)
+    if not quiet:
+        click.echo(line)
     sys.stdout.flush()
     sys.exit(res.result.exit_code)

@@ -18,9 +18,9 @@ of the sample that decided it, whatever the batching.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -30,18 +30,26 @@ from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
-from verify.geometry import gap_bounds, step_bound_m, workspace_margin
+from verify.geometry import (
+    containing_region,
+    label_margins,
+    region_margins,
+    step_bound_m,
+    workspace_margin,
+)
 from verify.ingest import LogData
+from verify.ingest.timebase import AGREE_TOL
+from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
+from verify.selection import select_checks
 from verify.timedrun import parse_spec
-from verify.trajectory import reported_margin, trajectory_positions
+from verify.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-CHECK_NAMES = ("spec_trajectory", "spec_timed_run", "tube", "input_box", "workspace", "obstacle_clearance")
 
 
 class MonitorClosedError(VerifyError, RuntimeError):
@@ -109,111 +117,6 @@ def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
     return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
 
 
-def _finite_min(a: FloatArray) -> float | None:
-    finite = a[np.isfinite(a)]
-    return float(finite.min()) if finite.size else None
-
-
-def _min(a: float | None, b: float | None) -> float | None:
-    return b if a is None else (a if b is None else min(a, b))
-
-
-# ---- per-sample checks -----------------------------------------------------------------------------------------------
-@dataclass(slots=True)
-class _MarginRun:
-    """``verify.checks.margin_check`` accumulated over batches (workspace, obstacle clearance)."""
-
-    name: str
-    samples: int = 0
-    fail_ns: int | None = None
-    fail_detail: dict[str, Any] = field(default_factory=dict)
-    sample_min: float | None = None
-    nan: int = 0
-    worst_gap: float = math.inf
-    worst_gap_at: tuple[int, int] | None = None
-
-    def feed(self, t_ns: IntArray, margin: FloatArray, step_m: FloatArray, new_from: int) -> int | None:
-        """``t_ns``/``margin``: the previous sample (if ``new_from`` = 1) and the new ones; returns the index of a
-        first violation found in this batch."""
-        new = margin[new_from:]
-        self.samples += new.shape[0]
-        self.sample_min = _min(self.sample_min, _finite_min(new))
-        self.nan += int(np.isnan(new).sum())
-        hit = None
-        if self.fail_ns is None:
-            bad = np.flatnonzero(new < 0)
-            if bad.size:
-                hit = int(bad[0]) + new_from
-                self.fail_ns = int(t_ns[hit])
-        if margin.shape[0] >= 2:
-            lo = gap_bounds(margin, step_m).lo
-            k = int(np.argmin(lo))
-            if lo[k] < self.worst_gap:
-                self.worst_gap, self.worst_gap_at = float(lo[k]), (int(t_ns[k]), int(t_ns[k + 1]))
-        return hit
-
-    def result(self) -> CheckResult:
-        if self.samples == 0:
-            return CheckResult(self.name, "inconclusive", None, None, {"reason": "no samples"})
-        if self.fail_ns is not None:
-            return CheckResult(self.name, "fail", self.sample_min, self.fail_ns, dict(self.fail_detail))
-        if self.nan or self.worst_gap < 0:
-            why = []
-            if self.nan:
-                why.append(f"{self.nan} NaN sample(s)")
-            if self.worst_gap < 0 and self.worst_gap_at is not None:
-                a, b = self.worst_gap_at
-                why.append(f"the robot may have crossed the limit between samples at {a} ns and {b} ns "
-                           f"(bound {self.worst_gap:.4f} m)")
-            return CheckResult(self.name, "inconclusive", self.sample_min, None,
-                               {"reason": "; ".join(why), "guaranteed_margin_m": None})
-        guaranteed = min(self.sample_min if self.sample_min is not None else -math.inf, self.worst_gap)
-        return CheckResult(self.name, "pass", guaranteed, None, {"sample_margin_m": self.sample_min})
-
-
-@dataclass(slots=True)
-class _MergedRun:
-    """Batch results of an offline check (tube, input box) merged: first failure, smallest margin, any undecided."""
-
-    name: str
-    samples: int = 0
-    fail: CheckResult | None = None
-    margin: float | None = None
-    undecided: list[str] = field(default_factory=list)
-    counts: dict[str, int] = field(default_factory=dict)
-    max_dev: float | None = None
-    missing_reason: str = "no samples"
-
-    def feed(self, res: CheckResult, n: int) -> bool:
-        self.samples += n
-        self.margin = _min(self.margin, res.margin)
-        for key in ("matched_samples", "unmatched_samples"):
-            if key in res.details:
-                self.counts[key] = self.counts.get(key, 0) + int(res.details[key])
-        dev = res.details.get("max_deviation_m")
-        if dev is not None and math.isfinite(dev):
-            self.max_dev = dev if self.max_dev is None else max(self.max_dev, dev)
-        if res.verdict == "fail" and self.fail is None:
-            self.fail = res
-            return True
-        if res.verdict == "inconclusive":
-            self.undecided.append(str(res.details.get("reason", "undecided samples")))
-        return False
-
-    def result(self, details: dict[str, Any]) -> CheckResult:
-        d = {**details, **self.counts}
-        if self.max_dev is not None:
-            d["max_deviation_m"] = self.max_dev
-        if self.fail is not None:
-            extra = {k: v for k, v in self.fail.details.items() if k == "component"}
-            return CheckResult(self.name, "fail", self.margin, self.fail.first_violation_ns, {**d, **extra})
-        if self.samples == 0:
-            return CheckResult(self.name, "inconclusive", None, None, {**d, "reason": self.missing_reason})
-        if self.undecided:
-            return CheckResult(self.name, "inconclusive", self.margin, None, {**d, "reason": "; ".join(self.undecided)})
-        return CheckResult(self.name, "pass", self.margin, None, d)
-
-
 class _Semantics:
     """One semantics of the formula: its track, atom nodes, heads and evaluation."""
 
@@ -232,11 +135,15 @@ class OnlineMonitor:
     """Incremental certifier of one run. ``push_pose`` / ``push_nominal`` / ``push_cmd`` in time order (per stream),
     ``update`` for the new decisions, ``state`` for everything so far, ``close`` for the final verdicts."""
 
-    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100) -> None:
+    def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100,
+                 checks: Sequence[str] | None = None) -> None:
         if max_pending < 1:
             raise ValueError(f"max_pending={max_pending!r} must be >= 1")
         sc = resolve_scenario(scenario)
         self.scenario = sc
+        self.selection = select_checks(sc, checks)  # as certify: --checks, else the scenario's, else what it names
+        self._selected = {n for c in self.selection.selected
+                          for n in (("spec_trajectory", "spec_timed_run") if c == "spec" else (c,))}
         self.formula = parse_spec(spec if spec is not None else sc.spec)
         known = {lab for r in sc.regions for lab in r.labels}
         unknown = sorted(atoms(self.formula) - known)
@@ -249,37 +156,50 @@ class OnlineMonitor:
         self._run = _Semantics(self.formula)
         self._obligation_names = [str(h.formula) for h in self._traj.obligations]
         eta = sc.robot.radius
-        self._cx = np.array([r.center[0] for r in sc.regions], dtype=np.float64)
-        self._cy = np.array([r.center[1] for r in sc.regions], dtype=np.float64)
-        self._radius = np.array([r.radius for r in sc.regions], dtype=np.float64)
-        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in sc.regions])
+        discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
+        self._cx = np.array([r.center[0] for r in discs], dtype=np.float64)
+        self._cy = np.array([r.center[1] for r in discs], dtype=np.float64)
+        self._radius = np.array([r.radius for r in discs], dtype=np.float64)
+        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in discs])
         self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels] for name in self._names]
+        # discs only: every region's margin in one broadcast pass; otherwise verify.geometry's functions per batch
+        self._discs = all(getattr(r, "polygon", None) is None for r in sc.regions)
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
         self._tol_m = 3.0 * sc.mocap.noise_std
+        self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
         self._pose_t: list[int] = []
         self._pose_x: list[float] = []
         self._pose_y: list[float] = []
+        self._pose_yaw: list[float] = []
+        self._conflict: set[int] = set()  # pending pose times whose duplicates disagree (unknown to the formula)
+        self._extra: list[tuple[int, float, float]] = []  # the disagreeing duplicates (judged by per-sample checks)
+        self._late: list[tuple[int, float, float]] = []  # ... of a sample the formula had judged already
+        self._formula_late_conflicts = 0
         self._nom_t: list[int] = []
         self._nom_x: list[float] = []
         self._nom_y: list[float] = []
         self._cmd_t: list[int] = []
         self._cmd_u: list[tuple[float, float, float]] = []
+        self._last_values: dict[str, tuple[float, ...]] = {}  # the first sample at each stream's last time
+        self.merged = {"pose": 0, "nominal": 0, "cmd": 0}
+        self.conflicting = {"pose": 0, "nominal": 0, "cmd": 0}
         self._last_pose = self._last_nom = self._last_cmd = -(2**63)
         self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
         self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
         self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
         # judged state
         self.t0_ns: int | None = None
-        self._prev: tuple[int, float, float] | None = None
+        self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
+        self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
         self._prev_region = -2  # "before the first sample"
-        self._ws = _MarginRun("workspace")
-        self._clear = _MarginRun("obstacle_clearance")
-        self._tube = _MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
-        self._input = _MergedRun("input_box", missing_reason="no cmd_vel logged")
+        self._ws = MarginRun("workspace")
+        self._clear = MarginRun("obstacle_clearance")
+        self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
+        self._input = MergedRun("input_box", missing_reason="no cmd_vel logged")
         self._tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []
         self._nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
         self._nominal_seen = 0
@@ -297,46 +217,78 @@ class OnlineMonitor:
         return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
                 len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
 
-    def _reject(self, stream: str, t_ns: int, last: int) -> None:
-        """A sample at or before the stream's last one: counted (equal stamps as duplicates), never judged."""
+    def _reject(self, stream: str, t_ns: int, last: int, values: tuple[float, ...]) -> bool:
+        """A sample at or before the stream's last time. Before: counted out of order, never judged. At the same
+        time (as ``verify.ingest.timebase.judged_samples``): merged when its values agree with the first sample
+        there, else a conflict (True: the caller keeps it for the per-sample checks)."""
         if self._closed:
             raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
-        (self.duplicates if t_ns == last else self.out_of_order)[stream] += 1
+        if t_ns != last:
+            self.out_of_order[stream] += 1
+            return False
+        self.duplicates[stream] += 1
+        first = self._last_values[stream]
+        if all(abs(a - b) <= AGREE_TOL or (math.isnan(a) and math.isnan(b))
+               for a, b in zip(first, values, strict=True)):
+            self.merged[stream] += 1
+            return False
+        self.conflicting[stream] += 1
+        return True
 
     def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
-        """A pose sample (absolute ns; ``yaw_rad`` is accepted for the caller's convenience, no check uses it)."""
+        """A pose sample (absolute ns). A sample is judged once the next one (or ``close``) arrives, so that a
+        sample repeating its time can still be merged with it or make it unknown."""
         if t_ns > self._last_pose and not self._closed:
             self._last_pose = t_ns
+            self._last_values["pose"] = (x_m, y_m, yaw_rad)
             self._pose_t.append(t_ns)
             self._pose_x.append(x_m)
             self._pose_y.append(y_m)
-            if len(self._pose_t) >= self.max_pending:
+            if len(self._pose_t) > self.max_pending:
                 self._process()
-        else:
-            self._reject("pose", t_ns, self._last_pose)
+        elif self._reject("pose", t_ns, self._last_pose, (x_m, y_m, yaw_rad)):
+            if self._pose_t and self._pose_t[-1] == t_ns:  # not judged yet: unknown to the formula
+                self._conflict.add(t_ns)
+                self._extra.append((t_ns, x_m, y_m))
+            else:  # the formula has judged the first sample at this time already: it cannot pass any more
+                self._late.append((t_ns, x_m, y_m))
+                self._formula_late_conflicts += 1
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A sample of the MPC's nominal state (absolute ns)."""
         if t_ns > self._last_nom and not self._closed:
             self._last_nom = t_ns
+            self._last_values["nominal"] = (x_m, y_m, yaw_rad)
             self._nom_t.append(t_ns)
             self._nom_x.append(x_m)
             self._nom_y.append(y_m)
             if len(self._nom_t) >= self.max_pending:
                 self._process()
-        else:
-            self._reject("nominal", t_ns, self._last_nom)
+        elif self._reject("nominal", t_ns, self._last_nom, (x_m, y_m, yaw_rad)):
+            self._unknown_nominal(t_ns)
+
+    def _unknown_nominal(self, t_ns: int) -> None:
+        """Nominal samples that disagree at one time: the nominal state there is unknown."""
+        if self._nom_t and self._nom_t[-1] == t_ns:
+            self._nom_x[-1] = self._nom_y[-1] = math.nan
+            return
+        nt, nx, ny = self._nominal
+        if nt.size and int(nt[-1]) == t_ns:
+            nx, ny = nx.copy(), ny.copy()
+            nx[-1] = ny[-1] = math.nan
+            self._nominal = (nt, nx, ny)
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
-        """An applied input (absolute ns; body frame as logged: vx, vy, wz)."""
-        if t_ns > self._last_cmd and not self._closed:
-            self._last_cmd = t_ns
+        """An applied input (absolute ns; body frame as logged: vx, vy, wz). Every command is judged, also one
+        that repeats a time with other values."""
+        if (t_ns > self._last_cmd and not self._closed) or self._reject("cmd", t_ns, self._last_cmd, (u1, u2, u3)):
+            if t_ns > self._last_cmd:
+                self._last_cmd = t_ns
+                self._last_values["cmd"] = (u1, u2, u3)
             self._cmd_t.append(t_ns)
             self._cmd_u.append((u1, u2, u3))
             if len(self._cmd_t) >= self.max_pending:
                 self._process()
-        else:
-            self._reject("cmd", t_ns, self._last_cmd)
 
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
@@ -346,19 +298,44 @@ class OnlineMonitor:
         out, self._unreturned = self._unreturned, []
         return out
 
-    def _process(self) -> None:
+    @staticmethod
+    def _with_extras(t: IntArray, x: FloatArray, y: FloatArray, extra: list[tuple[int, float, float]]
+                     ) -> tuple[IntArray, FloatArray, FloatArray]:
+        """Every sample for the per-sample checks: each disagreeing duplicate right after the samples at its time
+        (a duplicate of a sample judged in an earlier batch goes first)."""
+        et = np.array([e[0] for e in extra], dtype=np.int64)
+        at = np.searchsorted(t, et, side="right")
+        return (np.insert(t, at, et), np.insert(x, at, [e[1] for e in extra]), np.insert(y, at, [e[2] for e in extra]))
+
+    def _process(self, closing: bool = False) -> None:
         if self._nom_t:
             self._judged["nominal"] += len(self._nom_t)
             self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
                                np.array(self._nom_y, dtype=np.float64))
             self._nom_t, self._nom_x, self._nom_y = [], [], []
+        late, self._late = self._late, []
         if self._pose_t:
-            self._judged["pose"] += len(self._pose_t)
-            t = np.array(self._pose_t, dtype=np.int64)
-            x = np.array(self._pose_x, dtype=np.float64)
-            y = np.array(self._pose_y, dtype=np.float64)
-            self._pose_t, self._pose_x, self._pose_y = [], [], []
-            self._feed_pose(t, x, y)
+            k = len(self._pose_t)
+            self._judged["pose"] += k
+            t = np.array(self._pose_t[:k], dtype=np.int64)
+            x = np.array(self._pose_x[:k], dtype=np.float64)
+            y = np.array(self._pose_y[:k], dtype=np.float64)
+            del self._pose_t[:k], self._pose_x[:k], self._pose_y[:k]
+            every = None
+            if self._conflict:
+                done = t[-1]
+                extra = [e for e in self._extra if e[0] <= done]
+                self._extra = [e for e in self._extra if e[0] > done]
+                every = self._with_extras(t, x, y, extra)
+                bad = np.isin(t, np.array(sorted(self._conflict), dtype=np.int64))
+                self._conflict = {c for c in self._conflict if c > done}
+                x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
+            if late:
+                every = self._with_extras(*(every if every is not None else (t, x, y)), late)
+            self._feed_pose(t, x, y, every)
+        elif late:
+            self._feed_every(np.array([e[0] for e in late], dtype=np.int64), np.array([e[1] for e in late]),
+                             np.array([e[2] for e in late]))
         if self._cmd_t:
             self._judged["cmd"] += len(self._cmd_t)
             t = np.array(self._cmd_t, dtype=np.int64)
@@ -368,7 +345,10 @@ class OnlineMonitor:
         self._resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
 
-    def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray) -> None:
+    def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
+                   every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:
+        """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
+        samples for the per-sample checks (None: the same samples)."""
         sc = self.scenario
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
@@ -383,19 +363,8 @@ class OnlineMonitor:
         t_rel = t_abs - t0
         step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
         # trajectory semantics: sample points and the gaps between them
-        pos, point_at, gap_at = trajectory_positions(t_rel)
-        # the new positions start right after the previous batch's last sample: the gap between the batches too
-        # (starting at the first new sample would skip the motion between two batches: never judged)
-        first = 1 if prev is not None else 0
         tr = self._traj
-        start, stop, is_point = pos.start_ns[first:], pos.stop_ns[first:], pos.is_point[first:]
-        known = np.where(is_point, start, stop + 1)
-        # every region's margin in one pass (the arithmetic of verify.geometry, bit for bit)
-        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        region_m = self._offset[:, None] - dist
-        atom_m = np.empty((len(self._names), x.shape[0]))
-        for k, rows in enumerate(self._atom_rows):
-            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        region_m, atom_m = self._margins(x, y)
         nan = np.isnan(atom_m)
         p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
                                                                                                       atom_m)
@@ -404,21 +373,35 @@ class OnlineMonitor:
         g_lo, g_hi = mid - half, mid + half
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
-        lo = np.empty((len(self._names), pos.size))
+        # the positions of verify.trajectory.trajectory_positions after the previous sample: each new sample's
+        # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
+        m = t_rel.shape[0] - 1
+        start = np.empty(2 * m + 1 - k0, dtype=np.int64)
+        stop = np.empty_like(start)
+        is_point = np.zeros(start.shape[0], dtype=bool)
+        lo = np.empty((len(self._names), start.shape[0]))
         hi = np.empty_like(lo)
-        lo[:, point_at], hi[:, point_at] = p_lo, p_hi
-        ok = gap_at >= 0
-        lo[:, gap_at[ok]], hi[:, gap_at[ok]] = g_lo[:, ok], g_hi[:, ok]
+        o = 1 - k0  # the first sample of the run is a point with no gap before it
+        if o:
+            start[0] = stop[0] = t_rel[0]
+            is_point[0] = True
+            lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
+        start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
+        start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
+        is_point[o + 1 :: 2] = True
+        lo[:, o::2], hi[:, o::2] = g_lo, g_hi
+        lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
+        keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
+        if not keep.all():
+            start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
+        known = np.where(is_point, start, stop + 1)
         for k, name in enumerate(self._names):
-            tr.atoms[name].push(lo[k, first:], hi[k, first:], known)
+            tr.atoms[name].push(lo[k], hi[k], known)
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
         # timed-run semantics (paper, Definition 3): an entry where the containing region changes
-        inside = dist[:, k0:] + sc.robot.radius <= self._radius[:, None]  # geometry.containing_region
-        region = np.full(inside.shape[1], -1, dtype=np.int64)
-        for k in range(inside.shape[0]):
-            region[inside[k]] = k
+        region = self._containing(x[k0:], y[k0:])
         before = np.concatenate(([self._prev_region], region[:-1]))
         self._prev_region = int(region[-1])
         entry = np.flatnonzero((region != before) & (region >= 0))
@@ -433,16 +416,60 @@ class OnlineMonitor:
                 run.atoms[name].push(v1, v1.copy(), t_e)
         run.track.tick(conv)
         run.evaluation.step()
-        # checks: workspace, obstacle clearance, tube (pending until a nominal sample at or after them)
-        ws_hit = self._ws.feed(t_abs, workspace_margin(x, y, sc), step, k0)
-        del ws_hit
+        # per-sample checks on every sample: workspace, obstacle clearance, tube
+        if every is None and self._prev_every == prev:
+            self._feed_every(t_abs, x, y, (step, region_m, k0))
+        else:
+            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
+
+    def _feed_every(self, et: IntArray, ex: FloatArray, ey: FloatArray,
+                    reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
+        """Workspace, obstacle clearance and (pending until a nominal sample at or after them) tube on every
+        sample; ``reuse``: step bounds, region margins and offset already computed with the previous sample."""
+        sc = self.scenario
+        if reuse is not None:
+            e_step, e_margin, k1 = reuse
+        else:
+            k1 = 0 if self._prev_every is None else 1
+            if self._prev_every is not None:
+                pt, px, py = self._prev_every
+                et, ex, ey = np.concatenate(([pt], et)), np.concatenate(([px], ex)), np.concatenate(([py], ey))
+            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, sc.max_speed_mps)
+            e_margin = self._margins(ex, ey)[0]
+        self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
+        self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
         if self._unsafe:
-            margins = region_m[self._unsafe]
-            hit = self._clear.feed(t_abs, -np.max(margins, axis=0), step, k0)
+            margins = e_margin[self._unsafe]
+            hit = self._clear.feed(et, -np.max(margins, axis=0), e_step, k1)
             if hit is not None:
                 self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
-        self._tube_pending.append((t_abs[k0:], x[k0:], y[k0:]))
-        self._tube_last_t = int(t_abs[-1])
+        if "tube" in self._selected:
+            self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
+        self._tube_last_t = int(et[-1])
+
+    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Every region's margin (rows in scenario order) and every atom's (rows in name order), as
+        ``verify.geometry.region_margins`` / ``label_margins`` give them (bit for bit)."""
+        if not self._discs:
+            atom = label_margins(x, y, self.scenario, frozenset(self._names))
+            atom_m = np.array([atom[n] for n in self._names]).reshape(-1, x.shape[0])
+            return region_margins(x, y, self.scenario), atom_m
+        region_m = self._offset[:, None] - np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        atom_m = np.empty((len(self._names), x.shape[0]))
+        for k, rows in enumerate(self._atom_rows):
+            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        return region_m, atom_m
+
+    def _containing(self, x: FloatArray, y: FloatArray) -> IntArray:
+        """``verify.geometry.containing_region``."""
+        if not self._discs:
+            return containing_region(x, y, self.scenario)
+        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        inside = dist + self.scenario.robot.radius <= self._radius[:, None]
+        region = np.full(x.shape[0], -1, dtype=np.int64)
+        for k in range(inside.shape[0]):
+            region[inside[k]] = k
+        return region
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
@@ -467,7 +494,7 @@ class OnlineMonitor:
         nt, nx, ny = self._nominal
         k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
         if k:
-            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self.scenario.tube_radius_m,
+            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self._tube_radius_m,
                              tolerance_m=self._tol_m, match_ns=self._period_ns // 2)
             self._tube.feed(res, k)
         self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
@@ -497,11 +524,15 @@ class OnlineMonitor:
             return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
                                _rel_s(c.first_violation_ns, t0)) for c in self._final]
+        return [c for c in self._running_states() if c.name in self._selected]
+
+    def _running_states(self) -> list[CheckState]:
+        t0 = self.t0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
-        runs: list[_MergedRun | _MarginRun] = [self._tube, self._input, self._ws, self._clear]
+        runs: list[MergedRun | MarginRun] = [self._tube, self._input, self._ws, self._clear]
         for run in runs:
-            if isinstance(run, _MarginRun):
+            if isinstance(run, MarginRun):
                 failed, when, m = run.fail_ns is not None, run.fail_ns, run.sample_min
             else:
                 failed = run.fail is not None
@@ -525,7 +556,8 @@ class OnlineMonitor:
     def _state(self, closed: bool) -> MonitorState:
         checks = self._check_states()
         obligations = [self._head_state(name, h, margin=True)
-                       for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)]
+                       for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)
+                       if "spec" in self.selection]
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
@@ -550,7 +582,7 @@ class OnlineMonitor:
         for a log with the same samples (``partial``: the log was salvaged, never a pass)."""
         if self._result is not None:
             return self._result
-        self._process()
+        self._process(closing=True)
         self._closed = True
         for sem in (self._traj, self._run):
             sem.evaluation.step(closing=True)
@@ -561,7 +593,9 @@ class OnlineMonitor:
         self._unreturned = []
         verdicts = [c.verdict for c in checks]
         why: str | None = None
-        if "fail" in verdicts:
+        if not checks:
+            verdict, why = "inconclusive", "no check was run: nothing is certified"
+        elif "fail" in verdicts:
             verdict = "fail"
         elif "inconclusive" in verdicts:
             verdict = "inconclusive"
@@ -596,14 +630,20 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", rv, None,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    {} if self._run.track.count else {"reason": "the timed run is empty"})
-        tube = self._tube.result({"radius_m": self.scenario.tube_radius_m, "noise_tolerance_m": self._tol_m})
+        if self._formula_late_conflicts:  # a judged sample turned out unknown: the formula cannot pass
+            why = (f"{self._formula_late_conflicts} pose sample(s) judged before a sample at the same time with "
+                   f"other values arrived")
+            spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
+                                   if c.verdict == "pass" else c for c in (spec_traj, spec_run))
+        tube = self._tube.result({"radius_m": self._tube_radius_m, "noise_tolerance_m": self._tol_m})
         if self._nominal_seen == 0:
             tube = CheckResult("tube", "inconclusive", None, None,
                                {"reason": "no nominal state logged: tube containment cannot be checked"})
         clear = self._clear.result() if self._unsafe else CheckResult(
             "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
-        return [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
-                self._ws.result(), clear]
+        every = [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
+                 self._ws.result(), clear]
+        return [c for c in every if c.name in self._selected]
 
 
 def feed_log_data(monitor: OnlineMonitor, log: LogData, *, update_every: int = 0) -> list[Decision]:

@@ -11,6 +11,8 @@ The semantics is the offline one, computed by its own code: the windows of a bat
 ``_eventually`` (incomplete windows) on what is left. A node keeps only the positions its parent still needs:
 
 * a bounded window ``[lo, hi]`` is final once ``stop + hi`` is observed, so a node retains ``hi`` x rate positions;
+  before that its *provisional* bounds (and the time its verdict became certain) let the operators above it decide
+  early -- a nested ``G`` is false at the first sample that shows its argument false;
 * the top-level temporal operators are evaluated at the first position only (running extrema, nothing retained);
 * an unbounded window *below* another temporal operator, and any ``Until`` / ``Next`` (evaluated at ``close`` by the
   offline engine), keep their positions until ``close`` (memory grows with the log for those formulas only).
@@ -155,6 +157,23 @@ class Node:
     def update(self, track: Track, closing: bool) -> None:
         return
 
+    def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Bounds of the positions ``[final, count)`` given the data so far (the final values lie within them) and,
+        where their verdict is already certain, the time it became so (relative ns as float; inf: not yet)."""
+        n = track.count - self.final
+        return np.full(n, -INF), np.full(n, INF), np.full(n, INF)
+
+    def values_from(self, track: Track, p: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Final values then provisional ones for the positions ``[p, count)`` (known: float ns, inf = undecided
+        for a provisional value; a final value is known at its time whatever its verdict)."""
+        c = self.final
+        lo, hi = _f(self.lo, p, c), _f(self.hi, p, c)
+        known = _i(self.known, p, c).astype(np.float64)
+        if c >= track.count:
+            return lo, hi, known
+        plo, phi, pkn = self.provisional(track)
+        return np.concatenate((lo, plo)), np.concatenate((hi, phi)), np.concatenate((known, pkn))
+
     def emit(self, lo: FloatArray, hi: FloatArray, known: IntArray) -> None:
         self.lo.extend(lo)
         self.hi.extend(hi)
@@ -200,6 +219,10 @@ class NotNode(Node):
             p = self.final
             self.emit(-_f(self.arg.hi, p, c), -_f(self.arg.lo, p, c), _i(self.arg.known, p, c).copy())
 
+    def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
+        lo, hi, known = self.arg.values_from(track, self.final)
+        return -hi, -lo, known
+
 
 class BoolNode(Node):
     """And / Or of several children (min / max of the intervals: Kleene's logic)."""
@@ -225,6 +248,20 @@ class BoolNode(Node):
             hi = self.op(hi, _f(a.hi, p, c))
             known = np.maximum(known, _i(a.known, p, c))
         self.emit(np.array(lo, copy=True), np.array(hi, copy=True), np.array(known, copy=True))
+
+    def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Kleene's and/or; decided false (and) as soon as one argument is, true once all are (or: the dual)."""
+        parts = [a.values_from(track, self.final) for a in self.args]
+        lo, hi = parts[0][0], parts[0][1]
+        for plo, phi, _ in parts[1:]:
+            lo, hi = self.op(lo, plo), self.op(hi, phi)
+        is_and = self.op is np.minimum
+        # the argument verdict that settles the result alone (false for and), and the one all must share
+        settle = [np.where(((phi < 0) if is_and else (plo > 0)) & np.isfinite(pk), pk, INF) for plo, phi, pk in parts]
+        every = [np.where(((plo > 0) if is_and else (phi < 0)) & np.isfinite(pk), pk, INF) for plo, phi, pk in parts]
+        known = np.minimum.reduce(settle)
+        known = np.minimum(known, np.maximum.reduce(every))
+        return lo, hi, known
 
 
 class WindowNode(Node):
@@ -278,6 +315,24 @@ class WindowNode(Node):
         if closing:
             known = np.minimum(known, end)
         self.emit(lo, hi, known.astype(np.int64))
+
+    def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """A window not yet observed to its end: ``F`` is certain once its argument is certainly true at a position
+        of the window (then), never false before its end; ``G`` dually. An unbounded window stays open."""
+        p, n, end = self.final, track.count, track.end_ns
+        lo_a, hi_a, kn = self.arg.values_from(track, p)
+        if end is None or n <= p:
+            return np.zeros(0), np.zeros(0), np.zeros(0)
+        arg = Truth(-hi_a, -lo_a) if self.always else Truth(lo_a, hi_a)
+        pos = track.positions(p, n, max(end, int(track.stop_ns.at(n - 1))))
+        w = _windows(pos, self.interval)
+        lo = range_reduce(arg.lo, w.in0, w.in1, np.maximum, -INF)
+        hi = np.full(n - p, INF)  # F may still come true later in the window (or after the end, if unbounded)
+        certain = np.where((arg.lo > 0) & np.isfinite(kn), kn, INF)
+        known = range_reduce(certain, w.in0, w.in1, np.minimum, INF)
+        if self.always:
+            lo, hi = -hi, -lo
+        return lo, hi, known
 
 
 # ---- the formula at its first position -------------------------------------------------------------------------------
@@ -351,6 +406,24 @@ class WindowHead(Head):
         self.acc_lo = -INF  # max of the (negated for G) argument's lo over the window so far
         self.acc_hi = -INF
         self.complete = False
+        self.early_lo = -INF  # the (negated for G) argument certainly true at a position not final yet
+
+    def _early(self, track: Track, t0: int) -> None:
+        """The argument's provisional values settle the window before they are final (a nested window that is
+        already certainly true, or false for G)."""
+        p = self.used
+        lo_a, hi_a, kn = self.node.values_from(track, p)
+        if self.always:
+            lo_a, hi_a = -hi_a, -lo_a
+        start, stop = _i(track.start, p, track.count), _i(track.stop_ns, p, track.count)
+        inside = stop >= t0 + self.lo_ns
+        if self.hi_ns is not None:
+            inside &= start <= t0 + self.hi_ns
+        certain = np.flatnonzero(inside & (lo_a > 0) & np.isfinite(kn))
+        if certain.size:
+            k = int(certain[int(np.argmin(kn[certain]))])
+            self.early_lo = float(lo_a[certain].max())
+            self._decide(int(kn[k]), int(kn[k]))  # shown by the sample that made the argument certain
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
@@ -386,6 +459,8 @@ class WindowHead(Head):
                 self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
                 self.acc_hi = max(self.acc_hi, float(hi_a[sel].max()))
             self.used = c
+        if self.decided_ns is None and not self.complete and self.node.final < track.count:
+            self._early(track, t0)
         if not self.complete:
             if self.hi_ns is not None:
                 bound = t0 + self.hi_ns
@@ -397,7 +472,7 @@ class WindowHead(Head):
                         self._decide(min(when, track.end_ns), min(bound, track.end_ns))
             elif closing:
                 self.complete = True
-        lo, hi = self.acc_lo, (self.acc_hi if self.complete else INF)
+        lo, hi = max(self.acc_lo, self.early_lo), (self.acc_hi if self.complete else INF)
         self.lo, self.hi = (-hi, -lo) if self.always else (lo, hi)
         if closing:
             self.closed = True

@@ -100,8 +100,12 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
               on_decision: Callable[[Decision], None] | None = None) -> WatchResult:
     """Judge the log at ``path`` as it grows (see the module docstring); never modifies it."""
     p = Path(path)
+    waited = time.monotonic()
+    while follow and not p.exists() and time.monotonic() - waited < idle_timeout_s:
+        time.sleep(poll_s)  # the recorder may not have created the log yet
     if not p.exists():
-        raise LogReadError("no such file or directory", path=str(p))
+        raise LogReadError("no such file or directory" + (f" (waited {idle_timeout_s:g} s)" if follow else ""),
+                           path=str(p))
     if time_base not in ("header", "log"):
         raise LogReadError(f"time_base={time_base!r} must be 'header' or 'log'", path=str(p))
     follower = open_follower(p)

@@ -1,0 +1,176 @@
+"""The certificate as a typed contract: pydantic models -> validation of every certificate and its JSON Schema.
+
+input: the certificate's JSON-ready dict (``verify.certify``) or a ``certificate.json`` read back -> output: a
+frozen ``Certificate`` (``Certificate.model_validate``), and ``certificate_schema()``: the JSON Schema published as
+``docs/certificate.schema.json`` and printed by ``tubempc schema certificate``.
+
+Verdicts are an enum; every check states its margin's unit; a failed check must carry its first violation time and
+a margin (a validator refuses one without). Checks keep their own detail fields (``subformula``, ``reason``,
+``radius_m``, ...) beside the common ones; the top level admits no field the schema does not name, so a new field
+is a schema change (and a ``CERTIFICATE_VERSION`` bump), never a silent one.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
+           "NotChecked", "TimedRunEntry", "TubeInfo", "UnusableLog", "Verdict", "certificate_schema",
+           "certify_json_schema"]
+
+#: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
+CERTIFICATE_VERSION = 3
+CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v3.json"
+CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v3.json"
+
+
+class Verdict(StrEnum):
+    """A check's or the whole run's verdict (exit codes 0, 1, 2)."""
+
+    PASS = "pass"
+    FAIL = "fail"
+    INCONCLUSIVE = "inconclusive"
+
+
+class CheckEntry(BaseModel):
+    """One check: name, verdict, margin with its unit, first violation; check-specific details beside them."""
+
+    model_config = ConfigDict(frozen=True, extra="allow")
+
+    name: str = Field(description="check name: spec_trajectory, spec_timed_run, tube, input_box, workspace, "
+                                  "obstacle_clearance, ...")
+    verdict: Verdict
+    margin: float | None = Field(description="worst margin in margin_unit (negative: violated); null when the check "
+                                             "could not compute one (then it is not a fail)")
+    margin_unit: str | None = Field(description="unit of margin: m, s, m/s or rad/s, ...")
+    first_violation_time: float | None = Field(description="seconds from time 0 of the first violation (fail only)")
+    subformula: str | None = Field(default=None, description="the sub-formula a formula check's witness names")
+    reason: str | None = Field(default=None, description="why the check failed or could not be decided")
+
+    @model_validator(mode="after")
+    def _fail_has_time_and_margin(self) -> CheckEntry:
+        if self.verdict is Verdict.FAIL and (self.first_violation_time is None or self.margin is None):
+            raise ValueError(f"check {self.name!r} failed without a first violation time and a margin")
+        return self
+
+    @property
+    def details(self) -> dict[str, Any]:
+        """The check-specific fields (everything but the common ones)."""
+        return dict(self.model_extra or {}) | {k: v for k, v in (("subformula", self.subformula),
+                                                                   ("reason", self.reason)) if v is not None}
+
+
+class TimedRunEntry(BaseModel):
+    """Definition 3: the robot disc became fully contained in ``region`` at ``time`` (s from time 0)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    region: str
+    time: float
+
+
+class TubeInfo(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    radius_m: float
+    noise_tolerance_m: float
+    noise_tolerance_rule: str
+
+
+class NotChecked(BaseModel):
+    """A check that was not run, and why (not selected, or its data is not in the scenario)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    reason: str
+
+
+class Certificate(BaseModel):
+    """The certificate of one log (``certificate.json``, ``tubempc certify --json``)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", title="tubempc certificate")
+
+    certificate_version: Literal[3] = Field(description="bumped on every change of this schema")
+    verdict: Verdict = Field(description="fail if any check fails; else inconclusive if any check is inconclusive "
+                                         "or the log is partial; else pass")
+    verdict_reason: str | None = Field(default=None, description="why a run without a violation is not a pass")
+    formula: str = Field(description="the MITL formula judged (canonical text)")
+    scenario: str
+    scenario_sha256: str
+    log: str = Field(description="the log's path as given")
+    log_format: str
+    log_digest: str = Field(description="hash of the log's bytes")
+    log_digest_algorithm: str = Field(description="blake3 or sha256")
+    log_sha256: str | None = Field(default=None, description="the log's SHA-256 (only when that digest was asked)")
+    partial: bool = Field(description="true when a truncated log was salvaged (never a pass)")
+    time_base: str = Field(description="the time base used: header or log")
+    time_base_requested: str | None = None
+    time_base_note: str | None = None
+    time0_ns: int = Field(description="time 0 (ns, in the chosen time base); every time below is seconds from it")
+    duration_s: float
+    judged_span_s: tuple[float, float] = Field(description="[first, last] sample time judged (s)")
+    samples: dict[str, Any] = Field(description="per stream: samples read, judged, merged, re-timed")
+    pose_source: Any = Field(description="topic and type the poses were read from")
+    speed_bound_mps: float
+    robot_radius_m: float
+    tube: TubeInfo | None = Field(default=None, description="the tube the tube check used (when it ran)")
+    input_model: str = Field(description="holonomic or unicycle: how input_box reads the commands")
+    checks_selected: list[str] = Field(description="the checks that ran")
+    checks_source: str = Field(description="where the selection came from: --checks, the scenario, or default")
+    not_checked: list[NotChecked] = Field(description="checks that did not run, each with the reason")
+    scenario_warnings: list[str] = Field(description="geometry the certifier accepts but a user may not mean")
+    clock_findings: list[Any] | None = Field(default=None, description="what the clock checks found between topics")
+    checks: list[CheckEntry]
+    timed_run: list[TimedRunEntry]
+    signals: dict[str, Any] | None = Field(default=None, description="per signal atom: topic, field, samples, range")
+    data_quality: dict[str, Any]
+    generator: dict[str, Any] | None = Field(default=None, description="the log's own metadata (simulated runs)")
+
+    def check(self, name: str) -> CheckEntry | None:
+        return next((c for c in self.checks if c.name == name), None)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The JSON-ready dict (optional fields that are null are left out)."""
+        out = self.model_dump(mode="json", exclude={
+            k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "tube",
+                        "clock_findings", "signals", "generator")
+            if getattr(self, k) is None})
+        for check in out["checks"]:
+            for key in ("subformula", "reason"):
+                if check.get(key) is None:
+                    check.pop(key, None)
+        return out
+
+
+class UnusableLog(BaseModel):
+    """A log that could not be certified, as ``certify --json`` lists it among several logs' certificates."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    log: str
+    verdict: Literal["unusable", "error"] = Field(description="unusable input (exit 3) or an internal error (70)")
+    exit_code: Literal[3, 70]
+    error: str | None = Field(description="the one-line reason")
+
+
+def certify_json_schema() -> dict[str, Any]:
+    """The JSON Schema of ``tubempc certify --json``: one certificate, or for several logs a list of certificates
+    and unusable-log entries."""
+    cert = Certificate.model_json_schema(mode="serialization", ref_template="#/$defs/{model}")
+    unusable = UnusableLog.model_json_schema(mode="serialization")
+    defs = {**cert.pop("$defs", {}), "Certificate": cert, "UnusableLog": unusable}
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": CERTIFY_JSON_SCHEMA_ID,
+            "title": "tubempc certify --json", "$defs": defs,
+            "oneOf": [{"$ref": "#/$defs/Certificate"},
+                      {"type": "array", "items": {"anyOf": [{"$ref": "#/$defs/Certificate"},
+                                                            {"$ref": "#/$defs/UnusableLog"}]}}]}
+
+
+def certificate_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of ``Certificate``."""
+    schema = Certificate.model_json_schema(mode="serialization")
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": CERTIFICATE_SCHEMA_ID, **schema}
