@@ -28,7 +28,14 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-from hypothesis import strategies as st
+
+try:
+    from hypothesis import strategies as st
+except ImportError:  # hypothesis comes with the 'testing' extra: one line naming it (exit 4), not a traceback
+    from verify.extras import require
+
+    require("testing", feature="tubempc.strategies")
+    raise
 
 from tubempc.mitl import (
     FALSE,

@@ -30,7 +30,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from tqdm import tqdm
 
@@ -39,8 +39,10 @@ from tubempc.scenario import Scenario
 from verify.certificate import Certificate
 from verify.errors import UnusableInputError, VerifyError
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
-from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
 from verify.selection import select_checks
+
+if TYPE_CHECKING:  # verify.report imports matplotlib (the 'report' extra): only when reports are written
+    from verify.report import CertifyResultLike
 
 __all__ = [
     "EXIT_INTERNAL",
@@ -310,6 +312,9 @@ def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.B
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, address: str, bar: Any) -> list[R]:
     import importlib
 
+    from verify.extras import require
+
+    require("dask", feature="--dask")
     # distributed is only partly typed; treat it as untyped at this one boundary
     dist: Any = importlib.import_module("distributed")
     Client, LocalCluster, dask_completed = dist.Client, dist.LocalCluster, dist.as_completed
@@ -429,13 +434,13 @@ class _WriteJob:
 
 def _write_item(job: _WriteJob) -> JUnitSuite:
     """Write one log's folder; return its JUnit suite (a picklable value)."""
-    from verify.report import write_reports
-
     item, sub = job.item, Path(job.folder)
     sub.mkdir(parents=True, exist_ok=True)
     if item.result is not None:
         _write_certificate(item.result, sub)
         if job.reports:
+            from verify.report import write_reports
+
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
                           junit_inconclusive=job.junit_inconclusive)
         suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
@@ -485,8 +490,11 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
+    from verify.extras import require
     from verify.outputs import prepare_output_dir
 
+    if reports:
+        require("report", feature="report.html", alternative="write certificates only (reports=False, --no-report)")
     out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
             for item in batch.items]

@@ -133,6 +133,9 @@ def _random(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first:
 
 
 def _optimizer(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first: bool) -> None:
+    from verify.extras import require
+
+    require("plan", feature="falsify --method optimizer")
     from scipy.optimize import differential_evolution
     from scipy.stats.qmc import LatinHypercube
 
@@ -176,6 +179,9 @@ class _Counterexample(Exception):  # noqa: N818 (hypothesis needs an exception t
 
 def _targeted(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first: bool,
               shrink_budget: int) -> tuple[list[Evaluation], Evaluation | None]:
+    from verify.extras import require
+
+    require("testing", feature="falsify --method targeted")
     from hypothesis import HealthCheck, Phase, Verbosity, given, settings, target
     from hypothesis import seed as hseed
     from hypothesis import strategies as st
