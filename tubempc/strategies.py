@@ -31,10 +31,14 @@ import numpy.typing as npt
 
 try:
     from hypothesis import strategies as st
-except ImportError:  # hypothesis comes with the 'testing' extra: one line naming it (exit 4), not a traceback
+except ImportError:  # hypothesis comes with the 'testing' extra: one error naming it (exit 4)
+    from verify.errors import MissingExtraError
     from verify.extras import require
 
-    require("testing", feature="tubempc.strategies")
+    try:
+        require("testing", feature="tubempc.strategies")
+    except MissingExtraError as missing:
+        raise missing from None
     raise
 
 from tubempc.mitl import (

@@ -1,7 +1,7 @@
 """Search methods: a setup, a budget and a seed -> the evaluated candidates in the order they were simulated.
 
 input: a ``FalsifySetup``, the method (``random``, ``targeted``, ``optimizer``), the budget (simulations), the seed,
-and where to run (processes or Dask, through ``verify.batch.parallel_map``) -> output: a frozen ``SearchResult``.
+and where to run (processes or Dask, through ``verify.executor.parallel_map``) -> output: a frozen ``SearchResult``.
 
 - ``random``: ``budget`` points drawn uniformly in the cube by ``numpy.random.default_rng(seed)`` (the baseline);
 - ``targeted``: hypothesis generates the points (``hypothesis.seed(seed)``), ``target()`` steers it to the lowest
@@ -81,7 +81,7 @@ class _Runner:
         self.order: list[Evaluation] = []
 
     def run(self, points: Sequence[tuple[float, ...]], *, inline: bool = False) -> list[Evaluation]:
-        from verify.batch import parallel_map
+        from verify.executor import parallel_map
 
         todo = [z for z in dict.fromkeys(points) if z not in self.cache]
         if todo:
