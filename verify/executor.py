@@ -80,7 +80,8 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
         results: dict[int, R] = {}
         context = _process_context(preload)
         broken: list[int] = []
-        with ProcessPoolExecutor(max_workers=n, mp_context=context) as pool:
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=context)
+        try:
             futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
             for fut in as_completed(futures):
                 try:
@@ -89,6 +90,8 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
                     broken.append(futures[fut])
                     continue
                 bar.update()
+        finally:
+            _shut_down(pool, broken=bool(broken))
         for i in sorted(broken):  # rerun alone: an item that was only a bystander of the crash now finishes
             results[i] = _run_alone(fn, items[i], context, on_crash)
             bar.update()
@@ -97,17 +100,31 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
         bar.close()
 
 
+def _shut_down(pool: ProcessPoolExecutor, *, broken: bool) -> None:
+    """Shut a pool down. After a worker died, the surviving workers are killed first: waiting for them can hang
+    for ever (a survivor blocked reading its call queue is never told to stop once the pool is broken)."""
+    if broken:
+        processes: dict[int, multiprocessing.process.BaseProcess] = getattr(pool, "_processes", None) or {}
+        for proc in list(processes.values()):
+            proc.kill()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.BaseContext,
                on_crash: Callable[[T], R] | None) -> R:
-    with ProcessPoolExecutor(max_workers=1, mp_context=context) as solo:
-        try:
-            return solo.submit(fn, item).result()
-        except BrokenProcessPool as err:
-            if on_crash is not None:
-                return on_crash(item)
-            raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
-                               "native code; or a script that starts workers without an `if __name__ == "
-                               "\"__main__\":` guard)") from err
+    solo = ProcessPoolExecutor(max_workers=1, mp_context=context)
+    died = False
+    try:
+        return solo.submit(fn, item).result()
+    except BrokenProcessPool as err:
+        died = True
+        if on_crash is not None:
+            return on_crash(item)
+        raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
+                           "native code; or a script that starts workers without an `if __name__ == "
+                           "\"__main__\":` guard)") from err
+    finally:
+        _shut_down(solo, broken=died)
 
 
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any) -> list[R]:

@@ -116,13 +116,21 @@ def _f64_block_uniform(u8: npt.NDArray[np.uint8], size: int, start: int, count: 
     return np.ascontiguousarray(mat[:, start : start + 8 * count]).view("<f8").reshape(mat.shape[0], count)
 
 
-def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray) -> bool:
+def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray, packed: int | None = None) -> bool:
     """Whether every string ``u8[start:start+length]`` is valid UTF-8, as rosbags' deserializer requires (ASCII
-    is checked in bulk; only strings with bytes >= 0x80 are decoded one by one)."""
+    is checked in bulk; only strings with bytes >= 0x80 are decoded one by one). ``packed``: every message has this
+    length and they are back to back (then equal strings at one offset are a column of the byte matrix)."""
     if start.shape[0] == 0:
         return True
     if np.any(length < 0):
         return False
+    n = start.shape[0]
+    if packed is not None and np.all(length == length[0]) and u8.shape[0] == n * packed:
+        rel = start - np.arange(n, dtype=np.int64) * packed
+        if np.all(rel == rel[0]) and int(rel[0]) >= 0 and int(rel[0] + length[0]) <= packed:
+            column = u8.reshape(n, packed)[:, int(rel[0]) : int(rel[0] + length[0])]
+            if not np.any(column >= 0x80):
+                return True
     total = int(length.sum())
     if total == 0:
         return True
@@ -160,7 +168,7 @@ def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
     len_at = offs + 12
     str_len = _u32(u8, len_at, packed)
     pos = len_at + 4 + str_len  # after header.frame_id
-    if np.any(pos > offs + lens) or not _utf8_strings(u8, len_at + 4, str_len if ros1 else str_len - 1):
+    if np.any(pos > offs + lens) or not _utf8_strings(u8, len_at + 4, str_len if ros1 else str_len - 1, packed):
         return None  # the slow path decides (and rejects) a cut message or a frame id that is not UTF-8
     if raw.msgtype == ODOMETRY:
         if not ros1:

@@ -126,10 +126,12 @@ def choose_time_base(stamps_ns: IntArray, log_ns: IntArray, requested: str) -> T
     if n_out > limit:
         problems.append(f"{n_out} of {n} stamps are zero, negative or far from their neighbours")
     good = stamps_ns[~out]
-    repeats = int(good.size - np.unique(good).size)
+    step = np.diff(good)
+    backwards = int(np.count_nonzero(step < 0))
+    # repeated stamps: on sorted stamps (the usual case) the zero steps; else after sorting (np.unique is slower)
+    repeats = int(np.count_nonzero((step if backwards == 0 else np.diff(np.sort(good))) == 0))
     if repeats > limit:
         problems.append(f"{repeats} of {n} stamps repeat an earlier stamp")
-    backwards = int(np.count_nonzero(np.diff(good) < 0))
     if backwards > limit:
         problems.append(f"{backwards} of {n} stamps go backwards in reading order")
     if problems and requested == "auto":
@@ -161,6 +163,9 @@ class JudgedSamples:
 def judged_samples(t_ns: IntArray, values: FloatArray) -> JudgedSamples:
     """Sort by time; duplicates whose ``values`` rows agree (NaN equal to NaN) are merged, others are conflicts."""
     n = int(t_ns.shape[0])
+    if n < 2 or bool(np.all(t_ns[1:] > t_ns[:-1])):  # strictly increasing (the usual case): nothing to sort or merge
+        every = np.arange(n, dtype=np.int64)
+        return JudgedSamples(every, np.asarray(t_ns, dtype=np.int64), np.zeros(n, dtype=bool), every, n, 0, 0)
     order = np.argsort(t_ns, kind="stable").astype(np.int64)
     ts = t_ns[order]
     first = np.ones(n, dtype=bool)

@@ -42,7 +42,7 @@ from verify.ingest.timebase import AGREE_TOL
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
-from verify.timedrun import parse_spec
+from verify.timedrun import check_timed_run, parse_spec
 from verify.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
@@ -196,6 +196,7 @@ class OnlineMonitor:
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
         self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
         self._prev_region = -2  # "before the first sample"
+        self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
         self._ws = MarginRun("workspace")
         self._clear = MarginRun("obstacle_clearance")
         self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
@@ -409,6 +410,8 @@ class OnlineMonitor:
         conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
         if entry.size:
             t_e = conv[entry]
+            self._run_entries += [(self.scenario.regions[int(r)].name, float(t) * 1e-9)
+                                  for r, t in zip(region[entry], t_e, strict=True)]
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             for name in self._names:
                 holds = np.array([name in self._labels[int(r)] for r in region[entry]], dtype=bool)
@@ -615,6 +618,15 @@ class OnlineMonitor:
         """The decisions made by ``close`` (every check still open at the end)."""
         return list(getattr(self, "_final_decisions", []))
 
+    def _timed_run_margin_s(self, t0: int) -> float | None:
+        """A failed timed run's temporal margin, as the certificate states it (``verify.timedrun``): computed once
+        at the end on the entries kept (one per region change, so few)."""
+        if not self._run_entries:
+            return None
+        end_s = max((self._last_pose - t0) * 1e-9, self._run_entries[-1][1])
+        labels = {r.name: list(r.labels) for r in self.scenario.regions}
+        return check_timed_run(str(self.formula), self._run_entries, labels, end=end_s).margin_s
+
     def _final_checks(self) -> list[CheckResult]:
         t0 = self.t0_ns
         traj, run = self._traj.head, self._run.head
@@ -627,7 +639,7 @@ class OnlineMonitor:
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
-            spec_run = CheckResult("spec_timed_run", rv, None,
+            spec_run = CheckResult("spec_timed_run", rv, self._timed_run_margin_s(t0) if rv == "fail" else None,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    {} if self._run.track.count else {"reason": "the timed run is empty"})
         if self._formula_late_conflicts:  # a judged sample turned out unknown: the formula cannot pass
