@@ -87,3 +87,11 @@ def _written_certificates_match_the_schema(tmp_path_factory: pytest.TempPathFact
     if bad:
         pytest.fail(f"{len(bad)} of {len(files)} certificate(s) written by the tests break the schema:\n"
                     + "\n".join(bad[:10]))
+
+
+@pytest.fixture(params=["fast", "rosbags"])
+def ingest_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run a test twice: with the certifier's own fast readers (the default) and with ``TUBEMPC_FAST_INGEST=0``
+    (every log read by plain rosbags); the test's assertions must hold both ways."""
+    monkeypatch.setenv("TUBEMPC_FAST_INGEST", "1" if request.param == "fast" else "0")
+    return str(request.param)

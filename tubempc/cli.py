@@ -3,8 +3,9 @@
 Exit codes (all subcommands): 0 success / all checks pass; 1 a violation was found (certify, regress) or no
 accepting run exists (plan, proved); 2 inconclusive (certify) or undecided (plan: the search reached its state
 limit, ``--max-states``); 3 unusable input (unreadable or truncated log, missing topic, malformed formula or
-scenario, impossible controller design, an abstraction without any usable transition); 4 feature not available;
-70 internal error.
+scenario, impossible controller design, an abstraction without any usable transition); 4 feature not available
+(among others: an optional dependency is not installed; the line names the extra, ``verify.extras``); 70 internal
+error.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitEr
 from tubempc.mitl import parse
 from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
 from verify.command import certify
-from verify.errors import VerifyError
+from verify.errors import MissingExtraError, VerifyError
 from verify.online.command import watch
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
@@ -137,7 +138,7 @@ add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on ev
 
 
 def _exit_code(err: BaseException) -> int:
-    if isinstance(err, NotAvailableError):
+    if isinstance(err, NotAvailableError | MissingExtraError):
         return EXIT_NOT_AVAILABLE
     if isinstance(err, NoAcceptingRunError):
         return EXIT_FAIL

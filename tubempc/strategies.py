@@ -28,7 +28,18 @@ from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-from hypothesis import strategies as st
+
+try:
+    from hypothesis import strategies as st
+except ImportError:  # hypothesis comes with the 'testing' extra: one error naming it (exit 4)
+    from verify.errors import MissingExtraError
+    from verify.extras import require
+
+    try:
+        require("testing", feature="tubempc.strategies")
+    except MissingExtraError as missing:
+        raise missing from None
+    raise
 
 from tubempc.mitl import (
     FALSE,

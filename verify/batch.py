@@ -9,38 +9,32 @@ An unusable log (unreadable, truncated, missing topic) becomes a row with exit c
 "Worst" orders the codes by severity, not by value: 0 pass < 2 inconclusive < 1 violation < 3 unusable < 70
 internal error (an inconclusive log must not hide a violation in another one).
 
-``parallel_map`` is the executor shared with ``tubempc regress``: inline for one job or ``workers=1``, a
-``ProcessPoolExecutor`` (spawn) by default, or Dask distributed with ``dask="local"`` (a ``LocalCluster`` on
-loopback, worker processes, no dashboard) or ``dask="tcp://host:port"`` (an existing scheduler whose workers can
-import ``verify`` and read the same paths).
+The logs run through ``verify.executor.parallel_map``, the one executor of both packages (the abstraction, batch
+certification, regress and the falsifier): inline for one job or ``workers=1``, a process pool by default, or Dask
+distributed with ``dask="local"`` or ``dask="tcp://host:port"``.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
-import logging
-import multiprocessing
-import os
 import re
-import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, TypeVar
-
-from tqdm import tqdm
+from typing import TYPE_CHECKING, Any, Literal
 
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate
-from verify.errors import UnusableInputError, VerifyError
+from verify.errors import VerifyError
+from verify.executor import parallel_map
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
-from verify.report import CertifyResultLike  # (matplotlib is imported only when reports are written)
 from verify.selection import select_checks
+
+if TYPE_CHECKING:  # verify.report imports matplotlib (the 'report' extra): only when reports are written
+    from verify.report import CertifyResultLike
 
 __all__ = [
     "EXIT_INTERNAL",
@@ -50,7 +44,7 @@ __all__ = [
     "BatchResult",
     "certify_many",
     "discover_logs",
-    "parallel_map",
+    "parallel_map",  # verify.executor's, re-exported: the batch's executor
     "summary_lines",
     "worst_exit_code",
     "write_batch",
@@ -62,8 +56,7 @@ EXIT_INTERNAL = 70
 _SEVERITY = {0: 0, 2: 1, 1: 2, 3: 3, 70: 4}
 _VERDICT_OF_CODE = {0: "pass", 1: "fail", 2: "inconclusive", 3: "unusable", 70: "error"}
 
-T = TypeVar("T")
-R = TypeVar("R")
+_PRELOAD = ("verify.batch",)  # the process server imports the certifier once for all workers
 
 
 def worst_exit_code(codes: Iterable[int]) -> int:
@@ -230,136 +223,6 @@ def _worker_died(job: _Job) -> BatchItem:
                      "out-of-memory kill in native code)", 0.0, None)
 
 
-# ---- executors ----------------------------------------------------------------------------------------------------
-def _show_progress(progress: bool | None) -> bool:
-    return sys.stderr.isatty() if progress is None else progress
-
-
-def _process_context(preload: Sequence[str]) -> multiprocessing.context.BaseContext:
-    """forkserver where available: the server imports ``preload`` once, workers fork from it in milliseconds
-    (spawn would re-import pandas, rosbags, casadi in every worker; fork is unsafe with threads)."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(list(preload))
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: str | None = None,
-                 progress: bool | None = None, desc: str = "", preload: Sequence[str] = ("verify.batch",),
-                 on_crash: Callable[[T], R] | None = None) -> list[R]:
-    """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
-
-    ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"`` or a scheduler address.
-    ``progress``: a tqdm bar on stderr (default: only when stderr is a terminal). ``preload``: modules the
-    process server imports once for all workers. Exceptions raised by ``fn`` propagate; callers that must not stop
-    (``certify_many``) catch inside ``fn``. Worker processes re-import the caller's ``__main__`` module: scripts
-    must guard their top level with ``if __name__ == "__main__":``.
-
-    A worker that dies (a segfault or out-of-memory kill in native code) breaks the pool: every item not finished
-    then is rerun alone in a fresh process, so one bad item cannot take the others down. With ``on_crash``, an item
-    whose lone rerun dies too gets ``on_crash(item)`` as its result (without it: ``RuntimeError``).
-    """
-    if workers is not None and workers < 1:
-        raise ValueError(f"workers={workers!r} must be at least 1")
-    bar = tqdm(total=len(items), desc=desc or None, unit="job", disable=not _show_progress(progress),
-               file=sys.stderr, leave=True)
-    try:
-        if dask is not None:
-            return _dask_map(fn, items, workers=workers, address=dask, bar=bar)
-        n = min(workers or os.cpu_count() or 1, len(items))
-        if n <= 1:
-            out = []
-            for item in items:
-                out.append(fn(item))
-                bar.update()
-            return out
-        results: dict[int, R] = {}
-        context = _process_context(preload)
-        broken: list[int] = []
-        pool = ProcessPoolExecutor(max_workers=n, mp_context=context)
-        try:
-            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
-            for fut in as_completed(futures):
-                try:
-                    results[futures[fut]] = fut.result()
-                except BrokenProcessPool:
-                    broken.append(futures[fut])
-                    continue
-                bar.update()
-        finally:
-            _shut_down(pool, broken=bool(broken))
-        for i in sorted(broken):  # rerun alone: an item that was only a bystander of the crash now finishes
-            results[i] = _run_alone(fn, items[i], context, on_crash)
-            bar.update()
-        return [results[i] for i in range(len(items))]
-    finally:
-        bar.close()
-
-
-def _shut_down(pool: ProcessPoolExecutor, *, broken: bool) -> None:
-    """Shut a pool down. After a worker died, the surviving workers are killed first: waiting for them can hang
-    for ever (a survivor blocked reading its call queue is never told to stop once the pool is broken)."""
-    if broken:
-        processes: dict[int, multiprocessing.process.BaseProcess] = getattr(pool, "_processes", None) or {}
-        for proc in list(processes.values()):
-            proc.kill()
-    pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.BaseContext,
-               on_crash: Callable[[T], R] | None) -> R:
-    solo = ProcessPoolExecutor(max_workers=1, mp_context=context)
-    died = False
-    try:
-        return solo.submit(fn, item).result()
-    except BrokenProcessPool as err:
-        died = True
-        if on_crash is not None:
-            return on_crash(item)
-        raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
-                           "native code; or a script that starts workers without an `if __name__ == "
-                           "\"__main__\":` guard)") from err
-    finally:
-        _shut_down(solo, broken=died)
-
-
-def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, address: str, bar: Any) -> list[R]:
-    import importlib
-
-    # distributed is only partly typed; treat it as untyped at this one boundary
-    dist: Any = importlib.import_module("distributed")
-    Client, LocalCluster, dask_completed = dist.Client, dist.LocalCluster, dist.as_completed
-
-    cluster = None
-    try:
-        if address == "local":
-            cluster = LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
-                                   processes=True, host="127.0.0.1", dashboard_address=None,
-                                   silence_logs=logging.ERROR)
-            client = Client(cluster)
-        elif re.fullmatch(r"(tcp|tls|inproc|ucx)://\S+", address):
-            client = Client(address, timeout="20s")
-        else:
-            raise UnusableInputError(f"dask={address!r}: expected 'local' or a scheduler address such as "
-                                     f"tcp://host:8786", path=address)
-    except OSError as err:  # includes connection timeouts
-        raise UnusableInputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
-                                 path=address) from err
-    try:
-        # ship the inputs as data (certification results carry frames), not embedded in the task graph
-        scattered = client.scatter(list(items)) if items else []
-        futures = client.map(fn, scattered, pure=False)
-        for _ in dask_completed(futures):
-            bar.update()
-        gathered: list[R] = client.gather(futures)
-        return gathered
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
 # ---- the batch ----------------------------------------------------------------------------------------------------
 def _folder_names(paths: Sequence[str]) -> list[str]:
     names: list[str] = []
@@ -400,7 +263,7 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
     offsets = tuple(sorted((clock_offsets or {}).items()))
     jobs = [_Job(str(p), names[str(p)], scenario, spec, time_base, salvage, chosen, digest, offsets) for p in logs]
     done = parallel_map(_certify_one, jobs, workers=workers, dask=dask, progress=progress, desc="certify",
-                        on_crash=_worker_died)
+                        preload=_PRELOAD, on_crash=_worker_died)
     bad = [BatchItem(p, names[p], EXIT_UNUSABLE, "unusable", f"{p}: {why}", 0.0, None) for p, why in problems]
     return BatchResult(tuple(done) + tuple(bad), scenario, spec)
 
@@ -446,13 +309,13 @@ class _WriteJob:
 
 def _write_item(job: _WriteJob) -> JUnitSuite:
     """Write one log's folder; return its JUnit suite (a picklable value)."""
-    from verify.report import write_reports
-
     item, sub = job.item, Path(job.folder)
     sub.mkdir(parents=True, exist_ok=True)
     if item.result is not None:
         _write_certificate(item.result, sub)
         if job.reports:
+            from verify.report import write_reports
+
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
                           junit_inconclusive=job.junit_inconclusive)
         suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
@@ -502,12 +365,16 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
+    from verify.extras import require
     from verify.outputs import prepare_output_dir
 
+    if reports:
+        require("report", feature="report.html", alternative="write certificates only (reports=False, --no-report)")
     out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
             for item in batch.items]
-    suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports")
+    suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports",
+                          preload=_PRELOAD)
     rows = batch.rows()
     columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
     with (out / "summary.csv").open("w", newline="", encoding="utf-8") as fh:

@@ -97,13 +97,20 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
             digest: str, clock_offsets: tuple[str, ...]) -> None:
     """Certify ROS logs (.bag, .mcap, .db3, ROS2 bag folders, or folders of logs) against a scenario and a formula.
 
-    Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input.
+    Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input, 4 a needed optional
+    dependency is not installed (the line names the extra).
     """
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
+    from verify.extras import require
     from verify.junit import InconclusiveAs
     from verify.outputs import prepare_output_dir
     from verify.selection import parse_check_list
 
+    if out_dir is not None and not no_report:  # before any work: the reports are what was asked for
+        require("report", feature="report.html (certify --out)",
+                alternative="pass --no-report for certificate.json only")
+    if dask is not None:
+        require("dask", feature="certify --dask")
     level = _verbosity()
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None

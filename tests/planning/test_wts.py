@@ -53,3 +53,26 @@ def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:
     other = s.model_copy(update={"initial_region_name": "R2"})
     build_wts(other, oracle=straight_line_oracle, cache_path=tmp_path, workers=1)
     assert len(list(tmp_path.glob("wts-*.json"))) == 2
+
+
+def test_the_abstraction_runs_on_the_shared_executor(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """build_wts hands its region pairs to verify.executor.parallel_map (workers, Dask, progress passed through)."""
+    import verify.executor
+    from tubempc.planning import wts as wts_module
+
+    real = verify.executor.parallel_map
+    seen: list[dict[str, object]] = []
+
+    def spy(fn: object, items: list[object], **kwargs: object) -> list[object]:
+        seen.append({"fn": fn, "jobs": len(items), **kwargs})
+        return real(fn, items, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(verify.executor, "parallel_map", spy)
+    s = builtin_scenario()
+    g = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1, progress=False, use_cache=False)
+    n = len(s.safe_regions)
+    (call,) = seen
+    assert call["fn"] is wts_module._evaluate and call["jobs"] == n * (n - 1)
+    assert (call["workers"], call["dask"], call["progress"], call["unit"]) == (1, None, False, "pair")
+    assert "tubempc.planning.synthetic" in call["preload"]  # type: ignore[operator]
+    assert g.number_of_edges() + len(g.graph[FAILED]) == n * (n - 1)

@@ -8,8 +8,8 @@ import operator
 
 import pytest
 
-from verify.batch import parallel_map
 from verify.errors import UnusableInputError
+from verify.executor import parallel_map
 
 ITEMS = [3, -1, 4, -1, -5, 9, -2, 6]
 EXPECTED = [abs(x) for x in ITEMS]

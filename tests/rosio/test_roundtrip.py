@@ -1,4 +1,5 @@
-"""Log round trip: a written log read back with plain rosbags gives the simulated arrays (every format)."""
+"""Log round trip: a written log read back with plain rosbags, and with the certifier's reader (its own fast readers
+and, with ``TUBEMPC_FAST_INGEST=0``, plain rosbags), gives the simulated arrays (every format)."""
 
 from __future__ import annotations
 
@@ -72,6 +73,26 @@ def test_round_trip(tmp_path: Path, result: ClosedLoopResult, name: str) -> None
     assert meta["targets"] == [{"region": "R3", "depart_after_s": None}]
     assert meta["generator"].startswith("tubempc ") and meta["formula"] == SCENARIO.spec
     assert "regions:" in meta["scenario_yaml"]
+
+
+@pytest.mark.parametrize("name", ["run.mcap", "run.bag", "run.db3", "run_dir"])
+def test_round_trip_through_the_certifiers_reader(tmp_path: Path, result: ClosedLoopResult, name: str,
+                                                  ingest_path: str) -> None:
+    from verify.ingest import read_log
+
+    path = write_log(result, SCENARIO, tmp_path / name)
+    log = read_log(path, SCENARIO)
+    stamps = TIME0_NS + np.rint(result.t_s * 1e9).astype(np.int64)
+    assert log.time_base == "header" and log.time0_ns == TIME0_NS
+    assert np.array_equal(log.pose.t_ns, stamps)
+    assert np.array_equal(np.column_stack([log.pose.x_m, log.pose.y_m]), result.x_measured[:, :2])
+    assert np.allclose(log.pose.theta_rad, result.x_measured[:, 2], atol=1e-12)
+    assert log.nominal is not None and np.array_equal(log.nominal.x_m, result.x_hat[:, 0])
+    assert log.cmd_t_ns is not None and log.cmd_u is not None
+    assert np.array_equal(log.cmd_t_ns, stamps) and np.array_equal(log.cmd_u, result.u_body)
+    assert len(log.statuses) == len(result.solver) and log.metadata is not None
+    assert log.metadata["seed"] == 9
+    assert log.data_quality["pose"]["fast_decode"] is (ingest_path == "fast")
 
 
 def test_existing_path_and_reserved_key_are_refused(tmp_path: Path, result: ClosedLoopResult) -> None:

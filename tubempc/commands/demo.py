@@ -26,6 +26,9 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
 
     Exit code: the certificate's (0 pass, 1 fail, 2 inconclusive).
     """
+    from verify.extras import require
+
+    require("plan", "report", feature="the demo")
     from tubempc.demo import run_demo
     from verify.outputs import prepare_output_dir
 

@@ -76,6 +76,10 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
             stop_at_first: bool, shrink_budget: int | None, replay_text: str | None, workers: int | None,
             dask: str | None, out_dir: str | None) -> None:
     """Search disturbances, start poses and MoCap noise within the scenario's bounds for a run that breaks a check."""
+    from verify.extras import require
+
+    require("plan", *(("testing",) if method == "targeted" else ()), *(("dask",) if dask else ()),
+            feature=f"tubempc falsify --method {method}")
     from tubempc.commands.output import detail, say
     from tubempc.falsify import (
         FalsifyRequest,

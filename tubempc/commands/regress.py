@@ -35,6 +35,10 @@ __all__ = ["regress"]
 def regress(*, suite_path: str | None, baseline_path: str | None, update_baseline: bool, workers: int | None,
             dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None) -> None:
     """Run a regression suite with the current controller and compare it with a stored baseline."""
+    from verify.extras import require
+
+    require("plan", *(("report",) if reports and out_dir else ()), *(("dask",) if dask else ()),
+            feature="tubempc regress")
     from tubempc.regress import (
         FalsifyCase,
         RunCase,

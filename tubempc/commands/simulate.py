@@ -35,6 +35,9 @@ EXIT_NOT_REACHED = 1
 def simulate(*, scenario_path: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
              hold_s: float | None, out_path: str, force: bool) -> None:
     """Simulate the tube MPC from one region to another and write the robot's log."""
+    from verify.extras import require
+
+    require("plan", feature="tubempc simulate")
     import numpy as np
 
     from tubempc.control import Target, run_closed_loop

@@ -7,9 +7,10 @@ are never entered, so they are not states of the WTS) and whose edge ``i -> j`` 
 terminal set of ``j`` without violating the tightened constraints. Pairs that fail are listed with the oracle's
 reason in the graph attribute ``FAILED``.
 
-The pairs are evaluated in parallel (a process pool, or a Dask cluster when a client or address is given), with a
-progress bar on a terminal, and the result is cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under
-the sha256 of the scenario, the oracle, its settings and its code.
+The pairs are evaluated in parallel by ``verify.executor.parallel_map`` (a process pool, or a Dask cluster when a
+client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the result is
+cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
+settings and its code.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -206,14 +206,6 @@ def _store_cache(path: Path, pairs: list[PairResult], key_info: dict[str, Any]) 
     os.replace(tmp, path)
 
 
-def _progress(total: int, enabled: bool | None) -> Any:
-    from tqdm import tqdm
-
-    show = sys.stderr.isatty() if enabled is None else enabled
-    return tqdm(total=total, desc="abstraction (Algorithm 1 per region pair)", unit="pair", disable=not show,
-                file=sys.stderr)
-
-
 def build_wts(
     scenario: Scenario,
     *,
@@ -229,7 +221,8 @@ def build_wts(
     """Evaluate every ordered pair of safe regions with the oracle and return the WTS.
 
     ``workers``: processes (default: CPU count; 1 evaluates in this process). ``dask``: a
-    ``dask.distributed.Client`` or a scheduler address; when given, the pairs run on that cluster instead.
+    ``dask.distributed.Client``, a scheduler address or ``"local"``; when given, the pairs run on that cluster
+    instead (``verify.executor.parallel_map``).
     ``cache_path``: a directory (default ``cache_dir()``).
     """
     fn: TransitionOracle = default_oracle() if oracle is None else oracle
@@ -244,45 +237,21 @@ def build_wts(
             return g
     names = [r.name for r in scenario.safe_regions]
     todo = [_Job(fn, scenario, a, b, disturbance, seed) for a in names for b in names if a != b]
-    results: list[PairResult] = []
-    bar = _progress(len(todo), progress)
+    from verify.executor import parallel_map  # the one executor (processes or Dask) of both packages
+
+    oracle_module = getattr(fn, "__module__", None)
+    preload = ("tubempc.planning.wts", *([oracle_module] if oracle_module and oracle_module != "__main__" else []))
     try:
-        if dask is not None:
-            results = _run_dask(dask, todo, bar)
-        elif workers == 1 or len(todo) <= 1:
-            for job in todo:
-                results.append(_evaluate(job))
-                bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-                futures = [pool.submit(_evaluate, job) for job in todo]
-                for fut in futures:
-                    results.append(fut.result())
-                    bar.update(1)
+        results = parallel_map(_evaluate, todo, workers=workers, dask=dask, progress=progress,
+                               desc="abstraction (Algorithm 1 per region pair)", unit="pair", preload=preload)
     except (TubeMPCError, OSError) as err:
         raise AbstractionError(f"building the WTS of scenario {scenario.name!r} failed: {err}") from err
-    finally:
-        bar.close()
     if use_cache:
         with contextlib.suppress(OSError):  # an unwritable cache directory only costs time on the next run
             _store_cache(path, results, {"scenario": scenario.sha256(), **ident})
     g = wts_from_weights(scenario, results, oracle_name=ident["oracle"])
     g.graph["cache"] = str(path) if use_cache else None
     return g
-
-
-def _run_dask(dask: Any, todo: list[_Job], bar: Any) -> list[PairResult]:
-    from dask.distributed import Client, as_completed
-
-    client = dask if isinstance(dask, Client) else Client(dask)  # type: ignore[no-untyped-call]
-    try:
-        futures = client.map(_evaluate, todo, pure=False)
-        for _ in as_completed(futures):  # type: ignore[no-untyped-call]
-            bar.update(1)
-        return list(client.gather(futures))  # type: ignore[no-untyped-call]
-    finally:
-        if client is not dask:
-            client.close()  # type: ignore[no-untyped-call]
 
 
 def make_wts(labels: dict[str, Iterable[str]], weights: dict[tuple[str, str], Fraction | int | str], *,

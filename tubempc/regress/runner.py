@@ -166,7 +166,7 @@ def run_case(job: RunJob) -> RunOutcome:
 def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | None = None, reports: bool = False,
               workers: int | None = None, dask: str | None = None, progress: bool | None = None) -> list[RunOutcome]:
     """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address)."""
-    from verify.batch import parallel_map
+    from verify.executor import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports) for case in cases]
     preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",

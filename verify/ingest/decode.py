@@ -8,7 +8,8 @@ into one buffer and the fields are read with ``np.frombuffer`` at per-message of
 string lengths (CDR alignment is relative to the end of the 4-byte encapsulation header). When all messages have one
 length (the usual case: a constant frame id) the buffer is viewed as an ``(n, size)`` byte matrix and the columns
 are sliced directly. Anything else (big-endian CDR, TFMessage, a type whose definition differs from the standard
-one) goes through ``rosbags``' typestore ``deserialize_*`` (``decode_slow``).
+one) goes through ``rosbags``' typestore ``deserialize_*``; so does everything when ``TUBEMPC_FAST_INGEST=0``
+(``verify.ingest.raw.fast_ingest``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy.typing as npt
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from verify.errors import LogReadError
-from verify.ingest.raw import RawTopic
+from verify.ingest.raw import RawTopic, fast_ingest
 from verify.ingest.readerrors import READ_ERRORS
 from verify.ingest.ros1 import PayloadBuffer
 
@@ -202,8 +203,12 @@ def _stamp(header: Any) -> int:
     return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
 
 
-def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fast: bool = True) -> PoseColumns:
-    """PoseStamped / Odometry (fast path) or TFMessage / TransformStamped filtered by ``child_frame`` (slow path)."""
+def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fast: bool | None = None
+                ) -> PoseColumns:
+    """PoseStamped / Odometry (fast path) or TFMessage / TransformStamped filtered by ``child_frame`` (slow path).
+    ``fast``: whether the bulk decoder may be used (default: ``fast_ingest()``)."""
+    if fast is None:
+        fast = fast_ingest()
     if fast and raw.msgtype in (POSE_STAMPED, ODOMETRY) and raw.payloads:
         out = _pose_fast(raw, ros1)
         if out is not None:
@@ -268,8 +273,11 @@ def _twist_stamped_fast(raw: RawTopic, ros1: bool) -> TwistColumns | None:
                         sec * 10**9 + stamps[:, 1])
 
 
-def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool = True) -> TwistColumns:
-    """geometry_msgs Twist or TwistStamped (detected from the topic's type) -> (linear.x, linear.y, angular.z)."""
+def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool | None = None) -> TwistColumns:
+    """geometry_msgs Twist or TwistStamped (detected from the topic's type) -> (linear.x, linear.y, angular.z).
+    ``fast``: whether the bulk decoder may be used (default: ``fast_ingest()``)."""
+    if fast is None:
+        fast = fast_ingest()
     log_ns = np.asarray(raw.log_ns, dtype=np.int64)
     size = 48 if ros1 else 52
     if fast and raw.msgtype == TWIST and raw.payloads:

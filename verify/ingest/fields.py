@@ -9,10 +9,11 @@ definition (rosbags' ``fielddefs``) over all payloads at once: fixed-size fields
 strings and sequences of numbers by their per-message length words, with CDR alignment relative to the
 encapsulation header; the value is then read in one gather. Anything the walk cannot follow (a sequence or array of
 strings or messages before the field, big-endian CDR, a payload too short) declines, and the field is read with
-``rosbags``' typestore ``deserialize_*`` once per message. The first and last messages are always also deserialized,
-and the fast values must agree with them. A path that does not resolve on the first message, or resolves to
-something that is not a number, raises ``UnusableInputError`` naming the topic and the field. Message types outside
-the standard ROS type store (custom messages) are refused with exit 3 naming the type.
+``rosbags``' typestore ``deserialize_*`` once per message (always, with ``TUBEMPC_FAST_INGEST=0``). The first and
+last messages are always also deserialized, and the fast values must agree with them. A path that does not resolve
+on the first message, or resolves to something that is not a number, raises ``UnusableInputError`` naming the topic
+and the field. Message types outside the standard ROS type store (custom messages) are refused with exit 3 naming
+the type.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from tubempc.scenario import Scenario, SignalSpec
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
 from verify.ingest.decode import _joined, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
-from verify.ingest.raw import RawLog, RawTopic
+from verify.ingest.raw import RawLog, RawTopic, fast_ingest
 
 __all__ = ["FieldSamples", "SignalStream", "decode_field", "parse_field_path", "read_signals"]
 
@@ -230,8 +231,11 @@ def _bulk_field(raw: RawTopic, ros1: bool, steps: list[str | int]) -> FloatArray
     return None
 
 
-def decode_field(raw: RawTopic, ros1: bool, field: str, *, fast: bool = True) -> FieldSamples:
-    """Every message's ``field`` as float64 (bools as 0/1), with header stamps when the message has a header."""
+def decode_field(raw: RawTopic, ros1: bool, field: str, *, fast: bool | None = None) -> FieldSamples:
+    """Every message's ``field`` as float64 (bools as 0/1), with header stamps when the message has a header.
+    ``fast``: whether the bulk walk may be used (default: ``fast_ingest()``)."""
+    if fast is None:
+        fast = fast_ingest()
     steps = parse_field_path(field)
     store = typestore(ros1)
     if raw.msgtype not in store.types:

@@ -9,11 +9,16 @@ opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.
 ``.mcap`` and ``.db3`` files directly, sqlite3 with ``immutable=1`` so a ``-wal`` file is neither read nor
 checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with ``salvage=True`` the complete records
 are read by a stream walk (``verify.ingest.salvage``) and the result is marked partial.
+
+``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own readers off: every log is then opened and read by plain
+``rosbags`` (its ``Reader.messages``), and decoded by one ``deserialize`` per message (``verify.ingest.decode``,
+``.fields``). The format of a log is decided by rosbags' own dispatch (``detect_format``).
 """
 
 from __future__ import annotations
 
 import gc
+import os
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator
@@ -26,6 +31,7 @@ from pathlib import Path
 import apsw  # rosbags reads sqlite3 bags through apsw; its errors must be wrapped like sqlite3's
 import numpy as np
 import numpy.typing as npt
+import yaml
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import ReaderError as ReaderError1
@@ -42,7 +48,11 @@ from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 from verify.ingest.sqlite import QuickReader, read_sqlite_storage
 
-__all__ = ["RawLog", "RawTopic", "detect_format", "read_raw"]
+__all__ = ["FAST_INGEST_ENV", "RawLog", "RawTopic", "detect_format", "fast_ingest", "read_raw"]
+
+#: environment variable: "0" (or "false", "no", "off") reads every log through plain rosbags
+FAST_INGEST_ENV = "TUBEMPC_FAST_INGEST"
+_OFF = frozenset({"0", "false", "no", "off"})
 
 _ROS1_TRUNCATION_HINTS = ("not indexed", "index looks damaged", "Got only", "could not be read", "Could not read")
 _MCAP_TRUNCATION_HINTS = ("end magic", "Truncated record", "footer", "summary offset", "seems to be empty")
@@ -75,27 +85,64 @@ class RawLog:
     notes: tuple[str, ...]
 
 
+def fast_ingest() -> bool:
+    """Whether our own readers and bulk decoders may be used (the default; read at every call, so a test or a
+    process can switch). Off (``TUBEMPC_FAST_INGEST=0``), every read goes through plain rosbags: the same
+    certificate, only slower (the reader tests run both ways)."""
+    return os.environ.get(FAST_INGEST_ENV, "1").strip().lower() not in _OFF
+
+
 def detect_format(path: Path) -> str:
+    """"ros1", "mcap" or "sqlite3", decided as rosbags decides which reader opens the log (``AnyReader``: ``.bag``
+    is ROS1; ``rosbags.rosbag2.Reader.STORAGE_PLUGINS``: a file by its suffix; ``DirectoryReader.STORAGE_PLUGINS``:
+    a bag folder by the ``storage_identifier`` of its metadata.yaml). A folder whose metadata.yaml cannot say (not
+    YAML, no such key) is named by its storage files, so the error rosbags then raises names the right format."""
     if path.is_dir():
         meta = path / "metadata.yaml"
         if not meta.exists():
             raise LogReadError("a directory without metadata.yaml is not a ROS2 bag", path=str(path))
-        suffixes = {p.suffix for p in path.iterdir()}
-        if ".db3" in suffixes and ".mcap" not in suffixes:  # the storage files decide (metadata may be damaged)
-            return "sqlite3"
-        if ".mcap" in suffixes and ".db3" not in suffixes:
-            return "mcap"
-        text = meta.read_text(encoding="utf-8", errors="replace")
-        return "sqlite3" if "storage_identifier: sqlite3" in text else "mcap"
-    suffix = path.suffix.lower()
-    if suffix == ".bag":
+        storage_id = _storage_identifier(meta)
+        if storage_id is None:
+            return _format_from_files(path)
+        plugin = DirectoryReader.STORAGE_PLUGINS.get(storage_id)
+        if plugin is None or plugin not in _PLUGIN_FORMATS:
+            raise LogReadError(f"metadata.yaml names the storage plugin {storage_id!r}; rosbags reads "
+                               f"{' and '.join(sorted(DirectoryReader.STORAGE_PLUGINS))} bags", path=str(path))
+        return _PLUGIN_FORMATS[plugin]
+    if path.suffix.lower() == ".bag":  # rosbags' ROS1 reader opens any file name
         return "ros1"
-    if suffix == ".mcap":
-        return "mcap"
-    if suffix == ".db3":
-        return "sqlite3"
-    raise LogReadError(f"unrecognized log type {suffix or '(no extension)'!r}: expected .bag, .mcap, .db3 or a "
-                       f"ROS2 bag directory", path=str(path))
+    plugin = Reader2.STORAGE_PLUGINS.get(path.suffix)
+    if plugin in _PLUGIN_FORMATS:
+        return _PLUGIN_FORMATS[plugin]
+    known = sorted({".bag", *(k for k, v in Reader2.STORAGE_PLUGINS.items() if v in _PLUGIN_FORMATS)})
+    if path.suffix.lower() in known:
+        raise LogReadError(f"extension {path.suffix!r}: rosbags recognizes {path.suffix.lower()!r} in lower case "
+                           f"only (rename the file)", path=str(path))
+    raise LogReadError(f"unrecognized log type {path.suffix or '(no extension)'!r}: expected "
+                       f"{', '.join(known)} or a ROS2 bag directory", path=str(path))
+
+
+#: rosbags' storage reader classes -> our format names
+_PLUGIN_FORMATS: dict[object, str] = {McapReader: "mcap", Sqlite3Reader: "sqlite3"}
+_METADATA_MAX_BYTES = 64 << 20  # a metadata.yaml is a few KiB; a bigger one is damage (files decide)
+
+
+def _storage_identifier(meta: Path) -> str | None:
+    """``rosbag2_bagfile_information.storage_identifier`` of a metadata.yaml; None when it cannot be read."""
+    try:
+        if meta.stat().st_size > _METADATA_MAX_BYTES:
+            return None
+        doc = yaml.safe_load(meta.read_text(encoding="utf-8", errors="replace"))
+    except (OSError, yaml.YAMLError, RecursionError, ValueError):
+        return None
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    ident = info.get("storage_identifier") if isinstance(info, dict) else None
+    return ident if isinstance(ident, str) else None
+
+
+def _format_from_files(path: Path) -> str:
+    suffixes = {p.suffix for p in path.iterdir()}
+    return "sqlite3" if ".db3" in suffixes and ".mcap" not in suffixes else "mcap"
 
 
 def _storage_files(path: Path, fmt: str) -> list[Path]:
@@ -120,7 +167,7 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                 notes.append(f"un-checkpointed write-ahead log {wal.name} ({wal.stat().st_size} bytes) beside "
                              f"{db.name}: the database is opened read-only and immutable, so messages still in the "
                              f"-wal file are not read")
-    if fmt == "ros1" and (fast := read_ros1_fast(p, wanted)) is not None:
+    if fmt == "ros1" and fast_ingest() and (fast := read_ros1_fast(p, wanted)) is not None:
         topics_out = {topic: RawTopic(topic, msgtype, has_def, log_ns, payloads)
                       for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items()}
         return RawLog(str(p), fmt, True, topics_out, fast.available, False, tuple(notes))
@@ -165,7 +212,8 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
-    if fmt == "sqlite3" and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
+    own = fast_ingest()
+    if fmt == "sqlite3" and own and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
         return quick
     reader: Reader1 | Reader2
     try:
@@ -184,7 +232,7 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         selected = [c for c in conns if c.topic in wanted]
         out = _topics_from(selected)
         rows: list[tuple[Connection, int, bytes | memoryview]] = []
-        fast = _read_rosbag2_fast(reader, selected) if selected and isinstance(reader, Reader2) else None
+        fast = _read_rosbag2_fast(reader, selected) if own and selected and isinstance(reader, Reader2) else None
         if selected and fast is None:
             try:
                 rows = list(reader.messages(connections=selected))

@@ -1,0 +1,168 @@
+"""The one executor of both packages: a function and its jobs -> their results in input order, run in parallel.
+
+input: a picklable ``fn``, its items, and where to run them (``workers``: processes, 1 = inline; ``dask``: a Dask
+cluster) -> output: ``[fn(x) for x in items]``. Used by the abstraction (``tubempc.planning.wts``: Algorithm 1 per
+region pair), batch certification (``verify.batch``), ``tubempc regress`` and the falsifier (``tubempc.falsify``).
+
+Processes: a ``ProcessPoolExecutor`` on the ``forkserver`` start method (``spawn`` where there is none): the server
+imports ``preload`` once and workers fork from it in milliseconds. A worker that dies (a segfault or an
+out-of-memory kill in native code) breaks the pool: every item not finished then is rerun alone in a fresh process,
+so one bad item cannot take the others down; an item whose lone rerun dies too gets ``on_crash(item)`` as its result
+(without ``on_crash``: ``RuntimeError``, an internal error, exit 70). Dask distributed (the ``dask`` extra):
+``dask="local"`` (a ``LocalCluster`` on loopback, worker processes, one thread each, no dashboard),
+``dask="tcp://host:port"`` (an existing scheduler whose workers can import this package and see the same paths),
+or a ``distributed.Client`` the caller owns (used, not closed). Exceptions raised by ``fn`` propagate.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import multiprocessing
+import os
+import re
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any, TypeVar
+
+from tqdm import tqdm
+
+from verify.errors import UnusableInputError
+
+__all__ = ["parallel_map"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def _show_progress(progress: bool | None) -> bool:
+    return sys.stderr.isatty() if progress is None else progress
+
+
+def _process_context(preload: Sequence[str]) -> multiprocessing.context.BaseContext:
+    """forkserver where available: the server imports ``preload`` once, workers fork from it in milliseconds
+    (spawn would re-import pandas, rosbags, casadi in every worker; fork is unsafe with threads)."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(list(preload))
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None = None, dask: Any = None,
+                 progress: bool | None = None, desc: str = "", unit: str = "job", preload: Sequence[str] = (),
+                 on_crash: Callable[[T], R] | None = None) -> list[R]:
+    """``[fn(x) for x in items]`` in parallel, results in input order. ``fn`` and items must be picklable.
+
+    ``workers``: processes (default: CPU count; 1 runs inline). ``dask``: ``"local"``, a scheduler address or a
+    ``distributed.Client``. ``progress``: a tqdm bar on stderr (default: only when stderr is a terminal), labelled
+    ``desc`` and counting ``unit``. ``preload``: modules the process server imports once for all workers.
+    Exceptions raised by ``fn`` propagate; callers that must not stop (``certify_many``) catch inside ``fn``. Worker
+    processes re-import the caller's ``__main__`` module: scripts must guard their top level with
+    ``if __name__ == "__main__":``. A worker crash: see the module docstring (``on_crash``).
+    """
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers={workers!r} must be at least 1")
+    bar = tqdm(total=len(items), desc=desc or None, unit=unit, disable=not _show_progress(progress),
+               file=sys.stderr, leave=True)
+    try:
+        if dask is not None:
+            return _dask_map(fn, items, workers=workers, dask=dask, bar=bar)
+        n = min(workers or os.cpu_count() or 1, len(items))
+        if n <= 1:
+            out = []
+            for item in items:
+                out.append(fn(item))
+                bar.update()
+            return out
+        results: dict[int, R] = {}
+        context = _process_context(preload)
+        broken: list[int] = []
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=context)
+        try:
+            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+            for fut in as_completed(futures):
+                try:
+                    results[futures[fut]] = fut.result()
+                except BrokenProcessPool:
+                    broken.append(futures[fut])
+                    continue
+                bar.update()
+        finally:
+            _shut_down(pool, broken=bool(broken))
+        for i in sorted(broken):  # rerun alone: an item that was only a bystander of the crash now finishes
+            results[i] = _run_alone(fn, items[i], context, on_crash)
+            bar.update()
+        return [results[i] for i in range(len(items))]
+    finally:
+        bar.close()
+
+
+def _shut_down(pool: ProcessPoolExecutor, *, broken: bool) -> None:
+    """Shut a pool down. After a worker died, the surviving workers are killed first: waiting for them can hang
+    for ever (a survivor blocked reading its call queue is never told to stop once the pool is broken)."""
+    if broken:
+        processes: dict[int, multiprocessing.process.BaseProcess] = getattr(pool, "_processes", None) or {}
+        for proc in list(processes.values()):
+            proc.kill()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.BaseContext,
+               on_crash: Callable[[T], R] | None) -> R:
+    solo = ProcessPoolExecutor(max_workers=1, mp_context=context)
+    died = False
+    try:
+        return solo.submit(fn, item).result()
+    except BrokenProcessPool as err:
+        died = True
+        if on_crash is not None:
+            return on_crash(item)
+        raise RuntimeError("a worker process died twice on the same item (a crash or out-of-memory kill in "
+                           "native code; or a script that starts workers without an `if __name__ == "
+                           "\"__main__\":` guard)") from err
+    finally:
+        _shut_down(solo, broken=died)
+
+
+def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any) -> list[R]:
+    from verify.extras import require
+
+    require("dask", feature="--dask")
+    # distributed is only partly typed; treat it as untyped at this one boundary
+    dist: Any = importlib.import_module("distributed")
+    Client, LocalCluster, dask_completed = dist.Client, dist.LocalCluster, dist.as_completed
+
+    cluster = None
+    owned = isinstance(dask, str)
+    try:
+        if not owned:
+            client = dask  # the caller's client: used, not closed
+        elif dask == "local":
+            cluster = LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
+                                   processes=True, host="127.0.0.1", dashboard_address=None,
+                                   silence_logs=logging.ERROR)
+            client = Client(cluster)
+        elif re.fullmatch(r"(tcp|tls|inproc|ucx)://\S+", dask):
+            client = Client(dask, timeout="20s")
+        else:
+            raise UnusableInputError(f"dask={dask!r}: expected 'local' or a scheduler address such as "
+                                     f"tcp://host:8786", path=dask)
+    except OSError as err:  # includes connection timeouts
+        raise UnusableInputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
+                                 path=str(dask)) from err
+    try:
+        # ship the inputs as data (certification results carry frames), not embedded in the task graph
+        scattered = client.scatter(list(items)) if items else []
+        futures = client.map(fn, scattered, pure=False)
+        for _ in dask_completed(futures):
+            bar.update()
+        gathered: list[R] = client.gather(futures)
+        return gathered
+    finally:
+        if owned:
+            client.close()
+        if cluster is not None:
+            cluster.close()
