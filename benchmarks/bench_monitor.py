@@ -21,7 +21,7 @@ import numpy as np
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario, builtin_scenario, scenario_from_dict
 from verify.geometry import label_margins
-from verify.trajectory import check_trajectory
+from verify.semantics.trajectory import check_trajectory
 
 # argus needs float literals (an integer 0 makes it panic)
 STL = ("G(!(obs_1 > 0.0 || obs_2 > 0.0 || obs_3 > 0.0 || obs_4 > 0.0)) && F[{a},{b}](mission_2 >= 0.0) && "

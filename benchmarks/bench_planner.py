@@ -27,8 +27,8 @@ import networkx as nx
 import numpy as np
 
 from tubempc.mitl import parse
+from tubempc.planning.reference_semantics import holds
 from tubempc.planning.search import find_run
-from tubempc.planning.semantics import holds
 from tubempc.planning.synthetic import random_scenario, straight_line_oracle
 from tubempc.planning.wts import FAILED, LABELS, ORACLE, WEIGHT, build_wts
 from tubempc.scenario import builtin_scenario

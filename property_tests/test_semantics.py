@@ -45,8 +45,8 @@ from tubempc.mitl import (
 )
 from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, holds, make_wts, plan_from_wts
 from tubempc.planning.automaton import tick_of
+from tubempc.planning.reference_semantics import brute_force_silent
 from tubempc.planning.search import OBSERVED, SILENT
-from tubempc.planning.semantics import brute_force_silent
 from tubempc.strategies import TimedRun
 from verify import check_timed_run
 

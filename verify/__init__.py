@@ -13,7 +13,7 @@ from verify.errors import (
     UnusableInputError,
     VerifyError,
 )
-from verify.timedrun import TimedRunVerdict, check_timed_run
+from verify.semantics.timed_run import TimedRunVerdict, check_timed_run
 
 __all__ = [
     "CertifyResult",

@@ -31,9 +31,9 @@ from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
 from verify.selection import Selection, select_checks
+from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
+from verify.semantics.trajectory import check_trajectory, reported_margin
 from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
-from verify.timedrun import check_timed_run, parse_spec, timed_run_of_sets
-from verify.trajectory import check_trajectory, reported_margin
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
            "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]

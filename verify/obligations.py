@@ -6,9 +6,9 @@ bound -> output: a tuple of ``Obligation`` values, one per top-level conjunct of
 A formula such as ``G !obs & F[30,50] mission_2 & F[80,110] mission_1`` is a list of obligations, each with its own
 window. One robustness curve for the whole formula hides which of them failed and when (an unbounded window that
 reaches past the log end makes the whole curve undecided). Here every conjunct is judged on its own under the
-trajectory semantics (``verify.trajectory``), and the signal drawn is the margin of its *body* at every sample:
-the sub-formula the temporal operator asks about (``mission_2`` for ``F[30,50] mission_2``: metres to go into the
-region, negative outside), with the window in which it counts. A missed window then reads as what it is: a curve
+trajectory semantics (``verify.semantics.trajectory``), and the signal drawn is the margin of its *body* at every
+sample: the sub-formula the temporal operator asks about (``mission_2`` for ``F[30,50] mission_2``: metres to go into
+the region, negative outside), with the window in which it counts. A missed window then reads as what it is: a curve
 that turns positive only after the shaded span closes.
 """
 
@@ -23,7 +23,7 @@ import pandas as pd
 
 from tubempc.mitl import Always, And, Eventually, Formula, SpecSyntaxError, Until, parse
 from tubempc.scenario import Scenario
-from verify.trajectory import check_trajectory
+from verify.semantics.trajectory import check_trajectory
 
 __all__ = ["Obligation", "obligations_of", "split_obligations"]
 

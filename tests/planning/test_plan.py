@@ -22,7 +22,7 @@ WINDOW_2, WINDOW_1 = (30.0, 50.0), (80.0, 110.0)
 
 
 def certify(spec: str, run: list[tuple[str, float]], labels: dict[str, tuple[str, ...]]) -> str:
-    check_timed_run = pytest.importorskip("verify.timedrun").check_timed_run
+    check_timed_run = pytest.importorskip("verify.semantics.timed_run").check_timed_run
     return str(check_timed_run(spec, run, {k: list(v) for k, v in labels.items()}).verdict)
 
 
@@ -154,7 +154,7 @@ def test_executed_silent_plan_is_certified_from_its_trajectory() -> None:
     reconstruction of the executed *observed* plan has no position in either window."""
     closed_loop = pytest.importorskip("tubempc.control.closed_loop")
     geometry = pytest.importorskip("verify.geometry")
-    timedrun = pytest.importorskip("verify.timedrun")
+    timedrun = pytest.importorskip("verify.semantics.timed_run")
     s = builtin_scenario()
     wts = build_wts(s, progress=False)
     names = [r.name for r in s.regions]

@@ -177,7 +177,7 @@ def test_wait_three_moves_before_the_goal_is_found() -> None:
     assert found.waits_s == (0, 1, 0, 0) and found.run.loop_start is None
     assert found.method == "exact search"
     assert holds(f, found.run, CHAIN_LABELS)
-    from verify.timedrun import check_timed_run
+    from verify.semantics.timed_run import check_timed_run
 
     verdict = check_timed_run(RESPONSE, [(r, float(t)) for r, t in zip(found.run.regions, found.run.times,
                                                                          strict=True)],

@@ -313,9 +313,9 @@ def test_between_samples_a_polygon_corner_makes_the_check_inconclusive(tmp_path:
 
 @pytest.mark.parametrize("x_leg", [3.4, 3.0])
 def test_fast_monitor_and_general_engine_agree_on_polygons(monkeypatch: pytest.MonkeyPatch, x_leg: float) -> None:
-    """The regular-grid path (verify.regular) and the interleaved engine (verify.monitor) give the same verdict and
-    margin on a formula over polygon and disc atoms."""
-    from verify import trajectory
+    """The regular-grid path (verify.monitor.grid) and the interleaved engine (verify.monitor.engine) give the same
+    verdict and margin on a formula over polygon and disc atoms."""
+    from verify.semantics import trajectory
 
     run = _run(x_leg)
     sc = poly_lab(spec="G[0,inf) !table & F[0,40] dock & G[0,3] in_room")

@@ -299,7 +299,7 @@ def test_every_failed_check_states_time_margin_and_unit(log: str, scenario: Scen
 
 
 def test_missed_window_margin_is_how_late_in_seconds() -> None:
-    from verify.timedrun import check_timed_run
+    from verify.semantics.timed_run import check_timed_run
 
     labels = {"R1": ["mission_1"], "R3": ["mission_2"], "R8": ["obs_3"]}
     late = check_timed_run("F[30,50] mission_2", [("R1", 0.0), ("R3", 56.0)], labels, end=60.0)

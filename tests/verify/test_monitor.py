@@ -27,8 +27,8 @@ from tubempc.mitl import (
 )
 from tubempc.scenario import builtin_scenario
 from verify import SpecError, check_timed_run
-from verify.monitor import range_reduce, sliding_reduce
-from verify.trajectory import check_trajectory
+from verify.monitor.engine import range_reduce, sliding_reduce
+from verify.semantics.trajectory import check_trajectory
 
 LABELS = {"A": ["p"], "B": ["q"], "C": ["p", "r"], "D": []}
 _ORD = {"F": 0, "U": 1, "T": 2}

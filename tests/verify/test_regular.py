@@ -11,9 +11,16 @@ from hypothesis import strategies as st
 from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, parse
 from tubempc.scenario import builtin_scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
-from verify.monitor import Truth, evaluate_at_points
-from verify.regular import Grid, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid, sliding_clipped
-from verify.trajectory import check_trajectory, interleave, trajectory_positions
+from verify.monitor.engine import Truth, evaluate_at_points
+from verify.monitor.grid import (
+    Grid,
+    UnsupportedFormulaError,
+    evaluate_grid,
+    evaluate_root,
+    regular_grid,
+    sliding_clipped,
+)
+from verify.semantics.trajectory import check_trajectory, interleave, trajectory_positions
 
 NS = Fraction(1, 10**9)
 

@@ -5,9 +5,9 @@
 
 from tubempc.planning.automaton import TimedAutomaton, compile_formula, tick_of
 from tubempc.planning.plan import Plan, PlannedTarget, plan_from_wts, plan_mission
+from tubempc.planning.reference_semantics import LassoRun, holds, truth_table
 from tubempc.planning.retime import Retimed, retime
 from tubempc.planning.search import SearchLimitError, SearchResult, export_dot, find_run
-from tubempc.planning.semantics import LassoRun, holds, truth_table
 from tubempc.planning.wts import (
     FAILED,
     INITIAL,

@@ -22,9 +22,9 @@ import networkx as nx
 
 from tubempc.errors import DesignError
 from tubempc.mitl import Formula
+from tubempc.planning.reference_semantics import LassoRun
 from tubempc.planning.retime import OBJECTIVES, retime
 from tubempc.planning.search import DEFAULT_MAX_STATES, DWELL_MODES, SILENT, SearchResult, find_run
-from tubempc.planning.semantics import LassoRun
 from tubempc.planning.wts import FAILED, LABELS, ORACLE, TransitionOracle, build_wts
 from tubempc.scenario import Scenario
 

@@ -17,7 +17,7 @@ from fractions import Fraction
 import networkx as nx
 
 from tubempc.planning.automaton import State, TimedAutomaton
-from tubempc.planning.semantics import LassoRun
+from tubempc.planning.reference_semantics import LassoRun
 
 __all__ = ["DWELL", "MOVE", "STAY", "WAIT", "Found", "Product", "Step", "accepting_cycle", "assemble", "path_steps"]
 

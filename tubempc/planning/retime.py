@@ -28,7 +28,7 @@ from fractions import Fraction
 import numpy as np
 
 from tubempc.mitl import Always, And, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, subformulas
-from tubempc.planning.semantics import LassoRun, holds, truth_table
+from tubempc.planning.reference_semantics import LassoRun, holds, truth_table
 
 __all__ = ["OBJECTIVES", "Retimed", "retime"]
 

@@ -39,7 +39,7 @@ from tubempc.mitl.ast import Always, Eventually, Next, Until
 from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, tick_of
 from tubempc.planning.exact import exact_search
 from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
-from tubempc.planning.semantics import LassoRun, holds
+from tubempc.planning.reference_semantics import LassoRun, holds
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
 
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",

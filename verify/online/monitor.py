@@ -42,8 +42,8 @@ from verify.ingest.timebase import AGREE_TOL
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
-from verify.timedrun import check_timed_run, parse_spec
-from verify.trajectory import reported_margin
+from verify.semantics.timed_run import check_timed_run, parse_spec
+from verify.semantics.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
            "feed_log_data"]
@@ -374,7 +374,7 @@ class OnlineMonitor:
         g_lo, g_hi = mid - half, mid + half
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
-        # the positions of verify.trajectory.trajectory_positions after the previous sample: each new sample's
+        # the positions of verify.semantics.trajectory.trajectory_positions after the previous sample: each new sample's
         # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
         m = t_rel.shape[0] - 1
         start = np.empty(2 * m + 1 - k0, dtype=np.int64)
@@ -619,8 +619,8 @@ class OnlineMonitor:
         return list(getattr(self, "_final_decisions", []))
 
     def _timed_run_margin_s(self, t0: int) -> float | None:
-        """A failed timed run's temporal margin, as the certificate states it (``verify.timedrun``): computed once
-        at the end on the entries kept (one per region change, so few)."""
+        """A failed timed run's temporal margin, as the certificate states it (``verify.semantics.timed_run``):
+        computed once at the end on the entries kept (one per region change, so few)."""
         if not self._run_entries:
             return None
         end_s = max((self._last_pose - t0) * 1e-9, self._run_entries[-1][1])

@@ -4,11 +4,11 @@ verdict of the formula at its first position, decided as soon as no future sampl
 input: a ``Track`` (position spans appended in time order, the end of observation, the observation ticks) and the
 atoms' robustness bounds appended per position -> output: for every stream node its *final* values (those offline
 analysis of any longer log would also give), and for the formula a ``Head`` whose interval only shrinks as data
-arrives (monotone: a decided verdict never flips) and equals ``verify.monitor`` on the whole log after ``close``.
+arrives (monotone: a decided verdict never flips) and equals ``verify.monitor.engine`` on the whole log after ``close``.
 
 The semantics is the offline one, computed by its own code: the windows of a batch of positions are
-``verify.monitor._windows`` over the retained slice of positions and their extrema ``range_reduce``; ``close`` runs
-``_eventually`` (incomplete windows) on what is left. A node keeps only the positions its parent still needs:
+``verify.monitor.engine._windows`` over the retained slice of positions and their extrema ``range_reduce``; ``close``
+runs ``_eventually`` (incomplete windows) on what is left. A node keeps only the positions its parent still needs:
 
 * a bounded window ``[lo, hi]`` is final once ``stop + hi`` is observed, so a node retains ``hi`` x rate positions;
   before that its *provisional* bounds (and the time its verdict became certain) let the operators above it decide
@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Interval, Next, Not, Or, Until
-from verify.monitor import Positions, Truth, _eventually, _windows, bounds_ns, evaluate_at_points, range_reduce
+from verify.monitor.engine import Positions, Truth, _eventually, _windows, bounds_ns, evaluate_at_points, range_reduce
 
 __all__ = ["Buffer", "Evaluation", "Head", "Track", "build_head"]
 

@@ -4,9 +4,9 @@ input: an MITL formula, a ``Grid`` (first time, period ``dt_ns`` >= 2, sample co
 samples (finite or -inf, no NaN) and the path-length bound of every gap -> output: for the formula and each
 sub-formula a ``SplitTruth`` (robustness bounds at the n samples and, where needed, at the n - 1 gaps).
 
-This is the same semantics as ``verify.monitor`` on the interleaved positions of ``verify.trajectory`` (sample points
-and the open gaps ``[t_i + 1, t_{i+1} - 1]`` ns) and gives bit-identical values (min/max are exact; the only
-arithmetic is the gap bound ``(m_i + m_{i+1}) / 2 -+ D / 2``, done in the same order). It is faster because
+This is the same semantics as ``verify.monitor.engine`` on the interleaved positions of ``verify.semantics.trajectory``
+(sample points and the open gaps ``[t_i + 1, t_{i+1} - 1]`` ns) and gives bit-identical values (min/max are exact; the
+only arithmetic is the gap bound ``(m_i + m_{i+1}) / 2 -+ D / 2``, done in the same order). It is faster because
 
 * samples and gaps are kept in separate arrays (no interleaving of 2n positions, no searchsorted): on a regular grid
   every window ``t + I`` covers samples ``i + a .. i + b`` and gaps ``i + a' .. i + b'`` with constant offsets;
@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until
-from verify.monitor import bounds_ns
+from verify.monitor.engine import bounds_ns
 
 __all__ = [
     "Grid",

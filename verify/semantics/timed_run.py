@@ -2,7 +2,7 @@
 
 input: a trajectory's region indices per sample (``geometry.containing_region``) -> output: the timed run
 ``[(region, time_s), ...]`` (``timed_run_of``); input: formula text + timed run + labels -> output: a
-``TimedRunVerdict`` (``check_timed_run``), evaluated with the pointwise semantics of ``verify.monitor``.
+``TimedRunVerdict`` (``check_timed_run``), evaluated with the pointwise semantics of ``verify.monitor.engine``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from tubempc.mitl import Eventually, Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
-from verify.monitor import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
+from verify.monitor.engine import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
 __all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
 

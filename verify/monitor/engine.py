@@ -15,7 +15,7 @@ is Kleene's 3-valued logic read off the interval: true iff ``lo > 0``, false iff
 (``and``/``or`` are ``min``/``max`` of intervals, which is exactly Kleene's conjunction/disjunction).
 Time windows use searchsorted over the span ends, and sliding max/min over the monotone index ranges are computed
 with van Herk/Gil-Werman block scans per window-length class (O(n), vectorized), never a per-sample Python loop.
-Regularly sampled trajectories take the faster, value-identical path of ``verify.regular``.
+Regularly sampled trajectories take the faster, value-identical path of ``verify.monitor.grid``.
 
 Finite logs (see docs/certifier.md): an unbounded interval ranges to the end of the log; a bounded window whose
 upper end ``t + hi`` lies after the end of observation ``end_ns`` is incomplete: positions that could still come

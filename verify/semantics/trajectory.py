@@ -21,8 +21,8 @@ import numpy.typing as npt
 from tubempc.mitl import Formula, atoms
 from tubempc.scenario import Scenario
 from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
-from verify.monitor import Positions, Truth, evaluate_at_points, explain, verdict_of
-from verify.regular import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
+from verify.monitor.engine import Positions, Truth, evaluate_at_points, explain, verdict_of
+from verify.monitor.grid import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 from verify.signals import SignalBounds
 
 __all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "reported_margin",
@@ -153,7 +153,7 @@ def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Flo
 
 def _check_on_grid(formula: Formula, grid: Grid, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, *,
                    scenario: Scenario, max_speed_mps: float) -> TrajectoryVerdict | None:
-    """Regularly sampled, NaN-free trajectory: ``verify.regular`` (same values as the interleaved engine). A pass
+    """Regularly sampled, NaN-free trajectory: ``verify.monitor.grid`` (same values as the interleaved engine). A pass
     far from a zero margin keeps the fast distances; otherwise the margins are recomputed with ``hypot`` and the
     witness is found on the interleaved positions. None: the formula needs the general engine (``Until``)."""
     step = step_bound_regular_m(grid.dt_ns, x_m, y_m, max_speed_mps)
