@@ -1,3 +1,4 @@
+# Over 500 lines: MITL -> timed automaton, one construction per operator over one clock and location encoding.
 """MITL -> an on-the-fly alternating timed automaton with clock copies, made nondeterministic state by state.
 
 input: a ``Formula`` (``tubempc.mitl``) and the tick (seconds per integer time unit) -> output: a ``TimedAutomaton``

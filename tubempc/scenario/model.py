@@ -1,3 +1,4 @@
+# Over 500 lines: one validated model of the scenario file; field types and their cross-field checks belong together.
 """Scenario model: validated, frozen values for the workspace, regions, robot, limits, controller and spec.
 
 input: a mapping (from YAML) -> output: a ``Scenario`` whose every field has been checked; errors raise

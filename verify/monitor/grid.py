@@ -1,3 +1,4 @@
+# Over 500 lines: every operator of the grammar on the regular grid, each beside its blocked window kernel.
 """Trajectory monitor on a regular sample grid: formula + per-atom sample margins -> robustness at samples and gaps.
 
 input: an MITL formula, a ``Grid`` (first time, period ``dt_ns`` >= 2, sample count), every atom's margin at the

@@ -1,3 +1,4 @@
+# Over 500 lines: one incremental monitor; the formula and the five checks share its batch loop and buffers.
 """Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
 
 input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer

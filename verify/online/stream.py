@@ -1,3 +1,4 @@
+# Over 500 lines: streaming nodes for every operator of the grammar over one shared retention scheme.
 """Streaming MITL evaluation: positions and atom values arriving in time order -> final sub-formula values and the
 verdict of the formula at its first position, decided as soon as no future sample can change it.
 
