@@ -11,7 +11,8 @@ from typing import Any
 
 import pytest
 
-import verify.batch as batch_mod
+import verify.batch.output as batch_output
+import verify.batch.run as batch_run
 from tubempc.scenario import Scenario
 from verify.batch import certify_many, discover_logs, worst_exit_code, write_batch
 from verify.errors import TruncatedLogError
@@ -56,8 +57,8 @@ def _fake_certifier(make_result: Callable[..., Any]) -> Callable[..., Any]:
 
 def test_mixed_batch_inline(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any],
                             monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(batch_mod, "_certify_function", lambda: _fake_certifier(make_result))
-    monkeypatch.setattr(batch_mod, "_write_certificate",
+    monkeypatch.setattr(batch_run, "_certify_function", lambda: _fake_certifier(make_result))
+    monkeypatch.setattr(batch_output, "_write_certificate",
                         lambda result, out: (out / "certificate.json").write_text(json.dumps(result.certificate)))
     logs = tmp_path / "logs"
     logs.mkdir()
@@ -101,7 +102,7 @@ def test_mixed_batch_inline(tmp_path: Path, scenario: Scenario, make_result: Cal
 
 def test_same_file_names_get_distinct_folders(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any],
                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(batch_mod, "_certify_function", lambda: _fake_certifier(make_result))
+    monkeypatch.setattr(batch_run, "_certify_function", lambda: _fake_certifier(make_result))
     for d in ("a", "b"):
         (tmp_path / d).mkdir()
         (tmp_path / d / "pass_run.mcap").write_bytes(b"")
@@ -116,8 +117,8 @@ def test_malformed_spec_stops_the_whole_batch(tmp_path: Path, scenario: Scenario
 
 def test_log_names_are_escaped_in_summaries(tmp_path: Path, scenario: Scenario, make_result: Callable[..., Any],
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(batch_mod, "_certify_function", lambda: _fake_certifier(make_result))
-    monkeypatch.setattr(batch_mod, "_write_certificate",
+    monkeypatch.setattr(batch_run, "_certify_function", lambda: _fake_certifier(make_result))
+    monkeypatch.setattr(batch_output, "_write_certificate",
                         lambda result, out: (out / "certificate.json").write_text(json.dumps(result.certificate)))
     evil = tmp_path / 'pass_<script>alert("x")<|>.mcap'
     evil.write_bytes(b"")
