@@ -152,7 +152,7 @@ def test_worst_margin_of_a_failed_log_is_its_failed_checks(scenario: Scenario) -
 
 
 def test_a_worker_that_dies_twice_is_exit_70_and_the_batch_goes_on() -> None:
-    from verify.batch import _Job, _worker_died
+    from verify.batch.run import _Job, _worker_died
 
     item = _worker_died(_Job("x.bag", "x", None, None, "auto", False))  # type: ignore[arg-type]
     assert item.exit_code == 70 and item.verdict == "error" and "died twice" in (item.error or "")
