@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from tubempc.control import closed_loop
 from tubempc.regress import SuiteError, compare, expand_falsify, expand_suite, format_diff, load_suite, run_cases
 from tubempc.scenario import builtin_scenario_text
 
@@ -41,7 +39,7 @@ def test_falsification_cases_expand_beside_the_runs(suite: Path) -> None:
     assert [c.run_id for c in expand_suite(loaded)] == ["nexus.R4-R5.none.s0"]
 
 
-def test_a_new_counterexample_regresses(suite: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_new_counterexample_regresses(suite: Path, tmp_path: Path, quarter_gain: Callable[[], None]) -> None:
     loaded = load_suite(suite)
     cases = expand_falsify(loaded)
     (good,) = run_cases(cases, workers=1, progress=False, out_dir=tmp_path / "good")
@@ -50,13 +48,7 @@ def test_a_new_counterexample_regresses(suite: Path, tmp_path: Path, monkeypatch
     assert (tmp_path / "good" / "nexus.falsify.R4-R5" / "falsify.json").is_file()
     baseline = {"runs": {good.run_id: {"metrics": good.metrics}}}
 
-    design = closed_loop.design_tube
-
-    def weak_design(*args: Any, **kwargs: Any) -> Any:
-        tube = design(*args, **kwargs)
-        return dataclasses.replace(tube, sigma=tube.sigma / 4)  # the bug: a quarter of the designed gain
-
-    monkeypatch.setattr(closed_loop, "design_tube", weak_design)
+    quarter_gain()  # the bug: a quarter of the designed gain
     (bad,) = run_cases(cases, workers=1, progress=False)  # in this process, so the patch applies
     assert bad.metrics["falsify.violation"] is True
     comparison = compare(baseline, [bad], loaded.suite.tolerances)

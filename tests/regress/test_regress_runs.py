@@ -3,16 +3,14 @@ then a deliberately degraded controller (a smaller sigma_low; a scaled-down anci
 
 from __future__ import annotations
 
-import dataclasses
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from tubempc.control import closed_loop
 from tubempc.regress import (
     compare,
     default_baseline_path,
@@ -75,20 +73,14 @@ def test_smaller_sigma_low_is_caught(small_suite: Path, tmp_path: Path) -> None:
     assert [c.find("failure") is not None for c in junit.iter("testcase")] == [True]
 
 
-def test_scaled_down_gain_is_caught(small_suite: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_scaled_down_gain_is_caught(small_suite: Path, quarter_gain: Callable[[], None]) -> None:
     loaded = load_suite(small_suite)
     cases = expand_suite(loaded)
     (good,) = run_cases(cases, workers=1, progress=False)
     assert good.error is None, good.error
     baseline = {"runs": {good.run_id: {"metrics": good.metrics}}}
 
-    design = closed_loop.design_tube
-
-    def weak_design(*args: Any, **kwargs: Any) -> Any:
-        tube = design(*args, **kwargs)
-        return dataclasses.replace(tube, sigma=tube.sigma / 4)  # the bug: a quarter of the designed gain
-
-    monkeypatch.setattr(closed_loop, "design_tube", weak_design)
+    quarter_gain()  # the bug: a quarter of the designed gain
     (bad,) = run_cases(cases, workers=1, progress=False)  # in this process, so the patch applies
     comparison = compare(baseline, [bad], loaded.suite.tolerances)
     regressed = {r.metric for r in comparison.by_status("regressed")}
