@@ -102,7 +102,25 @@ def typed(result: CertifyResultLike) -> Certificate:
 
 
 def _check_details(check: CheckEntry) -> str:
-    return "; ".join(f"{k}: {_fmt(v)}" for k, v in sorted(check.details.items(), key=lambda kv: str(kv[0])))
+    return "; ".join(_detail(str(k), v) for k, v in sorted(check.details.items(), key=lambda kv: str(kv[0])))
+
+
+def _detail(key: str, value: Any) -> str:
+    """One detail of a check; the per-atom margins as ``name [min, max] unit`` (the full values are in the
+    certificate)."""
+    if key == "atom_margins" and isinstance(value, dict):
+        return "atom margins (min, max): " + ", ".join(f"{name} {_range(m)}" for name, m in value.items())
+    return f"{key}: {_fmt(value)}"
+
+
+def _range(margins: Any) -> str:
+    if not isinstance(margins, dict):
+        return _fmt(margins)
+
+    def num(v: Any) -> str:
+        return f"{v:.4g}" if isinstance(v, int | float) else "-"
+
+    return f"[{num(margins.get('min'))}, {num(margins.get('max'))}] {margins.get('unit', '')}".rstrip()
 
 
 def fmt_time(value: Any) -> str:
