@@ -7,12 +7,10 @@ scenario and the command line; unknown or unsupported selections are exit 3.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -22,18 +20,12 @@ from tubempc.scenario import Scenario, scenario_from_dict
 from verify import certify_log
 from verify.errors import ScenarioInputError
 
+from .conftest import any_robot_kit
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _kit() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("any_robot_logs", ROOT / "scripts" / "make_any_robot_logs.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-KIT = _kit()
+KIT = any_robot_kit()
 TABLE = (2.5, 1.5)  # centre of the obstacle (a disc of radius 0.4)
 
 

@@ -5,7 +5,6 @@ And ``detect_format`` decides a log's format as rosbags' own dispatch does."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
 import shutil
 from collections.abc import Callable
@@ -24,6 +23,8 @@ from verify.ingest import fields as fields_mod
 from verify.ingest import raw as raw_mod
 from verify.ingest.log import read_log
 from verify.ingest.raw import FAST_INGEST_ENV, detect_format, fast_ingest
+
+from .conftest import any_robot_kit
 
 ROOT = Path(__file__).resolve().parents[2]
 #: every entry point of our own reading: the ROS1 chunk reader, the sqlite3 open + reader, the MCAP/sqlite3 message
@@ -103,14 +104,6 @@ def test_log_data_is_identical_both_ways(make_log: Callable[..., Path], paper_tr
     assert _without_path_flag(fast) == _without_path_flag(plain)
 
 
-def _kit() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("any_robot_logs", ROOT / "scripts" / "make_any_robot_logs.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def _lab() -> Scenario:
     return scenario_from_dict({
         "name": "lab", "workspace": {"x": [0.0, 5.0], "y": [0.0, 4.0]}, "robot": {"radius": 0.25},
@@ -126,7 +119,7 @@ def _lab() -> Scenario:
 @pytest.mark.parametrize("suffix", [".bag", ".mcap"])
 def test_stamped_commands_and_signal_atoms_identical_both_ways(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                fast_calls: list[str], suffix: str) -> None:
-    kit = _kit()
+    kit = any_robot_kit()
     ros1 = suffix == ".bag"
     run = kit.unicycle_run([(0.5, 0.5), (3.4, 0.5), (3.4, 2.5), (4.4, 3.3)], v_mps=0.4, w_radps=0.8, rate_hz=50.0)
     msgs = (kit.odometry_messages(run, "/odom", ros1=ros1)
