@@ -100,14 +100,19 @@ def _ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
     return ends
 
 
-def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16
-                 ) -> tuple[U8Array, IntArray]:
+def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16,
+                 limits: IntArray | None = None) -> tuple[U8Array, IntArray]:
     """The records at ``offsets`` (relative to file position ``base``; sorted, unique, each < ``limit``, the length
-    of the chunk's records) -> (compact buffer, position of each record in it)."""
+    of the chunk's records) -> (compact buffer, position of each record in it). ``limits`` (same shape as
+    ``offsets``, relative to ``base``): each record's own end bound instead of ``limit``, for records of many chunks
+    read in one call (``base`` 0, offsets and limits file positions: a record must end inside its chunk)."""
     k = offsets.shape[0]
     if k == 0:
         return np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.int64)
-    if np.any(np.diff(offsets) <= 0) or int(offsets[0]) < 0 or int(offsets[-1]) >= limit:
+    lim = np.full(k, limit, dtype=np.int64) if limits is None else limits.astype(np.int64, copy=False)
+    if lim.shape != offsets.shape:
+        raise ValueError("limits and offsets must have the same shape")
+    if np.any(np.diff(offsets) <= 0) or int(offsets[0]) < 0 or np.any(offsets >= lim):
         raise SpanError("index offsets not sorted or outside their chunk")
     cuts = [0, *(np.flatnonzero(np.diff(offsets) > gap_b) + 1).tolist(), k]
     pieces: list[bytes] = []
@@ -115,11 +120,12 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
     filled = 0
     for a, b in pairwise(cuts):
         lo, last = int(offsets[a]), int(offsets[b - 1])
-        hi = last + _record_size(fd, kind, base + last, limit - last)
+        hi = last + _record_size(fd, kind, base + last, int(lim[b - 1]) - last)
         piece = _pread(fd, base + lo, hi - lo)
         rel = offsets[a:b] - lo
         ends = _ends(np.frombuffer(piece, dtype=np.uint8), kind, rel)
-        bound = np.append(rel[1:], hi - lo)  # each record ends before the next one starts; the last at hi
+        # each record ends before the next one starts (the last at hi) and inside its chunk
+        bound = np.minimum(np.append(rel[1:], hi - lo), lim[a:b] - lo)
         if np.any(ends < 0) or np.any(ends > bound) or int(ends[-1]) != hi - lo:
             raise SpanError("records overlap or run past their chunk")
         pos[a:b] = rel + filled

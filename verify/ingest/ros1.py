@@ -255,11 +255,16 @@ class _Parts:
     lengths: list[IntArray]
 
 
-def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) -> tuple[IntArray, U8Array, IntArray]:
-    """Log times, packed payloads and payload lengths of connection ``cid``'s messages listed in ``index`` (sorted
-    by offset). Records are viewed as rows of a byte matrix (strided view when evenly spaced, else gathered)."""
-    offs = index["offset"].astype(np.int64)
-    times = index["sec"].astype(np.int64) * 1_000_000_000 + index["nsec"].astype(np.int64)
+def _index_times(index: npt.NDArray[np.void]) -> IntArray:
+    return index["sec"].astype(np.int64) * 1_000_000_000 + index["nsec"].astype(np.int64)
+
+
+def _messages_in_chunk(chunk: U8Array, cid: int | IntArray, offs: IntArray, times: IntArray
+                       ) -> tuple[IntArray, U8Array, IntArray]:
+    """Log times, packed payloads and payload lengths of the message records at ``offs`` (sorted) in ``chunk``
+    (a chunk, or the compact buffer of wanted records), each of connection ``cid`` (one id, or one per record) at
+    log time ``times``. Records are viewed as rows of a byte matrix (strided view when evenly spaced, else
+    gathered)."""
     k = offs.shape[0]
     size = chunk.shape[0]
     if k == 0:
@@ -302,11 +307,12 @@ def _messages_in_chunk(chunk: U8Array, cid: int, index: npt.NDArray[np.void]) ->
     return times, payloads.ravel(), np.full(k, d, dtype=np.int64)
 
 
-def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) -> tuple[IntArray, U8Array,
-                                                                                             IntArray]:
+def _messages_varied(chunk: U8Array, cid: int | IntArray, offs: IntArray, times: IntArray
+                     ) -> tuple[IntArray, U8Array, IntArray]:
     """Records of different lengths (e.g. frame ids of different lengths): parsed one by one (through a memoryview:
     no copy of the chunk)."""
     buf = chunk.data
+    cids = np.broadcast_to(np.asarray(cid, dtype=np.int64), offs.shape).tolist()
     pieces: list[memoryview] = []
     lengths = np.empty(offs.shape[0], dtype=np.int64)
     for i, o in enumerate(offs.tolist()):
@@ -318,7 +324,7 @@ def _messages_varied(chunk: U8Array, cid: int, offs: IntArray, times: IntArray) 
             raise _UnusualError("message data outside its chunk")
         _op(header, _OP_MSG)
         sec, nsec = struct.unpack("<II", header["time"])
-        if _u32(header["conn"], "conn") != cid or sec * 1_000_000_000 + nsec != int(times[i]):
+        if _u32(header["conn"], "conn") != cids[i] or sec * 1_000_000_000 + nsec != int(times[i]):
             raise _UnusualError("index and message records disagree")
         pieces.append(buf[start : start + dlen])
         lengths[i] = dlen
@@ -390,21 +396,63 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
             offsets = index["offset"].astype(np.int64)
             mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
         plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
-    # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
-    workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads only for decompression
-    for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
-        for cid, idx in mine.items():
-            times, packed, lens = _messages_in_chunk(chunk, cid, idx)
-            p = parts[selected[cid].topic]
-            p.times.append(times)
-            p.blocks.append(packed)
-            p.lengths.append(lens)
-        del chunk  # only the chunks in flight are alive
+    if plan and all(head[0] == "none" and head[1] == head[3] for head, _m, _t in plan):
+        _read_uncompressed(f, plan, selected, parts)
+    else:
+        # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
+        workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads: decompression only
+        for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
+            for cid, idx in mine.items():
+                times, packed, lens = _messages_in_chunk(chunk, cid, idx["offset"].astype(np.int64),
+                                                         _index_times(idx))
+                p = parts[selected[cid].topic]
+                p.times.append(times)
+                p.blocks.append(packed)
+                p.lengths.append(lens)
+            del chunk  # only the chunks in flight are alive
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
         tconns = [c for c in selected.values() if c.topic == topic]
         out[topic] = (tconns[0].msgtype, all(c.has_definition for c in tconns), *_ordered(p))
     return Ros1Index(out, available)
+
+
+def _read_uncompressed(f: _File, plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]],
+                       selected: dict[int, _Conn], parts: dict[str, _Parts]) -> None:
+    """Every wanted record of uncompressed chunks in one pass: the index entries of all chunks as file positions,
+    the records read at them (``verify.ingest.records``: one ``pread`` per cluster of nearby records, each record
+    bounded by the end of its chunk), then parsed per topic at once (a handful of numpy calls per topic, none per
+    chunk). Per topic one block in file order, which ``_ordered`` sorts stably by time: rosbags' (time, chunk
+    position, offset) order."""
+    offs: list[IntArray] = []
+    times: list[IntArray] = []
+    cids: list[IntArray] = []
+    limits: list[IntArray] = []
+    for (_compression, size, start, _dlen), mine, _total in plan:
+        for cid, index in mine.items():
+            offs.append(index["offset"].astype(np.int64) + start)
+            times.append(_index_times(index))
+            cids.append(np.full(index.shape[0], cid, dtype=np.int64))
+            limits.append(np.full(index.shape[0], start + size, dtype=np.int64))
+    at = np.concatenate(offs)
+    order = np.argsort(at, kind="stable")
+    at, t = at[order], np.concatenate(times)[order]
+    cid, lim = np.concatenate(cids)[order], np.concatenate(limits)[order]
+    if at.shape[0] > 1 and np.any(np.diff(at) == 0):
+        raise _UnusualError("two index entries for one record")
+    try:
+        u8, pos = read_records(f.fd, 0, f.size, at, ROS1, limits=lim)
+    except SpanError as err:
+        raise _UnusualError(str(err)) from err
+    for topic, p in parts.items():
+        ids = np.array(sorted(c for c, conn in selected.items() if conn.topic == topic), dtype=np.int64)
+        mine = np.isin(cid, ids)
+        if not mine.any():
+            continue
+        tt, packed, lens = _messages_in_chunk(u8, cid[mine], pos[mine], t[mine])
+        p.times.append(tt)
+        p.blocks.append(packed)
+        p.lengths.append(lens)
 
 
 def _ordered(p: _Parts) -> tuple[IntArray, PayloadBuffer]:
