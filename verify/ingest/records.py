@@ -43,6 +43,7 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 
 
 _SCRATCH = threading.local()
+_SLACK_B = 4096  # read past a cluster's last record start, to learn its length in the same read
 
 
 class SpanError(Exception):
@@ -116,22 +117,60 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
         raise SpanError("index offsets not sorted or outside their chunk")
     cuts = [0, *(np.flatnonzero(np.diff(offsets) > gap_b) + 1).tolist(), k]
     pieces: list[bytes] = []
-    pos = np.empty(k, dtype=np.int64)
+    starts = np.empty(k, dtype=np.int64)  # each record's cluster start in the compact buffer
+    stops = np.empty(k, dtype=np.int64)  # ... and end
     filled = 0
     for a, b in pairwise(cuts):
         lo, last = int(offsets[a]), int(offsets[b - 1])
-        hi = last + _record_size(fd, kind, base + last, int(lim[b - 1]) - last)
-        piece = _pread(fd, base + lo, hi - lo)
-        rel = offsets[a:b] - lo
-        ends = _ends(np.frombuffer(piece, dtype=np.uint8), kind, rel)
-        # each record ends before the next one starts (the last at hi) and inside its chunk
-        bound = np.minimum(np.append(rel[1:], hi - lo), lim[a:b] - lo)
-        if np.any(ends < 0) or np.any(ends > bound) or int(ends[-1]) != hi - lo:
-            raise SpanError("records overlap or run past their chunk")
-        pos[a:b] = rel + filled
-        filled += hi - lo
+        room = int(lim[b - 1]) - last
+        # the cluster and a little beyond: the last record's length is then usually known without a second read
+        piece = _pread(fd, base + lo, last - lo + min(room, _SLACK_B))
+        size = _size_in(piece, kind, last - lo, room)
+        if size is None:
+            size = _record_size(fd, kind, base + last, room)
+        n = last - lo + size
+        if n > len(piece):
+            piece += _pread(fd, base + lo + len(piece), n - len(piece))
+        elif n < len(piece):
+            piece = piece[:n]
+        starts[a:b] = filled
+        filled += n
+        stops[a:b] = filled
         pieces.append(piece)
-    return np.frombuffer(b"".join(pieces), dtype=np.uint8), pos
+    u8 = np.frombuffer(b"".join(pieces), dtype=np.uint8)
+    pos = offsets - offsets[np.repeat(np.array(cuts[:-1]), np.diff(cuts))] + starts
+    ends = _ends(u8, kind, pos)
+    # each record ends before the next one of its cluster starts (the last at the cluster's end), inside its chunk
+    nxt = np.append(pos[1:], 0)
+    last_of = np.zeros(k, dtype=bool)
+    last_of[np.array(cuts[1:]) - 1] = True
+    bound = np.minimum(np.where(last_of, stops, nxt), lim - offsets + pos)
+    if np.any(ends < 0) or np.any(ends > bound) or np.any(ends[last_of] != stops[last_of]):
+        raise SpanError("records overlap or run past their chunk")
+    return u8, pos
+
+
+def _size_in(piece: bytes, kind: str, rel: int, room: int) -> int | None:
+    """Size of the record at ``rel`` in ``piece`` when its length fields are inside ``piece`` (else None);
+    ``SpanError`` when it would not fit in ``room``."""
+    if kind == ROS1:
+        if rel + 4 > len(piece):
+            return None
+        (hlen,) = struct.unpack_from("<I", piece, rel)
+        if 8 + hlen > room:
+            raise SpanError("record header outside its chunk")
+        if rel + 8 + hlen > len(piece):
+            return None
+        (dlen,) = struct.unpack_from("<I", piece, rel + 4 + hlen)
+        size = 8 + int(hlen) + int(dlen)
+    else:
+        if rel + 9 > len(piece):
+            return None
+        (clen,) = struct.unpack_from("<Q", piece, rel + 1)
+        size = 9 + int(clen)
+    if size > room:
+        raise SpanError("record runs past the end of its chunk")
+    return size
 
 
 def in_order(fn: Callable[[_T], _R], items: Iterable[_T], *, workers: int = WORKERS) -> Iterator[_R]:
