@@ -116,14 +116,27 @@ def _fields(raw: bytes | memoryview) -> dict[str, bytes]:
 class _File:
     """Positioned reads (``os.pread``) of a file opened read-only; a short read means the file is cut."""
 
+    #: small reads are served from one block read ahead (record headers and index records come in runs)
+    BLOCK_B = 8192
+
     def __init__(self, fd: int) -> None:
         self.fd = fd
         self.size = os.fstat(fd).st_size
+        self._block = b""
+        self._block_pos = 0
 
     def read(self, pos: int, n: int) -> bytes:
         if pos < 0 or n < 0 or pos + n > self.size:
             raise _UnusualError("read past the end of the file")
-        data = os.pread(self.fd, n, pos)
+        rel = pos - self._block_pos
+        if 0 <= rel and rel + n <= len(self._block):
+            return self._block[rel : rel + n]
+        if n >= self.BLOCK_B:
+            data = os.pread(self.fd, n, pos)
+        else:
+            self._block = os.pread(self.fd, min(self.BLOCK_B, self.size - pos), pos)
+            self._block_pos = pos
+            data = self._block[:n]
         if len(data) != n:
             raise _UnusualError("short read")
         return data
@@ -392,15 +405,17 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         mine = {cid: index for cid, index in indexes.items() if cid in selected}
         if not mine:
             continue
-        for cid, index in mine.items():
-            offsets = index["offset"].astype(np.int64)
-            mine[cid] = index if np.all(np.diff(offsets) > 0) else index[np.argsort(offsets, kind="stable")]
         plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
     if plan and all(head[0] == "none" and head[1] == head[3] for head, _m, _t in plan):
         _read_uncompressed(f, plan, selected, parts)
     else:
         # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
         workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads: decompression only
+        for _head, mine, _total in plan:  # index entries by offset
+            for cid, index in mine.items():
+                offsets = index["offset"].astype(np.int64)
+                if np.any(np.diff(offsets) <= 0):
+                    mine[cid] = index[np.argsort(offsets, kind="stable")]
         for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
             for cid, idx in mine.items():
                 times, packed, lens = _messages_in_chunk(chunk, cid, idx["offset"].astype(np.int64),
