@@ -33,7 +33,7 @@ import os
 import struct
 import sys
 import zlib
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -115,9 +115,13 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         fd = fh.fileno()
         size = os.fstat(fd).st_size
         # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
-        workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
-        for channel, log_ns, starts, lens, u8 in in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected,
-                                                          workers=workers):
+        whole = _sparse_all(fd, size, selected, wanted)
+        if whole is not None:
+            batches: Iterable[tuple[IntArray, IntArray, IntArray, IntArray, U8Array]] = [whole]
+        else:
+            workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
+            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected, workers=workers)
+        for channel, log_ns, starts, lens, u8 in batches:
             for t in topics:
                 mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
                 parts[t].append(_Part(log_ns[mine], gather(u8, starts[mine], lens[mine]), lens[mine]))
@@ -236,6 +240,74 @@ def _sparse(fd: int, chunk: ChunkInfo, wanted: set[int]) -> tuple[IntArray, IntA
     except (SpanError, _UnusualError, KeyError):
         return None
     return pos, length, u8
+
+
+def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
+                ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array] | None:
+    """``_sparse`` for every chunk at once, when every chunk read is uncompressed and not all of its records are
+    wanted: the wanted channels' message index records of all chunks (one read per chunk), every wanted record read
+    at its file position (``verify.ingest.records``: one read per cluster of nearby records, each bounded by its
+    chunk), checked and ordered with a handful of numpy calls for the whole file. The result is what merging
+    ``_chunk_messages`` of each chunk gives: (log time, chunk offset, record position), i.e. (log time, file
+    position). None when any chunk is not of that kind or anything disagrees with an index (then chunk by chunk)."""
+    if not chunks or any(c.compression for c in chunks):
+        return None
+    chans: list[IntArray] = []
+    times: list[IntArray] = []
+    offs: list[IntArray] = []
+    limits: list[IntArray] = []
+    lows: list[IntArray] = []
+    highs: list[IntArray] = []
+    try:
+        for chunk in chunks:
+            counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
+            mine = sorted(cid for cid in wanted if counts.get(cid, 0))
+            if sum(counts[cid] for cid in mine) >= sum(counts.values()):
+                return None
+            lo = int(chunk.chunk_start_offset) + int(chunk.chunk_length)
+            n = int(chunk.message_index_length)
+            if lo + n > size:
+                return None
+            region = os.pread(fd, n, lo)
+            base = int(chunk.chunk_start_offset) + 9 + 40
+            usize = int(chunk.uncompressed_size)
+            for cid in mine:
+                rel = int(chunk.message_index_offsets[cid]) - lo
+                if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
+                    return None
+                (rec_len, channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
+                if channel != cid or arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
+                    return None
+                pairs = np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15).reshape(-1, 2)
+                if np.any(pairs >= np.uint64(2**63)):
+                    return None
+                k = pairs.shape[0]
+                chans.append(np.full(k, cid, dtype=np.int64))
+                times.append(pairs[:, 0].astype(np.int64))
+                offs.append(pairs[:, 1].astype(np.int64) + base)
+                limits.append(np.full(k, base + usize, dtype=np.int64))
+                lows.append(np.full(k, int(chunk.message_start_time), dtype=np.int64))
+                highs.append(np.full(k, int(chunk.message_end_time), dtype=np.int64))
+        at = np.concatenate(offs)
+        order = np.argsort(at, kind="stable")
+        at, chan, log_ns = at[order], np.concatenate(chans)[order], np.concatenate(times)[order]
+        lim, lo_t, hi_t = np.concatenate(limits)[order], np.concatenate(lows)[order], np.concatenate(highs)[order]
+        if at.shape[0] > 1 and np.any(np.diff(at) == 0):
+            return None
+        u8, pos = read_records(fd, 0, size, at, MCAP, limits=lim)
+        if pos.shape[0] and (np.any(u8[pos] != _OP_MESSAGE) or np.any(_read_u(u8, pos + 1, 8) < _MSG_HEAD)):
+            return None
+        length = _read_u(u8, pos + 1, 8)
+        if not (np.array_equal(_read_u(u8, pos + 9, 2), chan) and np.array_equal(_read_u(u8, pos + 15, 8), log_ns)):
+            return None
+    except (SpanError, _UnusualError, KeyError, OSError):
+        return None
+    keep = (log_ns >= lo_t) & (log_ns <= hi_t)
+    pos, length, chan, log_ns = pos[keep], length[keep], chan[keep], log_ns[keep]
+    if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
+        perm = np.argsort(log_ns, kind="stable")
+        pos, length, chan, log_ns = pos[perm], length[perm], chan[perm], log_ns[perm]
+    return chan, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
 
 
 def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:

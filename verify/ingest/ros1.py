@@ -129,7 +129,7 @@ class _File:
         if pos < 0 or n < 0 or pos + n > self.size:
             raise _UnusualError("read past the end of the file")
         rel = pos - self._block_pos
-        if 0 <= rel and rel + n <= len(self._block):
+        if rel >= 0 and rel + n <= len(self._block):
             return self._block[rel : rel + n]
         if n >= self.BLOCK_B:
             data = os.pread(self.fd, n, pos)
@@ -443,11 +443,11 @@ def _read_uncompressed(f: _File, plan: list[tuple[tuple[str, int, int, int], dic
     times: list[IntArray] = []
     cids: list[IntArray] = []
     limits: list[IntArray] = []
-    for (_compression, size, start, _dlen), mine, _total in plan:
-        for cid, index in mine.items():
+    for (_compression, size, start, _dlen), chunk_index, _total in plan:
+        for conn_id, index in chunk_index.items():
             offs.append(index["offset"].astype(np.int64) + start)
             times.append(_index_times(index))
-            cids.append(np.full(index.shape[0], cid, dtype=np.int64))
+            cids.append(np.full(index.shape[0], conn_id, dtype=np.int64))
             limits.append(np.full(index.shape[0], start + size, dtype=np.int64))
     at = np.concatenate(offs)
     order = np.argsort(at, kind="stable")
