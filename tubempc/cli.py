@@ -26,7 +26,7 @@ from tubempc.commands.simulate import simulate
 from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
 from tubempc.mitl import parse
 from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
-from verify.command import certify
+from verify.command import certify, digest_command
 from verify.errors import MissingExtraError, VerifyError
 from verify.online.command import watch
 
@@ -128,6 +128,7 @@ def spec(text: str) -> None:
 
 
 cli.add_command(certify)
+cli.add_command(digest_command)
 cli.add_command(watch)
 cli.add_command(plan)
 cli.add_command(simulate)

@@ -103,8 +103,8 @@ class Certificate(BaseModel):
     scenario_sha256: str
     log: str = Field(description="the log's path as given")
     log_format: str
-    log_digest: str = Field(description="hash of the log's bytes")
-    log_digest_algorithm: str = Field(description="blake3 or sha256")
+    log_digest: str = Field(description="hash of the messages judged (blake3-messages) or of the log's bytes")
+    log_digest_algorithm: str = Field(description="blake3-messages (the messages read), blake3 or sha256 (the file)")
     log_sha256: str | None = Field(default=None, description="the log's SHA-256 (only when that digest was asked)")
     partial: bool = Field(description="true when a truncated log was salvaged (never a pass)")
     time_base: str = Field(description="the time base used: header or log")

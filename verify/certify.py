@@ -120,7 +120,8 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
                 digest: str = DEFAULT_DIGEST, checks: Sequence[str] | None = None,
                 clock_offsets: Mapping[str, float] | None = None) -> CertifyResult:
     """Judge one log against the scenario and the formula (default: the scenario's). Never writes files.
-    ``digest`` names the hash of the log's bytes in the certificate: "blake3" (default) or "sha256".
+    ``digest`` names the certificate's digest (``verify.ingest.digest``): "blake3-messages" (default: of the
+    messages read), "blake3" or "sha256" (of the file's bytes).
     ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)

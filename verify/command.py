@@ -21,6 +21,7 @@ from typing import Any, Literal, cast
 import click
 
 from verify.errors import UnusableInputError
+from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS
 
 __all__ = ["certify"]
 
@@ -89,8 +90,9 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
                    "or <skipped> (shown green or grey by most dashboards).")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the certificate as JSON on stdout (a list for several logs); the summary goes to stderr.")
-@click.option("--digest", type=click.Choice(["blake3", "sha256"]), default="blake3", show_default=True,
-              help="Hash of the log's bytes in the certificate (b3sum's / sha256sum's value for a file).")
+@click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
+              help="The certificate's digest: blake3-messages, of the messages judged (no extra read of the file); "
+                   "blake3 / sha256, of the whole file's bytes (b3sum's / sha256sum's value for a file).")
 def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Path | None,  # noqa: PLR0917
             time_base: str, salvage: bool, force: bool, no_report: bool, workers: int | None, dask: str | None,
             progress: bool | None, checks_text: str | None, junit_inconclusive: str, as_json: bool,
@@ -163,3 +165,22 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
             click.echo(f"summary: {summary}", err=as_json)
     sys.stdout.flush()
     sys.exit(batch.exit_code)
+
+
+@click.command("digest")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--scenario", "scenario", default="nexus-sml", show_default=True,
+              help="Scenario YAML file or built-in name: its topics are the messages blake3-messages hashes.")
+@click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
+              help="blake3-messages (the messages certification reads), blake3 / sha256 (the whole file).")
+@click.option("--salvage", is_flag=True, help="Digest the complete records of a truncated log (as certify --salvage).")
+def digest_command(logs: tuple[Path, ...], scenario: str, digest: str, salvage: bool) -> None:
+    """Print the digest a certificate states for each log (`DIGEST  ALGORITHM  LOG`), to check a certificate
+    against a log without certifying it again. Exit 3 when a log cannot be read."""
+    from verify.certify import resolve_scenario
+    from verify.ingest.log import log_digest
+
+    sc = resolve_scenario(scenario)
+    for log in logs:
+        got = log_digest(log, sc, digest, salvage=salvage)
+        click.echo(f"{got.hex}  {got.algorithm}  {log}")

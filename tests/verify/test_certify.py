@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import pickle
@@ -28,7 +29,7 @@ from verify import (
     write_certificate,
 )
 from verify.certificate import certify_json_schema
-from verify.ingest.digest import digest_path
+from verify.ingest.log import log_digest
 
 MakeLog = Callable[..., Path]
 TIME0_NS = 1_767_225_600 * 10**9  # the log contract's time 0 of simulated runs (conftest writes it)
@@ -57,15 +58,14 @@ def test_every_format_and_pose_type_passes(make_log: MakeLog, scenario: Scenario
     assert cert["data_quality"]["pose"]["fast_decode"] is (pose_type != "TF")
     assert list(res.trajectory.columns) == ["t_s", "x_m", "y_m", "theta_rad"]
     assert res.trajectory["x_m"].to_numpy() == pytest.approx(good.x, abs=1e-12)
-    assert cert["log_digest_algorithm"] == "blake3" and "log_sha256" not in cert
-    assert cert["log_digest"] == digest_path(log, "blake3").hex and cert["scenario_sha256"] == sc.sha256()
+    assert cert["log_digest_algorithm"] == "blake3-messages" and "log_sha256" not in cert
+    assert cert["log_digest"] == log_digest(log, sc).hex and cert["scenario_sha256"] == sc.sha256()
 
 
 @pytest.mark.parametrize("fmt", ["bag", "dir-mcap"])
-def test_log_digest_is_the_files_hash(make_log: MakeLog, scenario: Scenario, good: Any, fmt: str) -> None:
-    """The certificate's digest is the hash of the log's bytes, named: BLAKE3 by default (``b3sum``'s value for a
-    file), SHA-256 on request (``sha256sum``'s, also kept as ``log_sha256``); a bag directory hashes every file's
-    name and bytes."""
+def test_log_digest_of_the_file_on_request(make_log: MakeLog, scenario: Scenario, good: Any, fmt: str) -> None:
+    """``digest="blake3"`` / ``"sha256"``: the hash of the log's bytes, named (``b3sum``'s / ``sha256sum``'s value
+    for a file; SHA-256 also kept as ``log_sha256``); a bag directory hashes every file's name and bytes."""
     log = Path(make_log(fmt, good))
     files = sorted(f for f in log.rglob("*") if f.is_file()) if log.is_dir() else [log]
     b3, sha = blake3.blake3(), hashlib.sha256()
@@ -75,15 +75,46 @@ def test_log_digest_is_the_files_hash(make_log: MakeLog, scenario: Scenario, goo
             sha.update(str(f.relative_to(log)).encode() + b"\0")
         b3.update(f.read_bytes())
         sha.update(f.read_bytes())
-    cert = certify_log(log, scenario).certificate
+    cert = certify_log(log, scenario, digest="blake3").certificate
     assert (cert["log_digest_algorithm"], cert["log_digest"]) == ("blake3", b3.hexdigest())
     cert256 = certify_log(log, scenario, digest="sha256").certificate
     assert (cert256["log_digest_algorithm"], cert256["log_digest"]) == ("sha256", sha.hexdigest())
     assert cert256["log_sha256"] == sha.hexdigest()
-    assert {k: v for k, v in cert256.items() if not k.startswith("log_")} == \
-        {k: v for k, v in cert.items() if not k.startswith("log_")}
+    default = certify_log(log, scenario).certificate
+    for other in (cert, cert256):
+        assert {k: v for k, v in other.items() if not k.startswith("log_")} == \
+            {k: v for k, v in default.items() if not k.startswith("log_")}
     with pytest.raises(UnusableInputError, match="digest"):
         certify_log(log, scenario, digest="md5")
+
+
+def test_messages_digest_is_of_the_judged_messages(make_log: MakeLog, scenario: Scenario, good: Any,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default digest hashes the messages read, not the container: the same run stored as MCAP or sqlite3 has
+    one digest, read by our readers or by plain rosbags; a ROS1 bag (other serialization) and another run differ;
+    ``tubempc digest`` prints the certificate's value."""
+    logs = {fmt: Path(make_log(fmt, good)) for fmt in ("dir-mcap", "dir-sqlite3", "mcap", "bag")}
+    certs = {fmt: certify_log(log, scenario).certificate for fmt, log in logs.items()}
+    assert {c["log_digest_algorithm"] for c in certs.values()} == {"blake3-messages"}
+    assert certs["dir-mcap"]["log_digest"] == certs["dir-sqlite3"]["log_digest"] == certs["mcap"]["log_digest"]
+    assert certs["bag"]["log_digest"] != certs["mcap"]["log_digest"]
+    monkeypatch.setenv("TUBEMPC_FAST_INGEST", "0")
+    for fmt, log in logs.items():
+        assert log_digest(log, scenario).hex == certs[fmt]["log_digest"], fmt
+    monkeypatch.delenv("TUBEMPC_FAST_INGEST")
+    moved = dataclasses.replace(good, x=good.x + 1e-6)
+    assert certify_log(make_log("mcap", moved), scenario).certificate["log_digest"] != certs["mcap"]["log_digest"]
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "tubempc", "digest", *args], capture_output=True, text=True,
+                              check=False, timeout=120)
+
+    out = run(str(logs["mcap"]), "--scenario", "nexus-sml")
+    assert out.returncode == 0 and out.stdout.split() == [certs["mcap"]["log_digest"], "blake3-messages",
+                                                          str(logs["mcap"])]
+    cut = logs["mcap"].with_name("cut.mcap")
+    cut.write_bytes(logs["mcap"].read_bytes()[:-200])
+    bad = run(str(cut))
+    assert bad.returncode == 3 and str(cut) in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_result_pickles_and_certificate_is_json(make_log: MakeLog, scenario: Scenario, good: Any,

@@ -13,6 +13,7 @@ from tubempc.mitl import parse
 from tubempc.scenario import Scenario
 from verify.errors import VerifyError
 from verify.executor import parallel_map
+from verify.ingest.digest import DEFAULT_DIGEST
 from verify.selection import select_checks
 
 if TYPE_CHECKING:  # verify.report imports matplotlib (the 'report' extra): only when reports are written
@@ -157,7 +158,7 @@ class _Job:
     time_base: str
     salvage: bool
     checks: tuple[str, ...] | None = None
-    digest: str = "blake3"
+    digest: str = DEFAULT_DIGEST
     clock_offsets: tuple[tuple[str, float], ...] = ()
 
 
@@ -211,7 +212,7 @@ def _folder_names(paths: Sequence[str]) -> list[str]:
 def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str | None = None,
                  time_base: Literal["auto", "header", "log"] = "auto", salvage: bool = False,
                  workers: int | None = None, dask: str | None = None, progress: bool | None = None,
-                 checks: Sequence[str] | None = None, digest: str = "blake3",
+                 checks: Sequence[str] | None = None, digest: str = DEFAULT_DIGEST,
                  clock_offsets: dict[str, float] | None = None) -> BatchResult:
     """Certify every log in ``paths`` (files, ROS2 bag folders, or folders to scan) with ``verify.certify_log``.
 

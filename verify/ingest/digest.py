@@ -1,19 +1,30 @@
-"""A log's identity: a path -> the content digest of its bytes, computed in a thread while the log is read.
+"""A log's identity: a path or the messages read from it -> a named digest.
 
-input: a log path (a file, or a ROS2 bag directory) and a digest name -> output: a ``LogDigest`` (algorithm, hex).
+input: a log path (a file, or a ROS2 bag directory) and a digest name, or the raw messages read (``RawLog``) ->
+output: a ``LogDigest`` (algorithm, hex). The certificate names the algorithm beside the digest.
 
-The certificate names the algorithm beside the digest. ``blake3`` (default): BLAKE3, a 256-bit cryptographic hash
-whose tree mode hashes on every core (4-8 GB/s here, against 1.7 GB/s for SHA-256 with the CPU's SHA extensions);
-for a single file it is what ``b3sum FILE`` prints. ``sha256``: SHA-256, what ``sha256sum FILE`` prints. A bag
-directory is digested as every file's relative name, a NUL byte and its bytes, in name order.
+``blake3-messages`` (default): BLAKE3 over the messages the certificate was computed from: for each topic read (by
+name), its name, type, message count, log times, payload lengths and payload bytes (``messages_digest``; the exact
+byte layout is below). It hashes what was read and nothing else, so it adds no read of the file: on a lab recording
+(cameras, lidars) the judged topics are a few percent of the bytes, and hashing the whole file would cost more than
+reading the judged messages (measured in ``benchmarks/bench_bigbag.py``). It is independent of the container: the
+same messages in a ROS2 bag stored as MCAP or sqlite3, compressed or not, have the same digest (a ROS1 bag's
+payloads are serialized differently, so its digest differs). It identifies the data behind the verdict, not the file:
+bytes of topics that were not read (a camera frame) can change without changing it, as they cannot change the
+verdict. ``tubempc digest LOG --scenario S`` recomputes it.
 
-``start_digest`` starts the digest in a daemon thread and returns at once; ``LogDigest`` comes from ``result()``.
-Both hashers release the GIL on large buffers, so the digest runs beside the reader (on another core when there is
-one) instead of before it: the wall time is about the longer of the two, not their sum. BLAKE3 hashes the file
-through read-only memory maps of 16 MiB, one at a time (the page cache's pages, nothing copied); SHA-256 reads it in
-8 MiB blocks into one reused buffer: the memory used is bounded either way. An error reading the file is re-raised
-by ``result()``. (A file truncated by another program while it is being mapped ends the process with SIGBUS, as
-for any reader that maps files; certify finished recordings.)
+``blake3`` / ``sha256``: the whole file's bytes, what ``b3sum FILE`` / ``sha256sum FILE`` print, for archives that
+must bind the certificate to the exact file. BLAKE3 (a 256-bit cryptographic hash whose tree mode hashes on every
+core) is read through read-only memory maps of 16 MiB; SHA-256 in 8 MiB blocks into one reused buffer. A bag
+directory is digested as every file's relative name, a NUL byte and its bytes, in name order. ``start_digest``
+runs a file digest in a daemon thread beside the reader (both hashers release the GIL on large buffers): the wall
+time is about the longer of the two, not their sum, but the whole file is read once more. An error reading the file
+is re-raised by ``result()``. (A file truncated by another program while it is being mapped ends the process with
+SIGBUS, as for any reader that maps files; certify finished recordings.)
+
+``messages_digest`` byte layout, all integers little-endian: ``b"tubempc-messages-v1\0"``; then per topic in
+name order: the topic name, ``\0``, the message type, ``\0``, the count (u64), the log times (i64 each), the
+payload lengths (u64 each), the payloads concatenated in reading order (rosbags' order).
 """
 
 from __future__ import annotations
@@ -21,17 +32,27 @@ from __future__ import annotations
 import hashlib
 import mmap
 import os
+import struct
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import blake3
+import numpy as np
 
-__all__ = ["DEFAULT_DIGEST", "DIGESTS", "DigestJob", "LogDigest", "digest_path", "start_digest"]
+from verify.ingest.ros1 import PayloadBuffer
 
-DIGESTS = ("blake3", "sha256")
-DEFAULT_DIGEST = "blake3"
+if TYPE_CHECKING:
+    from verify.ingest.raw import RawLog
+
+__all__ = ["DEFAULT_DIGEST", "DIGESTS", "FILE_DIGESTS", "MESSAGES_DIGEST", "DigestJob", "LogDigest", "digest_path",
+           "messages_digest", "start_digest"]
+
+MESSAGES_DIGEST = "blake3-messages"
+FILE_DIGESTS = ("blake3", "sha256")
+DIGESTS = (MESSAGES_DIGEST, *FILE_DIGESTS)
+DEFAULT_DIGEST = MESSAGES_DIGEST
 _BLOCK_B = 8 << 20
 _WINDOW_B = 16 << 20  # a multiple of mmap.ALLOCATIONGRANULARITY
 
@@ -50,7 +71,29 @@ class LogDigest:
     hex: str
 
 
+def messages_digest(raw: RawLog) -> LogDigest:
+    """The ``blake3-messages`` digest of the messages read (layout: the module docstring)."""
+    h = blake3.blake3(b"tubempc-messages-v1\0")
+    for name in sorted(raw.topics):
+        topic = raw.topics[name]
+        times = np.asarray(topic.log_ns, dtype="<i8")
+        h.update(name.encode() + b"\0" + topic.msgtype.encode() + b"\0" + struct.pack("<Q", times.shape[0]))
+        h.update(np.ascontiguousarray(times).view(np.uint8).data)
+        payloads = topic.payloads
+        if isinstance(payloads, PayloadBuffer):  # packed in order: payload i at the running sum of the lengths
+            lengths = np.asarray(payloads.lengths, dtype="<u8")
+            h.update(np.ascontiguousarray(lengths).view(np.uint8).data)
+            h.update(np.ascontiguousarray(payloads.data[: int(lengths.sum())], dtype=np.uint8).data)
+        else:
+            h.update(np.fromiter(map(len, payloads), dtype="<u8", count=len(payloads)).view(np.uint8).data)
+            for payload in payloads:
+                h.update(payload)
+    return LogDigest(MESSAGES_DIGEST, h.hexdigest())
+
+
 def _hasher(algorithm: str) -> _Hasher:
+    if algorithm == MESSAGES_DIGEST:
+        raise ValueError(f"digest={algorithm!r} is computed from the messages read, not from the file")
     if algorithm == "blake3":
         return blake3.blake3(max_threads=blake3.blake3.AUTO)
     if algorithm == "sha256":
@@ -58,7 +101,7 @@ def _hasher(algorithm: str) -> _Hasher:
     raise ValueError(f"digest={algorithm!r}: expected one of {', '.join(DIGESTS)}")
 
 
-def digest_path(path: str | Path, algorithm: str = DEFAULT_DIGEST, *, stop: threading.Event | None = None
+def digest_path(path: str | Path, algorithm: str = "blake3", *, stop: threading.Event | None = None
                 ) -> LogDigest | None:
     """The digest of the file (or bag directory) at ``path``, computed here; None when ``stop`` is set first."""
     p = Path(path)
@@ -130,6 +173,6 @@ class DigestJob:
         return self._out
 
 
-def start_digest(path: str | Path, algorithm: str = DEFAULT_DIGEST) -> DigestJob:
+def start_digest(path: str | Path, algorithm: str = "blake3") -> DigestJob:
     """Start digesting ``path`` in a background thread (see the module docstring)."""
     return DigestJob(Path(path), algorithm)

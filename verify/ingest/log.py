@@ -23,14 +23,23 @@ from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
 from verify.ingest.clocks import clock_report, median_offset_s
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
-from verify.ingest.digest import DEFAULT_DIGEST, DigestJob, digest_path, start_digest
+from verify.ingest.digest import (
+    DEFAULT_DIGEST,
+    DIGESTS,
+    MESSAGES_DIGEST,
+    DigestJob,
+    LogDigest,
+    digest_path,
+    messages_digest,
+    start_digest,
+)
 from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
 from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples
 
-__all__ = ["LogData", "PoseStream", "file_sha256", "read_log"]
+__all__ = ["LogData", "PoseStream", "file_sha256", "log_digest", "read_log", "wanted_topics"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -53,8 +62,8 @@ class PoseStream:
 class LogData:
     path: str
     format: str
-    log_digest: str  # hex digest of the log's bytes (verify.ingest.digest)
-    digest_algorithm: str  # "blake3" or "sha256"
+    log_digest: str  # hex digest of the messages read or of the log's bytes (verify.ingest.digest)
+    digest_algorithm: str  # "blake3-messages", "blake3" or "sha256"
     time_base: str
     time0_ns: int
     pose: PoseStream
@@ -150,31 +159,63 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
              time0_ns: int | None = None, digest: str = DEFAULT_DIGEST,
              clock_offsets: Mapping[str, float] | None = None) -> LogData:
     """Read and judge-ready the log at ``path``; any error of the readers on damaged bytes is a ``LogReadError``
-    (exit 3) naming the file and the problem in words, never an internal error. Its digest (``digest``: "blake3" or
-    "sha256") is computed in a thread beside the reading. ``clock_offsets`` (topic -> seconds, added to that topic's
+    (exit 3) naming the file and the problem in words, never an internal error. Its digest (``digest``:
+    "blake3-messages", of the messages read; "blake3" or "sha256", of the file, computed in a thread beside the
+    reading: ``verify.ingest.digest``). ``clock_offsets`` (topic -> seconds, added to that topic's
     times) extends and overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
     p = Path(path)
     _check_path(p)
-    try:
-        job = start_digest(p, digest)
-    except ValueError as err:
-        raise UnusableInputError(str(err)) from err
+    if digest not in DIGESTS:
+        raise UnusableInputError(f"digest={digest!r}: expected one of {', '.join(DIGESTS)}")
+    job = None if digest == MESSAGES_DIGEST else start_digest(p, digest)
     try:
         offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
         return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
                          offsets_s=offsets)
     except VerifyError:
-        job.cancel()
+        if job is not None:
+            job.cancel()
         raise
     except READ_ERRORS as err:
-        job.cancel()
+        if job is not None:
+            job.cancel()
         fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
         raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
     except BaseException:
-        job.cancel()
+        if job is not None:
+            job.cancel()
         raise
+
+
+def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DIGEST, *, salvage: bool = False
+               ) -> LogDigest:
+    """The digest ``read_log`` puts in the certificate, alone: of the messages certification reads
+    (``blake3-messages``) or of the file; errors as ``read_log``'s (one ``VerifyError`` naming the file)."""
+    p = Path(path)
+    _check_path(p)
+    if algorithm not in DIGESTS:
+        raise UnusableInputError(f"digest={algorithm!r}: expected one of {', '.join(DIGESTS)}")
+    try:
+        got = (messages_digest(read_raw(p, wanted_topics(scenario), salvage=salvage))
+               if algorithm == MESSAGES_DIGEST else digest_path(p, algorithm))
+    except VerifyError:
+        raise
+    except READ_ERRORS as err:
+        fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
+        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
+    if got is None:  # only a cancelled digest has no value
+        raise RuntimeError(f"digest of {p} was not computed")
+    return got
+
+
+def wanted_topics(scenario: Scenario) -> set[str]:
+    """The topics certification reads from a log: the scenario's pose, nominal, command, solver status, metadata,
+    signal topics and /tf."""
+    t = scenario.topics
+    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
+    return wanted | {sig.topic for sig in scenario.signals.values()}
 
 
 def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: dict[str, Any]) -> T | None:
@@ -189,13 +230,11 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
 
 
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob, offsets_s: dict[str, float]) -> LogData:
+              job: DigestJob | None, offsets_s: dict[str, float]) -> LogData:
     offsets_ns = {topic: round(sec * 1e9) for topic, sec in offsets_s.items()}
     clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
-    wanted = {name for name in (t.pose, t.nominal, t.cmd_vel, t.solver, t.metadata, TF_TOPIC) if name is not None}
-    wanted |= {sig.topic for sig in scenario.signals.values()}
-    raw = read_raw(p, wanted, salvage=salvage)
+    raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
         if not topic.has_definition:
@@ -315,7 +354,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     if raw.partial:
         quality["partial"] = True
     try:
-        log_digest = job.result()
+        log_digest = messages_digest(raw) if job is None else job.result()
     except OSError as err:
         raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
     return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, base.name, t0, pose,
