@@ -44,7 +44,16 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
-from verify.ingest.records import MCAP, WORKERS, SpanError, in_order, read_records, read_scratch
+from verify.ingest.records import (
+    MCAP,
+    WORKERS,
+    SpanError,
+    gather,
+    in_order,
+    read_records,
+    read_scratch,
+    retain_freed_memory,
+)
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -141,6 +150,7 @@ def _decompress(data: bytes | memoryview, compression: str, usize: int, crc: int
     """``rosbags``' ``decompress`` (same output, same checks), with one-shot zstd decoding into a buffer of the
     known size (``zstd.decompress`` without a size grows its output step by step: ~10x slower here); anything
     unusual (several frames, a size mismatch) goes to ``rosbags``' own function."""
+    retain_freed_memory()
     if compression == "zstd":
         dec = zstd.ZstdDecompressor()
         try:
@@ -417,39 +427,6 @@ def _walk(raw: bytes, u8: U8Array, cand: IntArray) -> tuple[IntArray, IntArray, 
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty, empty
     return np.concatenate(seg_pos), np.concatenate(seg_op), np.concatenate(seg_len)
-
-
-def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
-    """Bytes ``u8[starts[i] : starts[i] + lengths[i]]`` for all i, packed in order (strided view when evenly spaced,
-    a fancy index per row when of one length, else index arrays built in blocks of about 4 MiB of output)."""
-    n = starts.shape[0]
-    if n == 0:
-        return np.zeros(0, dtype=np.uint8)
-    d = int(lengths[0])
-    if np.all(lengths == d):
-        if n > 1:
-            step = int(starts[1] - starts[0])
-            if step >= d and np.all(np.diff(starts) == step):
-                view = np.lib.stride_tricks.as_strided(u8[int(starts[0]) :], shape=(n, d), strides=(step, 1),
-                                                       writeable=False)
-                packed = np.empty((n, d), dtype=np.uint8)  # a copy even when contiguous: never a view of the chunk
-                packed[...] = view
-                return packed.ravel()
-        rows: U8Array = u8[starts[:, None] + np.arange(d)]
-        return rows.ravel()
-    out_off = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(lengths, out=out_off[1:])
-    out = np.empty(int(out_off[-1]), dtype=np.uint8)
-    block = 1 << 22
-    i = 0
-    while i < n:
-        j = max(i + 1, int(np.searchsorted(out_off, out_off[i] + block, side="right")) - 1)
-        j = min(j, n)
-        o0, o1 = int(out_off[i]), int(out_off[j])
-        idx = np.arange(o0, o1, dtype=np.int64) + np.repeat(starts[i:j] - out_off[i:j], lengths[i:j])
-        out[o0:o1] = u8[idx]
-        i = j
-    return out
 
 
 def _packed_offsets(lengths: IntArray) -> IntArray:

@@ -14,6 +14,7 @@ decompression) a few chunks ahead in threads, keeping the chunks' order and a bo
 
 from __future__ import annotations
 
+import ctypes
 import os
 import struct
 import threading
@@ -26,7 +27,8 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["MCAP", "ROS1", "WORKERS", "SpanError", "in_order", "read_records", "read_scratch"]
+__all__ = ["MCAP", "ROS1", "WORKERS", "SpanError", "gather", "in_order", "read_records", "read_scratch",
+           "record_ends", "retain_freed_memory"]
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -81,7 +83,7 @@ def _u32_at(u8: U8Array, at: IntArray) -> IntArray:
     return np.ascontiguousarray(u8[at[:, None] + np.arange(4)]).view("<u4").ravel().astype(np.int64)
 
 
-def _ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
+def record_ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
     """End (exclusive) of each record starting at ``rel`` in ``u8``; -1 where its header is not in ``u8``."""
     n = u8.shape[0]
     ends = np.full(rel.shape[0], -1, dtype=np.int64)
@@ -139,7 +141,7 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
         pieces.append(piece)
     u8 = np.frombuffer(b"".join(pieces), dtype=np.uint8)
     pos = offsets - offsets[np.repeat(np.array(cuts[:-1]), np.diff(cuts))] + starts
-    ends = _ends(u8, kind, pos)
+    ends = record_ends(u8, kind, pos)
     # each record ends before the next one of its cluster starts (the last at the cluster's end), inside its chunk
     nxt = np.append(pos[1:], 0)
     last_of = np.zeros(k, dtype=bool)
@@ -193,6 +195,33 @@ def in_order(fn: Callable[[_T], _R], items: Iterable[_T], *, workers: int = WORK
                 fut.cancel()
 
 
+_RETAINED = False
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
+
+
+def retain_freed_memory() -> None:
+    """Have glibc's allocator reuse the memory of freed decompressed chunks instead of returning it to the system
+    and faulting it in again for the next chunk (called before the first decompression; once per process).
+
+    Decompressors return a new ``bytes`` per chunk (1-4 MB). glibc serves such sizes with a fresh ``mmap`` or
+    trims them off the heap when freed, so every 4 KiB page of every chunk is faulted in anew: measured here, 200
+    lz4 chunks of 1.8 MB decompressed in 0.79 s (0.62 s of it system time) against 0.11 s once the memory is
+    reused. ``mallopt``: blocks below 32 MiB come from the heap (``M_MMAP_THRESHOLD``) and up to 64 MiB of free
+    memory stays there (``M_TRIM_THRESHOLD``), so the process keeps at most that much more than it uses. Without
+    glibc (musl, macOS) nothing is changed."""
+    global _RETAINED  # noqa: PLW0603  # one process-wide setting, made once
+    if _RETAINED:
+        return
+    _RETAINED = True
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(_M_MMAP_THRESHOLD, 32 << 20)
+    mallopt(_M_TRIM_THRESHOLD, 64 << 20)
+
+
 def read_scratch(fd: int, pos: int, n: int) -> memoryview:
     """``n`` bytes at ``pos`` read into this thread's reusable buffer (valid until this thread's next call): for
     compressed chunks, which are decompressed and dropped at once. A fresh buffer per chunk costs a page fault per
@@ -206,3 +235,36 @@ def read_scratch(fd: int, pos: int, n: int) -> memoryview:
     if got != n:
         raise SpanError("short read")
     return view
+
+
+def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
+    """Bytes ``u8[starts[i] : starts[i] + lengths[i]]`` for all i, packed in order (strided view when evenly spaced,
+    a fancy index per row when of one length, else index arrays built in blocks of about 4 MiB of output)."""
+    n = starts.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.uint8)
+    d = int(lengths[0])
+    if np.all(lengths == d):
+        if n > 1:
+            step = int(starts[1] - starts[0])
+            if step >= d and np.all(np.diff(starts) == step):
+                view = np.lib.stride_tricks.as_strided(u8[int(starts[0]) :], shape=(n, d), strides=(step, 1),
+                                                       writeable=False)
+                packed = np.empty((n, d), dtype=np.uint8)  # a copy even when contiguous: never a view of the chunk
+                packed[...] = view
+                return packed.ravel()
+        rows: U8Array = u8[starts[:, None] + np.arange(d)]
+        return rows.ravel()
+    out_off = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(lengths, out=out_off[1:])
+    out = np.empty(int(out_off[-1]), dtype=np.uint8)
+    block = 1 << 22
+    i = 0
+    while i < n:
+        j = max(i + 1, int(np.searchsorted(out_off, out_off[i] + block, side="right")) - 1)
+        j = min(j, n)
+        o0, o1 = int(out_off[i]), int(out_off[j])
+        idx = np.arange(o0, o1, dtype=np.int64) + np.repeat(starts[i:j] - out_off[i:j], lengths[i:j])
+        out[o0:o1] = u8[idx]
+        i = j
+    return out

@@ -33,7 +33,17 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
-from verify.ingest.records import ROS1, WORKERS, SpanError, in_order, read_records, read_scratch
+from verify.ingest.records import (
+    ROS1,
+    WORKERS,
+    SpanError,
+    gather,
+    in_order,
+    read_records,
+    read_scratch,
+    record_ends,
+    retain_freed_memory,
+)
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -226,6 +236,7 @@ def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) ->
     if compression == "none":
         inner = f.read(start, dlen)
     else:
+        retain_freed_memory()
         try:
             raw = read_scratch(f.fd, start, dlen)
             inner = bz2.decompress(raw) if compression == "bz2" else lz4_decompress(raw)
@@ -236,27 +247,55 @@ def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) ->
     return np.frombuffer(inner, dtype=np.uint8)
 
 
-def _wanted_records(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
-                    ) -> tuple[U8Array, dict[int, npt.NDArray[np.void]]]:
-    """The bytes holding the wanted connections' records of one chunk, and their index entries with offsets into
-    those bytes. An uncompressed chunk whose wanted records are not all of its records is read message by message
-    (``verify.ingest.records``); otherwise (or when those reads find anything odd) the chunk is read whole.
+def _entries(plan_item: dict[int, npt.NDArray[np.void]], start: int = 0) -> tuple[IntArray, IntArray, IntArray]:
+    """A chunk's wanted index entries by offset: (offset + ``start``, connection id, log time)."""
+    offs = np.concatenate([x["offset"].astype(np.int64) for x in plan_item.values()]) + start
+    cid = np.concatenate([np.full(x.shape[0], c, dtype=np.int64) for c, x in plan_item.items()])
+    times = np.concatenate([_index_times(x) for x in plan_item.values()])
+    order = np.argsort(offs, kind="stable")
+    offs, cid, times = offs[order], cid[order], times[order]
+    if offs.shape[0] > 1 and np.any(np.diff(offs) == 0):
+        raise _UnusualError("two index entries for one record")
+    return offs, cid, times
+
+
+def _chunk_records(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
+                   ) -> tuple[U8Array, IntArray, IntArray, IntArray]:
+    """The wanted records of one chunk copied out of it -> (compact bytes, each record's position in them, its
+    connection id, its log time), by offset. An uncompressed chunk whose wanted records are not all of its records
+    is read record by record (``verify.ingest.records``); otherwise (or when those reads find anything odd) the
+    chunk is read (and decompressed) whole and dropped once its wanted records are copied out.
     ``head``: compression, uncompressed size, data start and data length of the chunk record."""
     compression, size, start, dlen = head
-    if compression == "none" and dlen == size and sum(len(x) for x in mine.values()) < total:
-        offsets = np.unique(np.concatenate([x["offset"] for x in mine.values()]).astype(np.int64))
+    offs, cid, times = _entries(mine)
+    if compression == "none" and dlen == size and offs.shape[0] < total:
         try:
-            compact, at = read_records(f.fd, start, size, offsets, ROS1)
+            u8, pos = read_records(f.fd, start, size, offs, ROS1)
         except SpanError:
             pass
         else:
-            moved: dict[int, npt.NDArray[np.void]] = {}
-            for cid, index in mine.items():
-                entry = index.copy()
-                entry["offset"] = at[np.searchsorted(offsets, index["offset"].astype(np.int64))]
-                moved[cid] = entry
-            return compact, moved
-    return _chunk_body(f, compression, size, start, dlen), mine
+            return u8, pos, cid, times
+    chunk = _chunk_body(f, compression, size, start, dlen)
+    ends = record_ends(chunk, ROS1, offs)
+    if np.any(ends < 0) or np.any(ends > np.append(offs[1:], size)):
+        raise _UnusualError("index offset outside its chunk or records overlap")
+    lengths = ends - offs
+    pos = np.zeros(offs.shape[0], dtype=np.int64)
+    if offs.shape[0] > 1:
+        np.cumsum(lengths[:-1], out=pos[1:])
+    return gather(chunk, offs, lengths), pos, cid, times
+
+
+def _joined(pieces: list[tuple[U8Array, IntArray, IntArray, IntArray]]) -> tuple[U8Array, IntArray, IntArray,
+                                                                                  IntArray]:
+    """The chunks' compact records as one buffer (positions shifted), in chunk order."""
+    if not pieces:
+        empty = np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.uint8), empty, empty, empty
+    shift = np.cumsum([0] + [piece[0].shape[0] for piece in pieces[:-1]])
+    return (np.concatenate([piece[0] for piece in pieces]),
+            np.concatenate([piece[1] + k for piece, k in zip(pieces, shift.tolist(), strict=True)]),
+            np.concatenate([piece[2] for piece in pieces]), np.concatenate([piece[3] for piece in pieces]))
 
 
 @dataclass(slots=True)
@@ -402,29 +441,18 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         indexes, _ = _index_records(f, after, n_conns)
         if set(indexes) != ids:
             raise _UnusualError("chunk info and index records disagree")
-        mine = {cid: index for cid, index in indexes.items() if cid in selected}
+        mine = {conn_id: index for conn_id, index in indexes.items() if conn_id in selected}
         if not mine:
             continue
         plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
     if plan and all(head[0] == "none" and head[1] == head[3] for head, _m, _t in plan):
-        _read_uncompressed(f, plan, selected, parts)
+        records = _records_uncompressed(f, plan)
     else:
-        # chunks are read (and decompressed) a few ahead in threads, parsed here in position order
+        # chunks are read (and decompressed) a few ahead in threads, which copy the wanted records out of them
         workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads: decompression only
-        for _head, mine, _total in plan:  # index entries by offset
-            for cid, index in mine.items():
-                offsets = index["offset"].astype(np.int64)
-                if np.any(np.diff(offsets) <= 0):
-                    mine[cid] = index[np.argsort(offsets, kind="stable")]
-        for chunk, mine in in_order(lambda item: _wanted_records(f, *item), plan, workers=workers):
-            for cid, idx in mine.items():
-                times, packed, lens = _messages_in_chunk(chunk, cid, idx["offset"].astype(np.int64),
-                                                         _index_times(idx))
-                p = parts[selected[cid].topic]
-                p.times.append(times)
-                p.blocks.append(packed)
-                p.lengths.append(lens)
-            del chunk  # only the chunks in flight are alive
+        pieces = list(in_order(lambda item: _chunk_records(f, *item), plan, workers=workers))
+        records = _joined(pieces)
+    _parse_records(records, selected, parts)
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
         tconns = [c for c in selected.values() if c.topic == topic]
@@ -432,33 +460,32 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
     return Ros1Index(out, available)
 
 
-def _read_uncompressed(f: _File, plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]],
-                       selected: dict[int, _Conn], parts: dict[str, _Parts]) -> None:
+def _records_uncompressed(f: _File, plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]],
+                                                     int]]) -> tuple[U8Array, IntArray, IntArray, IntArray]:
     """Every wanted record of uncompressed chunks in one pass: the index entries of all chunks as file positions,
     the records read at them (``verify.ingest.records``: one ``pread`` per cluster of nearby records, each record
-    bounded by the end of its chunk), then parsed per topic at once (a handful of numpy calls per topic, none per
-    chunk). Per topic one block in file order, which ``_ordered`` sorts stably by time: rosbags' (time, chunk
-    position, offset) order."""
-    offs: list[IntArray] = []
-    times: list[IntArray] = []
-    cids: list[IntArray] = []
-    limits: list[IntArray] = []
-    for (_compression, size, start, _dlen), chunk_index, _total in plan:
-        for conn_id, index in chunk_index.items():
-            offs.append(index["offset"].astype(np.int64) + start)
-            times.append(_index_times(index))
-            cids.append(np.full(index.shape[0], conn_id, dtype=np.int64))
-            limits.append(np.full(index.shape[0], start + size, dtype=np.int64))
-    at = np.concatenate(offs)
-    order = np.argsort(at, kind="stable")
-    at, t = at[order], np.concatenate(times)[order]
-    cid, lim = np.concatenate(cids)[order], np.concatenate(limits)[order]
-    if at.shape[0] > 1 and np.any(np.diff(at) == 0):
-        raise _UnusualError("two index entries for one record")
+    bounded by the end of its chunk) -> as ``_chunk_records``, for the whole file."""
+    entries = [(*_entries(mine, start), np.full(sum(x.shape[0] for x in mine.values()), start + size, dtype=np.int64))
+               for (_compression, size, start, _dlen), mine, _total in plan]
+    at = np.concatenate([e[0] for e in entries])
+    cid = np.concatenate([e[1] for e in entries])
+    t = np.concatenate([e[2] for e in entries])
+    lim = np.concatenate([e[3] for e in entries])
+    if at.shape[0] > 1 and np.any(np.diff(at) <= 0):
+        raise _UnusualError("chunks overlap")
     try:
         u8, pos = read_records(f.fd, 0, f.size, at, ROS1, limits=lim)
     except SpanError as err:
         raise _UnusualError(str(err)) from err
+    return u8, pos, cid, t
+
+
+def _parse_records(records: tuple[U8Array, IntArray, IntArray, IntArray], selected: dict[int, _Conn],
+                   parts: dict[str, _Parts]) -> None:
+    """Parse the wanted records (in file order) per topic at once (a handful of numpy calls per topic, none per
+    chunk): one block per topic in file order, which ``_ordered`` sorts stably by time: rosbags' (time, chunk
+    position, offset) order. ``records``: compact bytes, positions, connection ids, log times."""
+    u8, pos, cid, t = records
     for topic, p in parts.items():
         ids = np.array(sorted(c for c, conn in selected.items() if conn.topic == topic), dtype=np.int64)
         mine = np.isin(cid, ids)
