@@ -124,6 +124,8 @@ def detect_format(path: Path) -> str:
 
 #: rosbags' storage reader classes -> our format names
 _PLUGIN_FORMATS: dict[object, str] = {McapReader: "mcap", Sqlite3Reader: "sqlite3"}
+#: libyaml's safe loader when PyYAML has it (10x faster on a bag's metadata.yaml), else the pure-Python one
+_SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _METADATA_MAX_BYTES = 64 << 20  # a metadata.yaml is a few KiB; a bigger one is damage (files decide)
 
 
@@ -132,7 +134,7 @@ def _storage_identifier(meta: Path) -> str | None:
     try:
         if meta.stat().st_size > _METADATA_MAX_BYTES:
             return None
-        doc = yaml.safe_load(meta.read_text(encoding="utf-8", errors="replace"))
+        doc = yaml.load(meta.read_text(encoding="utf-8", errors="replace"), Loader=_SAFE_LOADER)
     except (OSError, yaml.YAMLError, RecursionError, ValueError):
         return None
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
