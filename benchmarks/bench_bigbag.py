@@ -10,7 +10,10 @@ and ROS2 sqlite3, written by rosbags' writers. Then, per format, in one run on a
 
 * rosbags: ``AnyReader`` over the pose, nominal pose and command topics + ``deserialize`` per message, keeping
   stamp, x, y (pose topics) and the three velocities (command): the plain loop a user writes first;
-* ours: ``verify.certify.certify_log`` on the built-in scenario (every check, the certificate and the log digest).
+* ours: ``verify.certify.certify_log`` on the built-in scenario (every check, the certificate and its default
+  digest, ``blake3-messages``: of the messages read);
+* ours + file digest: the same with ``digest="blake3"``, the whole file's BLAKE3 computed beside the reading (every
+  byte read once more: shown for what it costs; ``--no-file-digest`` skips it).
 
 Each side runs ``--repeat`` times (default 3), the two sides alternating, and its fastest run is kept (the machine
 is shared: the fastest run is the least disturbed one); the CPU time (user + system, every thread) is reported too.
@@ -18,8 +21,9 @@ Each measurement runs in its own child process; its wall time is measured inside
 its peak RSS is the child's ``ru_maxrss`` as the parent reaps it (``os.wait4``: the per-child form of
 ``getrusage(RUSAGE_CHILDREN)``), never the benchmark's own. (Linux carries a parent's peak RSS into a forked child,
 so the logs are written by children too and this process stays at ~30 MB.) Prints one row per format (rosbags
-s / MB, ours s / MB, ratio = rosbags time / ours), and last
-``worst_ratio_vs_rosbags=<min ratio> max_rss_mb=<max over ours> formats=<n>``. Targets: ratio >= 2 everywhere,
+s / MB, ours s / MB, ratio = rosbags time / ours, and the same for ours + file digest), and last
+``worst_ratio_vs_rosbags=<min ratio of ours> max_rss_mb=<max over ours> formats=<n>
+worst_ratio_file_digest=<min ratio of ours + file digest>``. Targets: ratio >= 2 everywhere,
 ours' RSS <= 250 MB and within 10 % between --size-gb 1 and 3.
 """
 
@@ -204,14 +208,14 @@ def _child_rosbags(path: Path) -> dict[str, Any]:
     return {"wall_s": wall, "counts": {k: len(v) for k, v in kept.items()}, "setup_cpu_s": setup_cpu_s}
 
 
-def _child_ours(path: Path) -> dict[str, Any]:
+def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
     from tubempc.scenario import builtin_scenario
     from verify.certify import certify_log
 
     sc = builtin_scenario()
     setup_cpu_s = _cpu_s()
     t0 = time.perf_counter()
-    result = certify_log(path, sc)
+    result = certify_log(path, sc) if digest is None else certify_log(path, sc, digest=digest)
     wall = time.perf_counter() - t0
     cert = result.certificate
     dq = cert["data_quality"]
@@ -249,6 +253,7 @@ def main() -> None:
     ap.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()) / "bench_bigbag")
     ap.add_argument("--formats", default=",".join(FORMATS))
     ap.add_argument("--repeat", type=int, default=3, help="runs per side and format; the fastest is kept")
+    ap.add_argument("--no-file-digest", action="store_true", help="do not measure ours + the whole file's digest")
     ap.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
     ap.add_argument("--write", nargs=3, metavar=("FORMAT", "PATH", "SIZE_GB"), help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -257,7 +262,8 @@ def main() -> None:
         return
     if args.child:
         kind, p = args.child
-        res = _child_rosbags(Path(p)) if kind == "rosbags" else _child_ours(Path(p))
+        res = (_child_rosbags(Path(p)) if kind == "rosbags" else
+               _child_ours(Path(p), "blake3") if kind == "ours+file" else _child_ours(Path(p)))
         print(json.dumps(res))
         return
     formats = [f for f in args.formats.split(",") if f]
@@ -266,7 +272,7 @@ def main() -> None:
         raise SystemExit(f"--formats: unknown {', '.join(unknown)} (choose from {', '.join(FORMATS)})")
     args.dir.mkdir(parents=True, exist_ok=True)
     print(f"load average (shared machine): {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
-    rows: list[tuple[str, float, dict[str, Any], dict[str, Any]]] = []
+    rows: list[tuple[str, float, dict[str, Any], dict[str, Any], dict[str, Any] | None]] = []
     for fmt in formats:
         path = args.dir / f"bigbag_{args.size_gb:g}gb_{fmt.replace('-', '_')}{'.bag' if fmt.startswith('ros1') else ''}"
         if not path.exists():  # written by a child: this process stays small (a child's peak RSS starts at ours)
@@ -274,25 +280,32 @@ def main() -> None:
             subprocess.run([sys.executable, __file__, "--write", fmt, str(path), str(args.size_gb)], check=True)
             print(f"wrote {path} ({_size_mb(path):.0f} MB) in {time.perf_counter() - t_w:.0f} s", flush=True)
         _warm(path)
-        runs: dict[str, list[dict[str, Any]]] = {"rosbags": [], "ours": []}
+        kinds = ["rosbags", "ours"] + ([] if args.no_file_digest else ["ours+file"])
+        runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
         for _ in range(args.repeat):
             for kind, got in runs.items():
                 got.append(measure(kind, path))
         base, ours = best_of(runs["rosbags"]), best_of(runs["ours"])
+        whole = best_of(runs["ours+file"]) if "ours+file" in runs else None
         if base["counts"] != ours["counts"]:
             print(f"  {fmt}: message counts differ: rosbags {base['counts']}, ours {ours['counts']}")
-        rows.append((fmt, _size_mb(path), base, ours))
-        print(f"  {fmt}: rosbags {base['wall_s']:.2f} s, ours {ours['wall_s']:.2f} s", flush=True)
+        rows.append((fmt, _size_mb(path), base, ours, whole))
+        more = "" if whole is None else f", ours + file digest {whole['wall_s']:.2f} s"
+        print(f"  {fmt}: rosbags {base['wall_s']:.2f} s, ours {ours['wall_s']:.2f} s{more}", flush=True)
     print(f"| log ({args.size_gb:g} GB) | size MB | rosbags loop: wall s / CPU s / max RSS MB | certify_log: wall s / "
-          f"CPU s / max RSS MB | ratio (wall) | ratio (CPU) | verdict |")
-    print("|---|---|---|---|---|---|---|")
-    for fmt, size, base, ours in rows:
+          f"CPU s / max RSS MB | ratio (wall) | ratio (CPU) | + file digest: wall s / max RSS MB / ratio | verdict |")
+    print("|---|---|---|---|---|---|---|---|")
+    for fmt, size, base, ours, whole in rows:
+        extra = "-" if whole is None else (f"{whole['wall_s']:.2f} / {whole['rss_mb']:.0f} / "
+                                           f"{base['wall_s'] / whole['wall_s']:.2f}x")
         print(f"| {fmt} | {size:.0f} | {base['wall_s']:.2f} / {base['cpu_s']:.2f} / {base['rss_mb']:.0f} | "
               f"{ours['wall_s']:.2f} / {ours['cpu_s']:.2f} / {ours['rss_mb']:.0f} | "
-              f"{base['wall_s'] / ours['wall_s']:.2f}x | {base['cpu_s'] / ours['cpu_s']:.2f}x | {ours['verdict']} |")
-    worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o in rows)
-    print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o in rows):.0f} "
-          f"formats={len(rows)}")
+              f"{base['wall_s'] / ours['wall_s']:.2f}x | {base['cpu_s'] / ours['cpu_s']:.2f}x | {extra} | "
+              f"{ours['verdict']} |")
+    worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o, _w in rows)
+    wholes = [b["wall_s"] / w["wall_s"] for _f, _s, b, _o, w in rows if w is not None]
+    print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o, _w in rows):.0f} "
+          f"formats={len(rows)}" + (f" worst_ratio_file_digest={min(wholes):.2f}" if wholes else ""))
 
 
 if __name__ == "__main__":
