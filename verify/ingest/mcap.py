@@ -262,12 +262,8 @@ def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
     position). None when any chunk is not of that kind or anything disagrees with an index (then chunk by chunk)."""
     if not chunks or any(c.compression for c in chunks):
         return None
-    chans: list[IntArray] = []
-    times: list[IntArray] = []
-    offs: list[IntArray] = []
-    limits: list[IntArray] = []
-    lows: list[IntArray] = []
-    highs: list[IntArray] = []
+    pairs: list[npt.NDArray[np.uint64]] = []  # per (chunk, channel): its message index entries (log time, offset)
+    meta: list[tuple[int, int, int, int, int, int]] = []  # ... and channel, count, base, limit, start, end time
     try:
         for chunk in chunks:
             counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
@@ -280,7 +276,7 @@ def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
                 return None
             region = os.pread(fd, n, lo)
             base = int(chunk.chunk_start_offset) + 9 + 40
-            usize = int(chunk.uncompressed_size)
+            limit = base + int(chunk.uncompressed_size)
             for cid in mine:
                 rel = int(chunk.message_index_offsets[cid]) - lo
                 if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
@@ -288,20 +284,18 @@ def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
                 (rec_len, channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
                 if channel != cid or arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
                     return None
-                pairs = np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15).reshape(-1, 2)
-                if np.any(pairs >= np.uint64(2**63)):
-                    return None
-                k = pairs.shape[0]
-                chans.append(np.full(k, cid, dtype=np.int64))
-                times.append(pairs[:, 0].astype(np.int64))
-                offs.append(pairs[:, 1].astype(np.int64) + base)
-                limits.append(np.full(k, base + usize, dtype=np.int64))
-                lows.append(np.full(k, int(chunk.message_start_time), dtype=np.int64))
-                highs.append(np.full(k, int(chunk.message_end_time), dtype=np.int64))
-        at = np.concatenate(offs)
+                pairs.append(np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15))
+                meta.append((cid, arr_len // 16, base, limit, int(chunk.message_start_time),
+                             int(chunk.message_end_time)))
+        flat = np.concatenate(pairs).reshape(-1, 2)
+        if np.any(flat >= np.uint64(2**63)):
+            return None
+        m = np.array(meta, dtype=np.int64).reshape(-1, 6)
+        k = m[:, 1]
+        at = flat[:, 1].astype(np.int64) + np.repeat(m[:, 2], k)
         order = np.argsort(at, kind="stable")
-        at, chan, log_ns = at[order], np.concatenate(chans)[order], np.concatenate(times)[order]
-        lim, lo_t, hi_t = np.concatenate(limits)[order], np.concatenate(lows)[order], np.concatenate(highs)[order]
+        at, log_ns, chan = at[order], flat[:, 0].astype(np.int64)[order], np.repeat(m[:, 0], k)[order]
+        lim, lo_t, hi_t = (np.repeat(m[:, j], k)[order] for j in (3, 4, 5))
         if at.shape[0] > 1 and np.any(np.diff(at) == 0):
             return None
         u8, pos = read_records(fd, 0, size, at, MCAP, limits=lim)
