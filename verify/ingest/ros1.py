@@ -52,6 +52,7 @@ IntArray = npt.NDArray[np.int64]
 
 _MAGIC = b"#ROSBAG V2.0\n"
 _OP_MSG, _OP_BAG, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
+_PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
 _INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
 
@@ -488,13 +489,13 @@ def _parse_records(records: tuple[U8Array, IntArray, IntArray, IntArray], select
     u8, pos, cid, t = records
     for topic, p in parts.items():
         ids = np.array(sorted(c for c, conn in selected.items() if conn.topic == topic), dtype=np.int64)
-        mine = np.isin(cid, ids)
-        if not mine.any():
-            continue
-        tt, packed, lens = _messages_in_chunk(u8, cid[mine], pos[mine], t[mine])
-        p.times.append(tt)
-        p.blocks.append(packed)
-        p.lengths.append(lens)
+        mine = np.flatnonzero(np.isin(cid, ids))
+        for k in range(0, mine.shape[0], _PARSE_BLOCK):  # bounded temporaries (a byte matrix of the records)
+            rows = mine[k : k + _PARSE_BLOCK]
+            tt, packed, lens = _messages_in_chunk(u8, cid[rows], pos[rows], t[rows])
+            p.times.append(tt)
+            p.blocks.append(packed)
+            p.lengths.append(lens)
 
 
 def _ordered(p: _Parts) -> tuple[IntArray, PayloadBuffer]:
