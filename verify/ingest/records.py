@@ -46,6 +46,7 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 
 _SCRATCH = threading.local()
 _SLACK_B = 4096  # read past a cluster's last record start, to learn its length in the same read
+_GROUP_B = 2 << 20  # clusters read and checked together before their records are copied out
 
 
 class SpanError(Exception):
@@ -106,9 +107,14 @@ def record_ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
 def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16,
                  limits: IntArray | None = None) -> tuple[U8Array, IntArray]:
     """The records at ``offsets`` (relative to file position ``base``; sorted, unique, each < ``limit``, the length
-    of the chunk's records) -> (compact buffer, position of each record in it). ``limits`` (same shape as
-    ``offsets``, relative to ``base``): each record's own end bound instead of ``limit``, for records of many chunks
-    read in one call (``base`` 0, offsets and limits file positions: a record must end inside its chunk)."""
+    of the chunk's records) -> (compact buffer holding just those records, back to back, and each record's position
+    in it). ``limits`` (same shape as ``offsets``, relative to ``base``): each record's own end bound instead of
+    ``limit``, for records of many chunks read in one call (``base`` 0, offsets and limits file positions: a record
+    must end inside its chunk).
+
+    Clusters are read into a group of at most ``_GROUP_B`` bytes, checked together (vectorized), and only their
+    records are copied out: the bytes between two records of a cluster (another topic's messages) are never kept,
+    so the memory held is the wanted records plus one group, whatever the file's size."""
     k = offsets.shape[0]
     if k == 0:
         return np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.int64)
@@ -118,11 +124,12 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
     if np.any(np.diff(offsets) <= 0) or int(offsets[0]) < 0 or np.any(offsets >= lim):
         raise SpanError("index offsets not sorted or outside their chunk")
     cuts = [0, *(np.flatnonzero(np.diff(offsets) > gap_b) + 1).tolist(), k]
-    pieces: list[bytes] = []
-    starts = np.empty(k, dtype=np.int64)  # each record's cluster start in the compact buffer
-    stops = np.empty(k, dtype=np.int64)  # ... and end
-    filled = 0
-    for a, b in pairwise(cuts):
+    out: list[U8Array] = []
+    out_len: list[IntArray] = []
+    group: list[bytes] = []
+    group_b = 0
+    first = 0  # the group's first cluster
+    for c, (a, b) in enumerate(pairwise(cuts)):
         lo, last = int(offsets[a]), int(offsets[b - 1])
         room = int(lim[b - 1]) - last
         # the cluster and a little beyond: the last record's length is then usually known without a second read
@@ -135,21 +142,44 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
             piece += _pread(fd, base + lo + len(piece), n - len(piece))
         elif n < len(piece):
             piece = piece[:n]
-        starts[a:b] = filled
-        filled += n
-        stops[a:b] = filled
-        pieces.append(piece)
+        group.append(piece)
+        group_b += n
+        if group_b >= _GROUP_B or c == len(cuts) - 2:
+            data, lengths = _group_records(group, cuts[first : c + 2], offsets, lim, kind)
+            out.append(data)
+            out_len.append(lengths)
+            group, group_b, first = [], 0, c + 1
+    lengths_all = np.concatenate(out_len)
+    pos = np.zeros(k, dtype=np.int64)
+    np.cumsum(lengths_all[:-1], out=pos[1:])
+    return (out[0] if len(out) == 1 else np.concatenate(out)), pos
+
+
+def _group_records(pieces: list[bytes], cuts: list[int], offsets: IntArray, lim: IntArray, kind: str
+                   ) -> tuple[U8Array, IntArray]:
+    """Check the records of a group of clusters (``pieces``: each cluster's bytes; ``cuts``: their record index
+    bounds) and copy them out back to back -> (bytes, record lengths)."""
     u8 = np.frombuffer(b"".join(pieces), dtype=np.uint8)
-    pos = offsets - offsets[np.repeat(np.array(cuts[:-1]), np.diff(cuts))] + starts
+    a0, a1 = cuts[0], cuts[-1]
+    sizes = np.array([len(p) for p in pieces], dtype=np.int64)
+    stops = np.cumsum(sizes)
+    starts = stops - sizes
+    counts: IntArray = np.diff(np.array(cuts, dtype=np.int64)).astype(np.int64)
+    cluster_lo = offsets[np.array(cuts[:-1], dtype=np.int64)]
+    offs = offsets[a0:a1]
+    pos = offs - np.repeat(cluster_lo, counts) + np.repeat(starts, counts)
     ends = record_ends(u8, kind, pos)
     # each record ends before the next one of its cluster starts (the last at the cluster's end), inside its chunk
+    last_of = np.zeros(a1 - a0, dtype=bool)
+    last_of[np.cumsum(counts) - 1] = True
     nxt = np.append(pos[1:], 0)
-    last_of = np.zeros(k, dtype=bool)
-    last_of[np.array(cuts[1:]) - 1] = True
-    bound = np.minimum(np.where(last_of, stops, nxt), lim - offsets + pos)
-    if np.any(ends < 0) or np.any(ends > bound) or np.any(ends[last_of] != stops[last_of]):
+    bound = np.minimum(np.where(last_of, np.repeat(stops, counts), nxt), lim[a0:a1] - offs + pos)
+    if np.any(ends < 0) or np.any(ends > bound) or np.any(ends[last_of] != stops):
         raise SpanError("records overlap or run past their chunk")
-    return u8, pos
+    lengths = ends - pos
+    if int(lengths.sum()) == u8.shape[0]:  # nothing between the records: the group is the compact buffer
+        return u8, lengths
+    return gather(u8, pos, lengths), lengths
 
 
 def _size_in(piece: bytes, kind: str, rel: int, room: int) -> int | None:
