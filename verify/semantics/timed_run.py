@@ -142,9 +142,7 @@ def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.f
     n = contains.shape[1] if contains.ndim == 2 else 0
     if n == 0:
         return [], {}
-    _, code = np.unique(contains.T, axis=0, return_inverse=True)
-    code = code.reshape(-1)
-    change = np.flatnonzero(np.diff(code) != 0) + 1
+    change = np.flatnonzero(np.any(contains[:, 1:] != contains[:, :-1], axis=0)) + 1  # the set of regions changes
     starts = np.concatenate(([0], change))
     run: list[tuple[str, float]] = []
     entry_labels: dict[str, list[str]] = {}
