@@ -104,6 +104,12 @@ class SignalFeed:
         """Bounds at the pose samples ``t_ns`` (the previously judged one first, if any) and the gaps between them,
         and at the timed-run entries ``entries_ns``; afterwards the messages before the one held at the last sample
         are dropped and later messages for those times are late."""
+        if not self.t:  # no message yet: unknown everywhere (offline, a signal without messages is unusable input)
+            self._judged(int(t_ns[-1]))
+            n, e = t_ns.shape[0], entries_ns.shape[0]
+            gap = np.full(max(n - 1, 0), -np.inf)
+            return (SignalBounds(np.full(n, -np.inf), np.full(n, np.inf), gap, -gap),
+                    (np.full(e, -np.inf), np.full(e, np.inf)))
         period = self.period_ns()
         stream = self._stream(period)
         out = signal_bounds(stream, t_ns), values_at(stream, entries_ns)
