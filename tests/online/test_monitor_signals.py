@@ -220,3 +220,20 @@ def test_dataclass_of_decision_keeps_its_fields() -> None:
     d = Decision("G[0,inf) slow", "fail", 1.0, -0.1, 0.5, "m/s")
     assert "margin -0.100 m/s" in d.line()
     assert dataclasses.replace(d, unit=None).line().endswith("(violated at 0.50 s)")
+
+
+def test_nested_regions_make_one_timed_run_entry_with_both_labels() -> None:
+    """The table lies in the room: a sample inside both is one entry ``room+table`` carrying both labels (as
+    ``verify.semantics.timed_run.timed_run_of_sets``), so ``G (table -> in_room)`` holds on the timed run."""
+    sc = _scenario(10.0)
+    n = 60
+    traj = Trajectory(tuple(i * 0.1 for i in range(n)), tuple((0.0, -0.3 + i * 0.01) for i in range(n)),
+                      tuple(0.0 for _ in range(n)))
+    log = _log(traj, _streams(sc, [(T0, 0.1)]))
+    for spec in ("G[0,inf) (table -> in_room)", "F[0,inf) (table & !in_room)", "G[0,inf) (table -> slow)"):
+        mon = OnlineMonitor(sc, spec=spec)
+        feed_log_data(mon, log, update_every=7)
+        res = mon.close()
+        cert = certify_data(log, sc, spec=spec).certificate
+        assert [(c.name, c.verdict) for c in res.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
+        assert [e[0] for e in mon._run_entries] == [e["region"] for e in cert["timed_run"]] == ["room", "room+table"]

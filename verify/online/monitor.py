@@ -34,7 +34,7 @@ from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
 from verify.geometry import (
-    containing_region,
+    containment,
     label_margins,
     region_margins,
     step_bound_m,
@@ -216,7 +216,8 @@ class OnlineMonitor:
         self.t0_ns: int | None = None
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
         self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
-        self._prev_region = -2  # "before the first sample"
+        self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
+        self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
         self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
         self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
         self._ws = MarginRun("workspace")
@@ -323,6 +324,11 @@ class OnlineMonitor:
             return
         feed.push(t_ns, value)
         self._newest_ns = max(self._newest_ns, t_ns)
+
+    @property
+    def signal_names(self) -> tuple[str, ...]:
+        """The scenario signals the formula uses (the ones ``push_signal`` judges)."""
+        return tuple(self._feeds)
 
     @property
     def signal_counts(self) -> dict[str, dict[str, int]]:
@@ -440,10 +446,15 @@ class OnlineMonitor:
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
         # the timed run's entries (paper, Definition 3): where the containing region changes
-        region = self._containing(x[k0:], y[k0:])
-        before = np.concatenate(([self._prev_region], region[:-1]))
-        self._prev_region = int(region[-1])
-        entry = np.flatnonzero((region != before) & (region >= 0))
+        # (verify.semantics.timed_run.timed_run_of_sets): a new entry where the set of containing regions changes
+        inside = self._containment(x[k0:], y[k0:])
+        before = np.concatenate((inside[:, :1] if self._prev_set is None else self._prev_set, inside[:, :-1]), axis=1)
+        changed = np.any(inside != before, axis=0)
+        if self._prev_set is None:
+            changed[0] = True
+        self._prev_set = inside[:, -1:].copy()
+        entry = np.flatnonzero(changed & inside.any(axis=0))
+        members = [self._entry_name(inside[:, int(e)]) for e in entry]
         conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
         if self._feeds:  # signal atoms: verify.signals on the messages held around this batch
@@ -483,8 +494,7 @@ class OnlineMonitor:
         run = self._run
         if entry.size:
             t_e = conv[entry]
-            self._run_entries += [(self.scenario.regions[int(r)].name, float(t) * 1e-9)
-                                  for r, t in zip(region[entry], t_e, strict=True)]
+            self._run_entries += [(m, float(t) * 1e-9) for m, t in zip(members, t_e, strict=True)]
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             for name in self._names:
                 if name in entry_values:
@@ -493,7 +503,7 @@ class OnlineMonitor:
                     self._run_signal[name][0].extend(e_lo.tolist())
                     self._run_signal[name][1].extend(e_hi.tolist())
                     continue
-                holds = np.array([name in self._labels[int(r)] for r in region[entry]], dtype=bool)
+                holds = np.array([name in self._entry_labels[m] for m in members], dtype=bool)
                 v1 = np.where(holds, 1.0, -1.0)
                 run.atoms[name].push(v1, v1.copy(), t_e)
         run.track.tick(conv)
@@ -543,16 +553,20 @@ class OnlineMonitor:
             atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
         return region_m, atom_m
 
-    def _containing(self, x: FloatArray, y: FloatArray) -> IntArray:
-        """``verify.geometry.containing_region``."""
+    def _containment(self, x: FloatArray, y: FloatArray) -> npt.NDArray[np.bool_]:
+        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc."""
         if not self._discs:
-            return containing_region(x, y, self.scenario)
+            return containment(x, y, self.scenario)
         dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        inside = dist + self.scenario.robot.radius <= self._radius[:, None]
-        region = np.full(x.shape[0], -1, dtype=np.int64)
-        for k in range(inside.shape[0]):
-            region[inside[k]] = k
-        return region
+        return dist + self.scenario.robot.radius <= self._radius[:, None]
+
+    def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
+        """A timed-run entry's name (its regions joined with ``+``); its labels (their union) are kept by name."""
+        rows = np.flatnonzero(column)
+        name = "+".join(self.scenario.regions[int(k)].name for k in rows)
+        if name not in self._entry_labels:
+            self._entry_labels[name] = frozenset(lab for k in rows for lab in self._labels[int(k)])
+        return name
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
@@ -705,7 +719,7 @@ class OnlineMonitor:
         if not self._run_entries:
             return None
         end_s = max((self._last_pose - t0) * 1e-9, self._run_entries[-1][1])
-        labels = {r.name: list(r.labels) for r in self.scenario.regions}
+        labels = {name: sorted(lab) for name, lab in self._entry_labels.items()}
         values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
         return check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values).margin_s
 
