@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from tubempc.scenario import Scenario, SignalSpec, load_scenario
-from tubempc.strategies.trajectories import Trajectory, trajectories
+from tubempc.strategies import SIGNAL_LEVELS, Trajectory, signal_messages, trajectories
 from verify import certify_data
 from verify.ingest import LogData, PoseStream
 from verify.ingest.fields import SignalStream
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = load_scenario(ROOT / "docs" / "examples" / "diffdrive-room.yaml")
 FORMULAS = ("G[0,inf) slow", "F[0,5] !crawl", "G[0,inf) (in_room -> slow)", "slow U[0,8] !in_room",
             "G[0,inf) F[0,2] crawl", "F[1,4] G[0,1] slow", "G[0,10] in_room & G[0,inf) (!table & slow)")
-LEVELS = (0.1, 0.3, 0.4, 0.5, 0.6, float("nan"))
+LEVELS = SIGNAL_LEVELS  # around the thresholds of slow (0.5) and crawl (0.3), and NaN
 T0 = 1_700_000_000 * 10**9
 
 
@@ -64,28 +64,12 @@ def _log(traj: Trajectory, signals: dict[str, SignalStream]) -> LogData:
 
 
 @st.composite
-def signal_messages(draw: st.DrawFn, end_ns: int) -> list[tuple[int, float]]:
-    """/odom's linear speed at ~10 Hz from before the first pose sample to after the last: jitter, dropouts,
-    repeated messages (same value, or another one), values around the thresholds and NaN."""
-    t = T0 - draw(st.integers(0, 300_000_000))
-    out: list[tuple[int, float]] = []
-    while t <= end_ns + 200_000_000:
-        if draw(st.integers(0, 9)):  # a dropout now and then
-            value = draw(st.sampled_from(LEVELS))
-            out.append((t, value))
-            if not draw(st.integers(0, 14)):
-                out.append((t, value if draw(st.booleans()) else draw(st.sampled_from(LEVELS))))
-        t += 100_000_000 + draw(st.sampled_from((0, 0, 0, 1, -1, 7_000_000, 60_000_000)))
-    return out or [(T0, draw(st.sampled_from(LEVELS)))]  # offline, a signal without messages is unusable input
-
-
-@st.composite
 def cases(draw: st.DrawFn) -> tuple[Scenario, str, LogData, list[tuple[int, float]], int]:
     rate = draw(st.sampled_from((10.0, None)))
     sc = _scenario(rate)
     traj = draw(trajectories(rate_hz=10.0, max_samples=120, max_speed_mps=0.45, box_m=1.5))
     end_ns = T0 + round(traj.t_s[-1] * 1e9)
-    messages = draw(signal_messages(end_ns))
+    messages = list(draw(signal_messages(T0, end_ns, levels=LEVELS)))
     return sc, draw(st.sampled_from(FORMULAS)), _log(traj, _streams(sc, messages)), messages, draw(
         st.sampled_from((1, 7)))
 
