@@ -150,6 +150,7 @@ def _run(n: int, silent_after: int, *, lag_s: float = 1.0) -> OnlineMonitor:
 def test_pose_samples_wait_for_the_signal_at_most_the_lag() -> None:
     mon = _run(600, 600)
     assert mon.counts["pose"] == 600 and len(mon._pose_t) <= 10 + 1  # judged as the signal covers them
+    assert len(mon._feeds["slow"].t) <= 10 + 2  # messages kept: from the one held at the last judged sample on
     mon = _run(600, 50, lag_s=1.0)
     mon.update()
     assert len(mon._pose_t) <= 10 + 11  # a silent signal: no more than the lag (10 samples) and one batch wait

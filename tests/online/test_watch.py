@@ -374,3 +374,19 @@ def test_watch_a_growing_sqlite3_bag_folder(tmp_path: Path) -> None:
     assert res.finished and len(rec.rows_when) > 5  # really written in several transactions
     assert seen["F[30,50] mission_2"] is False  # decided before the recorder finished
     _assert_same_as_certify(folder, res, salvage=False)
+
+
+def test_watch_applies_the_scenarios_clock_offsets_as_certify() -> None:
+    """A clock offset on /odom moves the pose and the signal alike: the same verdicts and first violation as
+    certify, and the decision at the same time from the first sample."""
+    sc = load_scenario(DIFFDRIVE)
+    sc = sc.model_copy(update={"clock_offsets": {"/odom": 0.5}})
+    spec = "G[0,inf) crawl"
+    res = watch_log(LOGS / "diffdrive_odom.bag", OnlineMonitor(sc, spec=spec))
+    cert = certify_log(LOGS / "diffdrive_odom.bag", sc, spec=spec).certificate
+    assert [(c.name, c.verdict) for c in res.result.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
+    got = next(c for c in res.result.checks if c.name == "spec_trajectory")
+    want = next(c for c in cert["checks"] if c["name"] == "spec_trajectory")
+    assert got.first_violation_ns is not None
+    assert round((got.first_violation_ns - cert["time0_ns"]) * 1e-9, 9) == want["first_violation_time"]
+    assert cert["time0_ns"] == read_log(LOGS / "diffdrive_odom.bag", load_scenario(DIFFDRIVE)).time0_ns + 500_000_000

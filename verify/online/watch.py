@@ -70,6 +70,8 @@ class _Feeder:
         self.time_base: str | None = None if time_base == "auto" else time_base  # None: not chosen yet (auto)
         self.base_note: str | None = None
         self.path = path
+        # as read_log: the scenario's clock_offsets (topic -> s) added to that topic's times
+        self.offsets_ns = {topic: round(sec * 1e9) for topic, sec in scenario.clock_offsets.items()}
         self.pose_topic: str | None = None
         self.seen_topics: dict[str, str] = {}
         self._held: list[SalvagedMessage] = []  # auto: the messages read before the base is chosen
@@ -153,14 +155,18 @@ class _Feeder:
                 self._push_pose(msgs, self.monitor.push_pose, child)
             if t.cmd_vel in by_topic:
                 tw = decode_twist(self._raw(by_topic[t.cmd_vel]), self.ros1)
-                for k in np.argsort(tw.log_ns, kind="stable").tolist():
-                    self.monitor.push_cmd(int(tw.log_ns[k]), *(float(v) for v in tw.u[k]))
+                # as read_log: a TwistStamped's header stamps unless the pose is judged on log time
+                header_cmd = tw.stamp_ns is not None and self.time_base != "log"
+                cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + self.offsets_ns.get(
+                    t.cmd_vel, 0)
+                for k in np.argsort(cst, kind="stable").tolist():
+                    self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
         except LogReadError as err:
             raise LogReadError(err.reason, path=str(self.path)) from err
 
     def _push_signals(self, msgs: list[SalvagedMessage], fields: list[tuple[str, str]]) -> None:
         """As ``verify.ingest.fields.read_signals``: header stamps when the message has a header and the pose is
-        judged on header stamps, else log time."""
+        judged on header stamps, else log time (plus the topic's clock offset)."""
         raw = self._raw(msgs)
         decoded: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, fld in fields:
@@ -168,14 +174,15 @@ class _Feeder:
                 cols = decode_field(raw, self.ros1, fld)
                 header = cols.stamp_ns is not None and self.time_base == "header"
                 stamps = cols.stamp_ns if header and cols.stamp_ns is not None else cols.log_ns
-                decoded[fld] = (np.asarray(stamps, dtype=np.int64), cols.value)
+                offset = self.offsets_ns.get(msgs[0].topic, 0)
+                decoded[fld] = (np.asarray(stamps, dtype=np.int64) + offset, cols.value)
             stamps, values = decoded[fld]
             for k in np.argsort(stamps, kind="stable").tolist():
                 self.monitor.push_signal(name, int(stamps[k]), float(values[k]))
 
     def _push_pose(self, msgs: list[SalvagedMessage], push: Callable[..., None], child: str | None) -> None:
         cols = decode_pose(self._raw(msgs), self.ros1, child_frame=child)
-        stamps = cols.stamp_ns if self.time_base == "header" else cols.log_ns
+        stamps = (cols.stamp_ns if self.time_base == "header" else cols.log_ns) + self.offsets_ns.get(msgs[0].topic, 0)
         if self.requested == "auto" and self.time_base == "header" and push == self.monitor.push_pose:
             self._count_stamps(np.asarray(cols.stamp_ns, dtype=np.int64))
         for k in np.argsort(stamps, kind="stable").tolist():
