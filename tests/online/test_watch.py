@@ -27,7 +27,7 @@ from verify import certify_log
 from verify.errors import LogReadError
 from verify.ingest import read_log
 from verify.ingest.salvage import walk_mcap, walk_ros1
-from verify.online import OnlineMonitor
+from verify.online import Decision, OnlineMonitor
 from verify.online.watch import watch_log
 
 LOGS = Path(__file__).resolve().parents[2] / "logs"
@@ -68,12 +68,14 @@ class Recorder(threading.Thread):
     close the log (killed); otherwise finish as a recorder does (ROS1: rewrite the header; folder: metadata.yaml)."""
 
     def __init__(self, data: bytes, target: Path, *, cut: int | None = None, final_header: bytes | None = None,
-                 metadata: bytes | None = None, seed: int = 0) -> None:
+                 metadata: bytes | None = None, seed: int = 0, pause_at: float | None = None) -> None:
         super().__init__(daemon=True)
         self.data, self.target, self.cut = data, target, cut
         self.final_header, self.metadata = final_header, metadata
         self.rng = np.random.default_rng(seed)
         self.sizes: list[int] = []
+        self.pause_at = pause_at  # a fraction of the bytes where the recorder waits (up to 30 s) for ``resume``
+        self.resume = threading.Event()
 
     def run(self) -> None:
         end = len(self.data) if self.cut is None else self.cut
@@ -81,6 +83,8 @@ class Recorder(threading.Thread):
         with self.target.open("ab") as fh:
             while pos < end:
                 n = int(self.rng.integers(4_000, 120_000))
+                if self.pause_at is not None and pos < self.pause_at * len(self.data) <= pos + n:
+                    self.resume.wait(30.0)  # the reader's speed on a loaded machine must not decide the test
                 fh.write(self.data[pos : min(end, pos + n)])
                 fh.flush()
                 pos = min(end, pos + n)
@@ -95,10 +99,11 @@ class Recorder(threading.Thread):
             (self.target.parent / "metadata.yaml").write_bytes(self.metadata)
 
 
-def _watch_while_recording(source: Path, kind: str, tmp_path: Path, *, cut_fraction: float | None
-                           ) -> tuple[Path, Path, object, list[tuple[str, int]]]:
+def _watch_while_recording(source: Path, kind: str, tmp_path: Path, *, cut_fraction: float | None,
+                           pause: tuple[float, str] | None = None) -> tuple[Path, Path, object, list[tuple[str, int]]]:
     """Start the recorder thread, watch with --follow semantics; returns (certify path, watched path, result,
-    decisions with the file size when each was reported)."""
+    decisions with the file size when each was reported). ``pause``: the recorder waits at that fraction of its
+    bytes until the named decision is reported."""
     data = b"" if source.is_dir() else source.read_bytes()
     final_header = None
     metadata = None
@@ -120,12 +125,19 @@ def _watch_while_recording(source: Path, kind: str, tmp_path: Path, *, cut_fract
         watched = certified = target
     target.write_bytes(b"")
     cut = None if cut_fraction is None else int(len(data) * cut_fraction)
-    rec = Recorder(data, target, cut=cut, final_header=final_header, metadata=metadata)
+    rec = Recorder(data, target, cut=cut, final_header=final_header, metadata=metadata,
+                   pause_at=None if pause is None else pause[0])
     sizes: list[tuple[str, int]] = []
     mon = OnlineMonitor(builtin_scenario())
+
+    def on_decision(d: Decision) -> None:
+        sizes.append((d.name, target.stat().st_size))
+        if pause is not None and d.name == pause[1]:
+            rec.resume.set()
+
     rec.start()
-    res = watch_log(watched, mon, follow=True, idle_timeout_s=1.0, poll_s=0.02,
-                    on_decision=lambda d: sizes.append((d.name, target.stat().st_size)))
+    res = watch_log(watched, mon, follow=True, idle_timeout_s=1.0 if pause is None else 40.0, poll_s=0.02,
+                    on_decision=on_decision)
     rec.join()
     return certified, watched, res, sizes
 
@@ -148,7 +160,8 @@ def test_watch_a_growing_log_equals_certify(kind: str, name: str, tmp_path: Path
         src = _ros1_small_chunks(src, tmp_path / "src.bag")
     elif kind == "folder":
         src = _ros2_folder(src, tmp_path / "src_bag")
-    certified, _watched, res, sizes = _watch_while_recording(src, kind, tmp_path, cut_fraction=None)
+    pause = (0.59, "obstacle_clearance") if kind == "ros1" else None
+    certified, _watched, res, sizes = _watch_while_recording(src, kind, tmp_path, cut_fraction=None, pause=pause)
     _assert_same_as_certify(certified, res, salvage=False)
     final = certified.stat().st_size if certified.is_file() else None
     if kind == "ros1":  # the obstacle is touched at 6.7 s of 26 s: reported long before the recorder stops
@@ -316,13 +329,16 @@ def test_watch_cli_time_base_auto(tmp_path: Path) -> None:
 class SqliteRecorder(threading.Thread):
     """A ROS2 recorder with sqlite3 storage: creates the storage file in ``folder`` with the source's tables, then
     inserts the source's message rows in batches of random size, one transaction each, and writes metadata.yaml at
-    the end."""
+    the end. Past ``pause_at`` of the rows it waits (up to 30 s) for ``resume``: the reader's speed on a loaded
+    machine does not decide whether a decision comes before the end."""
 
-    def __init__(self, source: Path, folder: Path, seed: int = 1) -> None:
+    def __init__(self, source: Path, folder: Path, seed: int = 1, pause_at: float = 1.0) -> None:
         super().__init__(daemon=True)
         self.source, self.folder = source, folder
         self.rng = np.random.default_rng(seed)
         self.rows_when: list[int] = [0]
+        self.pause_at = pause_at
+        self.resume = threading.Event()
 
     def run(self) -> None:
         (db,) = [p for p in self.source.iterdir() if p.suffix == ".db3"]
@@ -344,9 +360,11 @@ class SqliteRecorder(threading.Thread):
                 live.executemany("INSERT INTO messages (id, topic_id, timestamp, data) VALUES (?, ?, ?, ?)",
                                  rows[pos : pos + n])
                 live.commit()
+                if pos < self.pause_at * len(rows) <= pos + n:
+                    self.resume.wait(30.0)
                 pos = min(len(rows), pos + n)
                 self.rows_when.append(pos)
-                time.sleep(0.04)
+                time.sleep(0.02)
         finally:
             src.close()
             live.close()
@@ -365,11 +383,17 @@ def test_watch_a_growing_sqlite3_bag_folder(tmp_path: Path) -> None:
             w.write(conns[c.id], t, data)
     folder = tmp_path / "live_bag"
     folder.mkdir()
-    rec = SqliteRecorder(src, folder)
+    rec = SqliteRecorder(src, folder, pause_at=0.95)
     seen: dict[str, bool] = {}
+
+    def on_decision(d: Decision) -> None:
+        seen.setdefault(d.name, (folder / "metadata.yaml").is_file())
+        if d.name == "F[30,50] mission_2":
+            rec.resume.set()
+
     rec.start()
-    res = watch_log(folder, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=2.0, poll_s=0.02,
-                    on_decision=lambda d: seen.setdefault(d.name, (folder / "metadata.yaml").is_file()))
+    res = watch_log(folder, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=40.0, poll_s=0.02,
+                    on_decision=on_decision)
     rec.join()
     assert res.finished and len(rec.rows_when) > 5  # really written in several transactions
     assert seen["F[30,50] mission_2"] is False  # decided before the recorder finished
