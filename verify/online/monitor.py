@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
-from verify.certify import resolve_scenario
+from verify.certify import POSITION_ROUNDING_M, resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
 from verify.geometry import (
@@ -188,7 +188,7 @@ class OnlineMonitor:
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
-        self._tol_m = 3.0 * sc.mocap.noise_std
+        self._tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M  # as verify.certify (rounding of positions)
         self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
