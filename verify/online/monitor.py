@@ -2,8 +2,9 @@
 """Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
 
 input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer
-ns) -> output: ``Decision`` events (``update``), the current ``MonitorState`` (``state``) and, at ``close``, the
-same checks and overall verdict as ``verify.certify.certify_log`` on a log holding the same samples.
+ns) and the messages of the signal atoms the formula uses (any order; ``verify.online.signalfeed``) -> output:
+``Decision`` events (``update``), the current ``MonitorState`` (``state``) and, at ``close``, the same checks and
+overall verdict as ``verify.certify.certify_log`` on a log holding the same samples.
 
 Verdicts are final once given: a check that fails never passes later, and a formula obligation is reported decided
 only when no continuation of the run can change its verdict. The obligations are the top-level conjuncts of the
@@ -13,7 +14,8 @@ workspace, the tube) is "inconclusive so far".
 
 ``push_*`` only buffers (O(1)); the buffered samples are judged together (vectorised, with the offline code) when
 ``update``/``state`` is called or when ``max_pending`` samples wait. The time a verdict is reported with is the time
-of the sample that decided it, whatever the batching.
+of the sample that decided it, whatever the batching. With signal atoms a pose sample is judged once every used
+signal has a message after it, or once it is ``max_signal_lag_s`` older than the newest sample.
 """
 
 from __future__ import annotations
