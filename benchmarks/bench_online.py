@@ -111,7 +111,10 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=1.0)
     ap.add_argument("--rtamt-seconds", type=float, default=60.0)
     ap.add_argument("--update-every", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="a smoke run: 3 minutes of samples, RTAMT for 5 s")
     args = ap.parse_args()
+    if args.quick:
+        args.hours, args.rtamt_seconds = 0.05, 5.0
     n = round(args.hours * 3600 * 100)
     print(f"load average before the run (2 cores here): {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     ours = run_ours(n, args.update_every)

@@ -5,7 +5,8 @@ random faults (NaN samples, dropouts, duplicate stamps that agree or disagree, a
 tube, commands outside the box, no nominal / no commands) and formulas with bounded, unbounded and nested windows
 (and ``U``, which the monitor evaluates at the end): ``close()`` gives the offline certifier's verdict for every
 check, its margins and first violations, whatever the batching; every decision made during the run is the final
-verdict (monotone); no decision is reported before the sample that made it.
+verdict (monotone); no decision is reported before the sample that made it. The same with a signal atom (a
+50 Hz topic with jitter, silences and duplicates) in the formula, on top of the faults.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tubempc.scenario import builtin_scenario
+from tubempc.scenario import Scenario, SignalSpec, builtin_scenario
 from verify.certify import _judge  # the offline judgement of in-memory samples, as certify_log runs it
+from verify.ingest.fields import SignalStream
 from verify.ingest.log import LogData, _stream
 from verify.ingest.timebase import judged_samples
 from verify.online import OnlineMonitor
@@ -72,7 +74,51 @@ def _run(rng: np.random.Generator, n: int, faults: dict[str, bool]) -> dict[str,
     return {"t": t, "x": x, "y": y, "nominal": nominal, "cmd": cmd, "dup": dup_pose}
 
 
-def _offline(run: dict[str, object], spec: str) -> dict[str, object]:
+#: the built-in scenario with a signal atom: a speed topic at 50 Hz, ``calm`` while it is at most 0.5
+SC_SIGNAL = SC.model_copy(update={"signals": {"calm": SignalSpec(topic="/speed", field="data", op="<=", value=0.5,
+                                                                  unit="m/s", rate_hz=50.0)}})
+SIGNAL_FORMULAS = [
+    "G[0,inf) calm",
+    "F[0,2] !calm",
+    "G[0,inf) (mission_1 -> calm)",
+    "calm U[0,3] !mission_1",
+    "G[0,1] F[0,0.5] calm",
+    "G[0,inf) !obs_1 & F[0,inf) (mission_2 | !calm)",
+]
+
+
+def _signal(rng: np.random.Generator, t: np.ndarray) -> list[tuple[int, float]]:
+    """Messages every 20 ms (+-3 ms) from before the first pose sample to after the last; one in 20 dropped (longer
+    silences now and then), one in 30 repeated (same or another value); the value changes now and then, NaN too."""
+    out: list[tuple[int, float]] = []
+    s = int(t[0]) - int(rng.integers(0, 60_000_000))
+    value = 0.2
+    while s <= int(t[-1]) + 40_000_000:
+        if rng.random() < 0.08:
+            value = float(rng.choice([0.2, 0.45, 0.55, np.nan]))
+        if rng.random() >= 0.05:
+            out.append((s, value))
+            if rng.random() < 1 / 30:
+                out.append((s, value if rng.random() < 0.5 else 0.55))
+        s += 20_000_000 + int(rng.integers(-3_000_000, 3_000_001)) + (int(rng.integers(0, 200_000_000))
+                                                                       if rng.random() < 0.01 else 0)
+    return out or [(int(t[0]), value)]
+
+
+def _signal_stream(messages: list[tuple[int, float]]) -> SignalStream:
+    """As ``verify.ingest.fields.read_signals``: sorted, one value per instant (NaN where duplicates disagree)."""
+    t = np.array([m[0] for m in messages], dtype=np.int64)
+    v = np.array([m[1] for m in messages])
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    tu, first = np.unique(t, return_index=True)
+    lo, hi = np.minimum.reduceat(v, first), np.maximum.reduceat(v, first)
+    spec = SC_SIGNAL.signals["calm"]
+    assert spec.rate_hz is not None
+    return SignalStream("calm", spec, tu, np.where(lo != hi, np.nan, v[first]), round(1e9 / spec.rate_hz), "header")
+
+
+def _offline(run: dict[str, object], spec: str, sc: Scenario = SC) -> dict[str, object]:
     t, x, y = run["t"], run["x"], run["y"]
     assert isinstance(t, np.ndarray) and isinstance(x, np.ndarray) and isinstance(y, np.ndarray)
     dup = run["dup"]
@@ -93,13 +139,17 @@ def _offline(run: dict[str, object], spec: str) -> dict[str, object]:
         ct, cu = run["cmd"]  # type: ignore[misc]
         js = judged_samples(ct, cu)
         cmd_t, cmd_u = ct[js.all_index], cu[js.all_index]
+    signals = {"calm": _signal_stream(run["signal"])} if run.get("signal") else {}  # type: ignore[arg-type]
     log = LogData("memory", "mcap", "", "sha256", "header", int(pose.t_ns[0]), pose, {}, nominal, cmd_t, cmd_u,
-                  (), None, {}, False, pose_samples=every)
-    return _judge(log, SC, formula_text=spec).certificate
+                  (), None, {}, False, pose_samples=every, signals=signals)
+    return _judge(log, sc, formula_text=spec).certificate
 
 
-def _online(run: dict[str, object], spec: str, update_every: int) -> tuple[OnlineMonitor, list[tuple[str, str]]]:
-    mon = OnlineMonitor(SC, spec=spec)
+def _online(run: dict[str, object], spec: str, update_every: int, sc: Scenario = SC
+            ) -> tuple[OnlineMonitor, list[tuple[str, str]]]:
+    mon = OnlineMonitor(sc, spec=spec)
+    signal: list[tuple[int, float]] = run.get("signal") or []  # type: ignore[assignment]
+    m = 0
     t, x, y = run["t"], run["x"], run["y"]
     assert isinstance(t, np.ndarray) and isinstance(x, np.ndarray) and isinstance(y, np.ndarray)
     dups: dict[int, list[tuple[float, float]]] = {}
@@ -112,6 +162,9 @@ def _online(run: dict[str, object], spec: str, update_every: int) -> tuple[Onlin
         while nom is not None and j < nom[0].shape[0] and nom[0][j] <= t[i]:  # type: ignore[index]
             mon.push_nominal(int(nom[0][j]), float(nom[1][j]), float(nom[2][j]))  # type: ignore[index]
             j += 1
+        while m < len(signal) and signal[m][0] <= t[i]:  # the signal's messages up to this pose sample
+            mon.push_signal("calm", *signal[m])
+            m += 1
         mon.push_pose(int(t[i]), float(x[i]), float(y[i]))
         for dx, dy in dups.get(i, []):
             mon.push_pose(int(t[i]), dx, dy)
@@ -124,6 +177,8 @@ def _online(run: dict[str, object], spec: str, update_every: int) -> tuple[Onlin
     while nom is not None and j < nom[0].shape[0]:  # type: ignore[index]
         mon.push_nominal(int(nom[0][j]), float(nom[1][j]), float(nom[2][j]))  # type: ignore[index]
         j += 1
+    for s_ns, value in signal[m:]:
+        mon.push_signal("calm", s_ns, value)
     seen.extend((d.name, d.verdict) for d in mon.update())
     return mon, seen
 
@@ -192,3 +247,32 @@ def test_samples_one_nanosecond_apart_leave_no_gap() -> None:
             for got, want in zip(res.checks, cert["checks"], strict=True):  # type: ignore[arg-type]
                 assert got.verdict == want["verdict"], (spec, got.name)
                 assert _same(got.margin, want["margin"]), (spec, got.name, got.margin, want["margin"])
+
+
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 400), spec=st.sampled_from(SIGNAL_FORMULAS),
+       update_every=st.sampled_from([0, 1, 7, 64]),
+       faults=st.fixed_dictionaries({f: st.booleans() for f in FAULTS}))
+def test_close_equals_offline_with_a_signal_atom(seed: int, n: int, spec: str, update_every: int,
+                                                 faults: dict[str, bool]) -> None:
+    """A signal atom in the formula, pushed in time order among the pose samples: close() gives the offline
+    verdicts, margins (in the signal's unit where it decides) and timed-run margins; decisions are final."""
+    rng = np.random.default_rng(seed)
+    run = _run(rng, n, faults)
+    run["signal"] = _signal(rng, run["t"])  # type: ignore[arg-type]
+    cert = _offline(run, spec, SC_SIGNAL)
+    mon, seen = _online(run, spec, update_every, SC_SIGNAL)
+    res = mon.close()
+    assert mon.signal_counts["calm"]["late"] == 0
+    late = mon._formula_late_conflicts
+    for got, want in zip(res.checks, cert["checks"], strict=True):  # type: ignore[arg-type]
+        if late and got.name.startswith("spec_"):
+            assert got.verdict != "pass" or want["verdict"] == "pass"
+            continue
+        assert got.verdict == want["verdict"], (got.name, got.details)
+        assert _same(got.margin, want["margin"]), (got.name, got.margin, want["margin"])
+    if not late:
+        assert res.verdict == cert["verdict"]
+        final = {c.name: c.verdict for c in (*res.state.checks, *res.state.obligations)}
+        for name, verdict in seen:
+            assert final[name] == verdict, name

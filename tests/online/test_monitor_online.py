@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tubempc.scenario import builtin_scenario
+from tubempc.scenario import builtin_scenario, load_scenario
 from verify import certify_log
 from verify.ingest import read_log
 from verify.online import MonitorClosedError, OnlineMonitor, feed_log_data
 
 LOGS = Path(__file__).resolve().parents[2] / "logs"
-#: the Nexus runs (diffdrive_odom.bag is judged against its own scenario: polygon regions and signal atoms)
-EXAMPLES = sorted(p.name for p in LOGS.iterdir() if p.suffix in (".bag", ".mcap") and p.name != "diffdrive_odom.bag")
+#: every example log; diffdrive_odom.bag is judged against its own scenario (polygon regions and signal atoms)
+EXAMPLES = sorted(p.name for p in LOGS.iterdir() if p.suffix in (".bag", ".mcap"))
+OWN_SCENARIO = {"diffdrive_odom.bag": LOGS.parent / "docs" / "examples" / "diffdrive-room.yaml"}
 
 
 def _same_margin(a: float | None, b: float | None) -> bool:
@@ -29,7 +30,7 @@ def _same_margin(a: float | None, b: float | None) -> bool:
 @pytest.mark.parametrize("name", EXAMPLES)
 @pytest.mark.parametrize("update_every", [1, 37])
 def test_close_equals_certify_log(name: str, update_every: int) -> None:
-    sc = builtin_scenario()
+    sc = load_scenario(OWN_SCENARIO[name]) if name in OWN_SCENARIO else builtin_scenario()
     salvage = name == "truncated.bag"
     log = read_log(LOGS / name, sc, salvage=salvage)
     cert = certify_log(LOGS / name, sc, salvage=salvage).certificate

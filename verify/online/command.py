@@ -34,8 +34,9 @@ def _certified_path(path: Path, finished: bool) -> Path:
               help="With --follow: stop when the log has not grown for this many seconds.")
 @click.option("--poll", "poll_s", type=click.FloatRange(min=0.01), default=0.2, show_default=True,
               help="Seconds between two reads of the log.")
-@click.option("--time-base", type=click.Choice(["header", "log"]), default="header", show_default=True,
-              help="Header stamps or log (receive) time.")
+@click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="header", show_default=True,
+              help="Header stamps, log (receive) time, or auto: certify's rule (header stamps unless they cannot "
+                   "order the samples) applied to the first pose messages.")
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here at the end, as certify does.")
 @click.option("--no-report", is_flag=True, help="With --out: write only certificate.json.")

@@ -2,8 +2,9 @@
 """Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
 
 input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer
-ns) -> output: ``Decision`` events (``update``), the current ``MonitorState`` (``state``) and, at ``close``, the
-same checks and overall verdict as ``verify.certify.certify_log`` on a log holding the same samples.
+ns) and the messages of the signal atoms the formula uses (any order; ``verify.online.signalfeed``) -> output:
+``Decision`` events (``update``), the current ``MonitorState`` (``state``) and, at ``close``, the same checks and
+overall verdict as ``verify.certify.certify_log`` on a log holding the same samples.
 
 Verdicts are final once given: a check that fails never passes later, and a formula obligation is reported decided
 only when no continuation of the run can change its verdict. The obligations are the top-level conjuncts of the
@@ -13,14 +14,17 @@ workspace, the tube) is "inconclusive so far".
 
 ``push_*`` only buffers (O(1)); the buffered samples are judged together (vectorised, with the offline code) when
 ``update``/``state`` is called or when ``max_pending`` samples wait. The time a verdict is reported with is the time
-of the sample that decided it, whatever the batching.
+of the sample that decided it, whatever the batching. With signal atoms a pose sample is judged once every used
+signal has a message after it, or once it is ``max_signal_lag_s`` older than the newest sample.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from bisect import bisect_left, bisect_right
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +32,11 @@ import numpy.typing as npt
 
 from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
-from verify.certify import resolve_scenario
+from verify.certify import POSITION_ROUNDING_M, resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import SpecError, VerifyError
 from verify.geometry import (
-    containing_region,
+    containment,
     label_margins,
     region_margins,
     step_bound_m,
@@ -41,6 +45,7 @@ from verify.geometry import (
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.online.accumulate import MarginRun, MergedRun
+from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
 from verify.semantics.timed_run import check_timed_run, parse_spec
@@ -51,6 +56,8 @@ __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "Onli
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+#: how long (s) a pose sample waits for a message of every signal the formula uses before the silence is judged
+DEFAULT_SIGNAL_LAG_S = 3.0
 
 
 class MonitorClosedError(VerifyError, RuntimeError):
@@ -79,10 +86,11 @@ class Decision:
     time_s: float
     margin: float | None
     first_violation_s: float | None
+    unit: str | None = "m"  # the margin's unit (None: not stated, e.g. a formula mixing metres and a signal's unit)
 
     def line(self) -> str:
         margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.3f}"
-        unit = "" if not margin or self.name in ("input_box",) else " m"
+        unit = "" if not margin or self.name in ("input_box",) or not self.unit else f" {self.unit}"
         at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
         return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
 
@@ -137,38 +145,52 @@ class OnlineMonitor:
     ``update`` for the new decisions, ``state`` for everything so far, ``close`` for the final verdicts."""
 
     def __init__(self, scenario: Scenario | str | Path, *, spec: str | None = None, max_pending: int = 100,
-                 checks: Sequence[str] | None = None) -> None:
+                 checks: Sequence[str] | None = None, max_signal_lag_s: float = DEFAULT_SIGNAL_LAG_S) -> None:
         if max_pending < 1:
             raise ValueError(f"max_pending={max_pending!r} must be >= 1")
+        if not max_signal_lag_s >= 0.0 or not math.isfinite(max_signal_lag_s):
+            raise ValueError(f"max_signal_lag_s={max_signal_lag_s!r} must be a finite number >= 0")
         sc = resolve_scenario(scenario)
         self.scenario = sc
         self.selection = select_checks(sc, checks)  # as certify: --checks, else the scenario's, else what it names
         self._selected = {n for c in self.selection.selected
                           for n in (("spec_trajectory", "spec_timed_run") if c == "spec" else (c,))}
         self.formula = parse_spec(spec if spec is not None else sc.spec)
-        known = {lab for r in sc.regions for lab in r.labels}
+        known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
         unknown = sorted(atoms(self.formula) - known)
         if unknown:
-            raise SpecError(f"formula {self.formula}: proposition(s) {', '.join(unknown)} label no region of "
-                            f"scenario {sc.name!r}")
+            raise SpecError(f"formula {self.formula}: proposition(s) {', '.join(unknown)} label no region and name "
+                            f"no signal of scenario {sc.name!r}")
         self.max_pending = max_pending
         self._names = sorted(atoms(self.formula))
+        # a name that is both a label and a signal is the signal (as verify.certify)
+        self._feeds = {n: SignalFeed(n, sc.signals[n]) for n in self._names if n in sc.signals}
+        self._region_names = [n for n in self._names if n not in self._feeds]
+        self._signal_rows = [k for k, n in enumerate(self._names) if n in self._feeds]
+        self.max_signal_lag_ns = round(max_signal_lag_s * 1e9)
+        self._newest_ns = -(2**63)  # the newest time pushed on the pose or a signal stream (the monitor's clock)
+        self._pose_trigger = max_pending  # pending pose samples that make a push judge the buffer
+        self.signal_ignored = 0  # messages of scenario signals the formula does not use
         self._traj = _Semantics(self.formula)
         self._run = _Semantics(self.formula)
         self._obligation_names = [str(h.formula) for h in self._traj.obligations]
+        # a formula's margin is its deciding atom's: metres for regions, the field's unit for a signal
+        self._units: dict[str, str | None] = {"spec_trajectory": self._unit_of(self.formula)}
+        self._units.update({str(h.formula): self._unit_of(h.formula) for h in self._traj.obligations})
         eta = sc.robot.radius
         discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
         self._cx = np.array([r.center[0] for r in discs], dtype=np.float64)
         self._cy = np.array([r.center[1] for r in discs], dtype=np.float64)
         self._radius = np.array([r.radius for r in discs], dtype=np.float64)
         self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in discs])
-        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels] for name in self._names]
+        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels and name not in self._feeds]
+                           for name in self._names]
         # discs only: every region's margin in one broadcast pass; otherwise verify.geometry's functions per batch
         self._discs = all(getattr(r, "polygon", None) is None for r in sc.regions)
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
-        self._tol_m = 3.0 * sc.mocap.noise_std
+        self._tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M  # as verify.certify (rounding of positions)
         self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
@@ -196,8 +218,10 @@ class OnlineMonitor:
         self.t0_ns: int | None = None
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
         self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
-        self._prev_region = -2  # "before the first sample"
+        self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
+        self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
         self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
+        self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
         self._ws = MarginRun("workspace")
         self._clear = MarginRun("obstacle_clearance")
         self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
@@ -211,6 +235,10 @@ class OnlineMonitor:
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
         self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+
+    def _unit_of(self, formula: Formula) -> str | None:
+        units = {self.scenario.signals[n].unit if n in self._feeds else "m" for n in atoms(formula)}
+        return units.pop() if len(units) == 1 else None
 
     # ---- input ----------------------------------------------------------------------------------------------------
     @property
@@ -246,7 +274,8 @@ class OnlineMonitor:
             self._pose_t.append(t_ns)
             self._pose_x.append(x_m)
             self._pose_y.append(y_m)
-            if len(self._pose_t) > self.max_pending:
+            self._newest_ns = max(self._newest_ns, t_ns)
+            if len(self._pose_t) > self._pose_trigger:
                 self._process()
         elif self._reject("pose", t_ns, self._last_pose, (x_m, y_m, yaw_rad)):
             if self._pose_t and self._pose_t[-1] == t_ns:  # not judged yet: unknown to the formula
@@ -279,6 +308,48 @@ class OnlineMonitor:
             nx, ny = nx.copy(), ny.copy()
             nx[-1] = ny[-1] = math.nan
             self._nominal = (nt, nx, ny)
+
+    def push_signal(self, name: str, t_ns: int, value: float) -> None:
+        """A message of the scenario's signal ``name`` (absolute ns on the pose's time base; the field's value).
+        Any order: a message is placed among the others by time, unless a pose sample at or after its time was
+        judged already (then it is counted late and the formula cannot pass). A pose sample is judged once every
+        signal the formula uses has a message after it, or once it is ``max_signal_lag_s`` older than the newest
+        sample (the silence is then unknown after each message's hold, as offline)."""
+        if self._closed:
+            raise MonitorClosedError(f"a sample of signal {name} at t_ns={t_ns} was pushed after close()")
+        feed = self._feeds.get(name)
+        if feed is None:
+            if name not in self.scenario.signals:
+                raise KeyError(f"signal {name!r} is not a signal of scenario {self.scenario.name!r} "
+                               f"(it has: {', '.join(sorted(self.scenario.signals)) or 'none'})")
+            self.signal_ignored += 1  # a signal of the scenario the formula does not use
+            return
+        feed.push(t_ns, value)
+        self._newest_ns = max(self._newest_ns, t_ns)
+
+    @property
+    def signal_names(self) -> tuple[str, ...]:
+        """The scenario signals the formula uses (the ones ``push_signal`` judges)."""
+        return tuple(self._feeds)
+
+    @property
+    def signal_counts(self) -> dict[str, dict[str, int]]:
+        """Per signal the formula uses: messages accepted (distinct instants), merged and conflicting duplicates,
+        and late messages (for an instant already judged)."""
+        return {n: {"messages": f.messages, "merged": f.merged, "conflicting": f.conflicting, "late": f.late}
+                for n, f in self._feeds.items()}
+
+    def _judgeable(self, closing: bool) -> int:
+        """How many pending pose samples every used signal is known for (a message after them), or that are older
+        than the lag bound."""
+        n = len(self._pose_t)
+        if closing or not self._feeds or not n:
+            return n
+        cover = min(f.newest_ns for f in self._feeds.values())
+        k = bisect_left(self._pose_t, cover)  # samples strictly before the newest message of every signal
+        if k < n and self._pose_t[k] <= self._newest_ns - self.max_signal_lag_ns:
+            k = bisect_right(self._pose_t, self._newest_ns - self.max_signal_lag_ns)
+        return k
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
         """An applied input (absolute ns; body frame as logged: vx, vy, wz). Every command is judged, also one
@@ -316,8 +387,9 @@ class OnlineMonitor:
                                np.array(self._nom_y, dtype=np.float64))
             self._nom_t, self._nom_x, self._nom_y = [], [], []
         late, self._late = self._late, []
-        if self._pose_t:
-            k = len(self._pose_t)
+        k = self._judgeable(closing)
+        self._pose_trigger = len(self._pose_t) - k + self.max_pending
+        if k:
             self._judged["pose"] += k
             t = np.array(self._pose_t[:k], dtype=np.int64)
             x = np.array(self._pose_x[:k], dtype=np.float64)
@@ -325,7 +397,7 @@ class OnlineMonitor:
             del self._pose_t[:k], self._pose_x[:k], self._pose_y[:k]
             every = None
             if self._conflict:
-                done = t[-1]
+                done = int(t[-1])
                 extra = [e for e in self._extra if e[0] <= done]
                 self._extra = [e for e in self._extra if e[0] > done]
                 every = self._with_extras(t, x, y, extra)
@@ -375,6 +447,24 @@ class OnlineMonitor:
         g_lo, g_hi = mid - half, mid + half
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
+        # the timed run's entries (paper, Definition 3): where the containing region changes
+        # (verify.semantics.timed_run.timed_run_of_sets): a new entry where the set of containing regions changes
+        inside = self._containment(x[k0:], y[k0:])
+        before = np.concatenate((inside[:, :1] if self._prev_set is None else self._prev_set, inside[:, :-1]), axis=1)
+        changed = np.any(inside != before, axis=0)
+        if self._prev_set is None:
+            changed[0] = True
+        self._prev_set = inside[:, -1:].copy()
+        entry = np.flatnonzero(changed & inside.any(axis=0))
+        members = [self._entry_name(inside[:, int(e)]) for e in entry]
+        conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
+        entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
+        if self._feeds:  # signal atoms: verify.signals on the messages held around this batch
+            p_lo, p_hi = p_lo.copy(), p_hi.copy()
+            for row in self._signal_rows:
+                name = self._names[row]
+                b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
+                p_lo[row], p_hi[row], g_lo[row], g_hi[row] = b.point_lo, b.point_hi, b.gap_lo, b.gap_hi
         # the positions of verify.semantics.trajectory.trajectory_positions after the previous sample: each new sample's
         # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
         m = t_rel.shape[0] - 1
@@ -402,20 +492,20 @@ class OnlineMonitor:
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
-        # timed-run semantics (paper, Definition 3): an entry where the containing region changes
-        region = self._containing(x[k0:], y[k0:])
-        before = np.concatenate(([self._prev_region], region[:-1]))
-        self._prev_region = int(region[-1])
-        entry = np.flatnonzero((region != before) & (region >= 0))
+        # timed-run semantics: the entries
         run = self._run
-        conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
         if entry.size:
             t_e = conv[entry]
-            self._run_entries += [(self.scenario.regions[int(r)].name, float(t) * 1e-9)
-                                  for r, t in zip(region[entry], t_e, strict=True)]
+            self._run_entries += [(m, float(t) * 1e-9) for m, t in zip(members, t_e, strict=True)]
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             for name in self._names:
-                holds = np.array([name in self._labels[int(r)] for r in region[entry]], dtype=bool)
+                if name in entry_values:
+                    e_lo, e_hi = entry_values[name]
+                    run.atoms[name].push(e_lo, e_hi, t_e)
+                    self._run_signal[name][0].extend(e_lo.tolist())
+                    self._run_signal[name][1].extend(e_hi.tolist())
+                    continue
+                holds = np.array([name in self._entry_labels[m] for m in members], dtype=bool)
                 v1 = np.where(holds, 1.0, -1.0)
                 run.atoms[name].push(v1, v1.copy(), t_e)
         run.track.tick(conv)
@@ -455,8 +545,9 @@ class OnlineMonitor:
         """Every region's margin (rows in scenario order) and every atom's (rows in name order), as
         ``verify.geometry.region_margins`` / ``label_margins`` give them (bit for bit)."""
         if not self._discs:
-            atom = label_margins(x, y, self.scenario, frozenset(self._names))
-            atom_m = np.array([atom[n] for n in self._names]).reshape(-1, x.shape[0])
+            atom = label_margins(x, y, self.scenario, frozenset(self._region_names))
+            atom_m = np.array([atom[n] if n in atom else np.full(x.shape[0], -np.inf) for n in self._names]
+                              ).reshape(-1, x.shape[0])
             return region_margins(x, y, self.scenario), atom_m
         region_m = self._offset[:, None] - np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
         atom_m = np.empty((len(self._names), x.shape[0]))
@@ -464,16 +555,20 @@ class OnlineMonitor:
             atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
         return region_m, atom_m
 
-    def _containing(self, x: FloatArray, y: FloatArray) -> IntArray:
-        """``verify.geometry.containing_region``."""
+    def _containment(self, x: FloatArray, y: FloatArray) -> npt.NDArray[np.bool_]:
+        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc."""
         if not self._discs:
-            return containing_region(x, y, self.scenario)
+            return containment(x, y, self.scenario)
         dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        inside = dist + self.scenario.robot.radius <= self._radius[:, None]
-        region = np.full(x.shape[0], -1, dtype=np.int64)
-        for k in range(inside.shape[0]):
-            region[inside[k]] = k
-        return region
+        return dist + self.scenario.robot.radius <= self._radius[:, None]
+
+    def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
+        """A timed-run entry's name (its regions joined with ``+``); its labels (their union) are kept by name."""
+        rows = np.flatnonzero(column)
+        name = "+".join(self.scenario.regions[int(k)].name for k in rows)
+        if name not in self._entry_labels:
+            self._entry_labels[name] = frozenset(lab for k in rows for lab in self._labels[int(k)])
+        return name
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
@@ -571,7 +666,8 @@ class OnlineMonitor:
         for c in (*st.obligations, *st.checks):
             if c.decided and c.name not in self._reported:
                 self._reported.add(c.name)
-                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin, c.first_violation_s))
+                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin, c.first_violation_s,
+                                    self._units.get(c.name, "m")))
         out.sort(key=lambda d: d.time_s)
         return out
 
@@ -625,8 +721,26 @@ class OnlineMonitor:
         if not self._run_entries:
             return None
         end_s = max((self._last_pose - t0) * 1e-9, self._run_entries[-1][1])
-        labels = {r.name: list(r.labels) for r in self.scenario.regions}
-        return check_timed_run(str(self.formula), self._run_entries, labels, end=end_s).margin_s
+        labels = {name: sorted(lab) for name, lab in self._entry_labels.items()}
+        values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
+        return check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values).margin_s
+
+    def _formula_doubt(self) -> str | None:
+        """Why the formula, as judged online, cannot pass: pose or signal samples that arrived for an instant
+        already judged, or (signals without ``rate_hz``) a hold that the whole stream's median spacing changes."""
+        why: list[str] = []
+        if self._formula_late_conflicts:
+            why.append(f"{self._formula_late_conflicts} pose sample(s) judged before a sample at the same time with "
+                       f"other values arrived")
+        for name, feed in self._feeds.items():
+            if feed.late:
+                why.append(f"{feed.late} message(s) of signal {name} arrived after the pose samples at or after "
+                           f"their time were judged (more than the lag bound late, or out of order)")
+            if feed.hold_mismatch():
+                why.append(f"signal {name} has no rate_hz: it was judged with the median spacing seen so far, and "
+                           f"the whole stream's median (hold {feed.final_hold_ns() * 1e-9:g} s) would judge a "
+                           f"stretch differently")
+        return "; ".join(why) or None
 
     def _final_checks(self) -> list[CheckResult]:
         t0 = self.t0_ns
@@ -643,9 +757,8 @@ class OnlineMonitor:
             spec_run = CheckResult("spec_timed_run", rv, self._timed_run_margin_s(t0) if rv == "fail" else None,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    {} if self._run.track.count else {"reason": "the timed run is empty"})
-        if self._formula_late_conflicts:  # a judged sample turned out unknown: the formula cannot pass
-            why = (f"{self._formula_late_conflicts} pose sample(s) judged before a sample at the same time with "
-                   f"other values arrived")
+        why = self._formula_doubt()
+        if why:  # a judged sample turned out unknown (or may have been judged otherwise): the formula cannot pass
             spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
                                    if c.verdict == "pass" else c for c in (spec_traj, spec_run))
         tube = self._tube.result({"radius_m": self._tube_radius_m, "noise_tolerance_m": self._tol_m})
@@ -660,18 +773,22 @@ class OnlineMonitor:
 
 
 def feed_log_data(monitor: OnlineMonitor, log: LogData, *, update_every: int = 0) -> list[Decision]:
-    """Push every sample of a read log in time order (the three streams merged), as a recorder would deliver
-    them; ``update_every`` > 0: call ``update`` after that many pose samples. Returns the decisions made."""
+    """Push every sample of a read log in time order (the streams and the signals merged), as a recorder would
+    deliver them; ``update_every`` > 0: call ``update`` after that many pose samples. Returns the decisions made."""
     streams: list[tuple[str, IntArray, FloatArray]] = [
         ("pose", log.pose.t_ns, np.column_stack((log.pose.x_m, log.pose.y_m)))]
     if log.nominal is not None:
         streams.append(("nominal", log.nominal.t_ns, np.column_stack((log.nominal.x_m, log.nominal.y_m))))
     if log.cmd_t_ns is not None and log.cmd_u is not None:
         streams.append(("cmd", log.cmd_t_ns, log.cmd_u))
+    push: dict[str, Callable[..., None]] = {"pose": monitor.push_pose, "nominal": monitor.push_nominal,
+                                            "cmd": monitor.push_cmd}
+    for name, sig in sorted(log.signals.items()):
+        streams.append((f"signal:{name}", sig.t_ns, sig.value.reshape(-1, 1)))
+        push[f"signal:{name}"] = partial(monitor.push_signal, name)
     kinds = np.concatenate([np.full(t.shape[0], k, dtype=np.int64) for k, (_, t, _) in enumerate(streams)])
     index = np.concatenate([np.arange(t.shape[0], dtype=np.int64) for _, t, _ in streams])
     order = np.argsort(np.concatenate([t for _, t, _ in streams]), kind="stable")
-    push = {"pose": monitor.push_pose, "nominal": monitor.push_nominal, "cmd": monitor.push_cmd}
     columns = [(push[name], t.tolist(), values.tolist()) for name, t, values in streams]
     out: list[Decision] = []
     poses = 0
