@@ -442,9 +442,10 @@ class OnlineMonitor:
         nan = np.isnan(atom_m)
         p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
                                                                                                       atom_m)
-        mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
-        half = 0.5 * step
-        g_lo, g_hi = mid - half, mid + half
+        with np.errstate(invalid="ignore"):  # inf - inf (an unknown atom over an unbounded gap): NaN, then unknown
+            mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
+            half = 0.5 * step
+            g_lo, g_hi = mid - half, mid + half
         g_lo[np.isnan(g_lo)] = -np.inf
         g_hi[np.isnan(g_hi)] = np.inf
         # the timed run's entries (paper, Definition 3): where the containing region changes
