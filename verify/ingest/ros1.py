@@ -23,7 +23,7 @@ from __future__ import annotations
 import bz2
 import os
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import overload
@@ -37,11 +37,9 @@ from verify.ingest.records import (
     ROS1,
     WORKERS,
     SpanError,
-    gather,
     in_order,
     read_records,
     read_scratch,
-    record_ends,
     retain_freed_memory,
 )
 
@@ -135,6 +133,12 @@ class _File:
         self.size = os.fstat(fd).st_size
         self._block = b""
         self._block_pos = 0
+
+    def fork(self) -> _File:
+        """Another reader of the same file with its own read-ahead block (one per thread)."""
+        other = object.__new__(_File)
+        other.fd, other.size, other._block, other._block_pos = self.fd, self.size, b"", 0
+        return other
 
     def read(self, pos: int, n: int) -> bytes:
         if pos < 0 or n < 0 or pos + n > self.size:
@@ -230,7 +234,7 @@ def _chunk_head(f: _File, pos: int) -> tuple[str, int, int, int, int]:
     return compression, size, start, dlen, nxt
 
 
-def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) -> U8Array:
+def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) -> bytes:
     """Uncompressed content of a chunk (read and decompressed whole)."""
     if start + dlen > f.size:
         raise _UnusualError("read past the end of the file")
@@ -245,7 +249,7 @@ def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) ->
             raise _UnusualError(f"chunk does not decompress ({err})") from err
     if len(inner) != size:
         raise _UnusualError("chunk size differs from its header")
-    return np.frombuffer(inner, dtype=np.uint8)
+    return bytes(inner)
 
 
 def _entries(plan_item: dict[int, npt.NDArray[np.void]], start: int = 0) -> tuple[IntArray, IntArray, IntArray]:
@@ -260,31 +264,49 @@ def _entries(plan_item: dict[int, npt.NDArray[np.void]], start: int = 0) -> tupl
     return offs, cid, times
 
 
-def _chunk_records(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
-                   ) -> tuple[U8Array, IntArray, IntArray, IntArray]:
-    """The wanted records of one chunk copied out of it -> (compact bytes, each record's position in them, its
-    connection id, its log time), by offset. An uncompressed chunk whose wanted records are not all of its records
-    is read record by record (``verify.ingest.records``); otherwise (or when those reads find anything odd) the
-    chunk is read (and decompressed) whole and dropped once its wanted records are copied out.
-    ``head``: compression, uncompressed size, data start and data length of the chunk record."""
+def _fetch(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
+           ) -> tuple[U8Array, IntArray, IntArray, IntArray] | bytes:
+    """A chunk's wanted records read one by one (an uncompressed chunk whose records are not all wanted), else the
+    whole chunk read and decompressed (bytes; the caller copies the records out)."""
     compression, size, start, dlen = head
-    offs, cid, times = _entries(mine)
-    if compression == "none" and dlen == size and offs.shape[0] < total:
+    if compression == "none" and dlen == size and sum(len(x) for x in mine.values()) < total:
+        offs, cid, times = _entries(mine)
         try:
             u8, pos = read_records(f.fd, start, size, offs, ROS1)
         except SpanError:
             pass
         else:
             return u8, pos, cid, times
-    chunk = _chunk_body(f, compression, size, start, dlen)
-    ends = record_ends(chunk, ROS1, offs)
-    if np.any(ends < 0) or np.any(ends > np.append(offs[1:], size)):
-        raise _UnusualError("index offset outside its chunk or records overlap")
-    lengths = ends - offs
-    pos = np.zeros(offs.shape[0], dtype=np.int64)
-    if offs.shape[0] > 1:
+    return _chunk_body(f, compression, size, start, dlen)
+
+
+def _copy_records(chunk: bytes, mine: dict[int, npt.NDArray[np.void]]) -> tuple[U8Array, IntArray, IntArray, IntArray]:
+    """The wanted records copied out of a whole chunk, by offset: a plain loop (a chunk holds a few dozen wanted
+    records; numpy's per-call cost would exceed the work). Each record must end before the next wanted one (or the
+    chunk) ends."""
+    entries = sorted((o, sec * 1_000_000_000 + nsec, cid) for cid, index in mine.items()
+                     for sec, nsec, o in index.tolist())
+    size = len(chunk)
+    pieces: list[bytes] = []
+    lengths: list[int] = []
+    for i, (o, _t, _cid) in enumerate(entries):
+        room = (entries[i + 1][0] if i + 1 < len(entries) else size) - o
+        if room < 8:
+            raise _UnusualError("index offset outside its chunk or records overlap")
+        (hlen,) = struct.unpack_from("<I", chunk, o)
+        if 8 + hlen > room:
+            raise _UnusualError("index offset outside its chunk or records overlap")
+        (dlen,) = struct.unpack_from("<I", chunk, o + 4 + hlen)
+        n = 8 + hlen + dlen
+        if n > room:
+            raise _UnusualError("index offset outside its chunk or records overlap")
+        pieces.append(chunk[o : o + n])
+        lengths.append(n)
+    pos = np.zeros(len(lengths), dtype=np.int64)
+    if len(lengths) > 1:
         np.cumsum(lengths[:-1], out=pos[1:])
-    return gather(chunk, offs, lengths), pos, cid, times
+    return (np.frombuffer(b"".join(pieces), dtype=np.uint8), pos, np.array([e[2] for e in entries], dtype=np.int64),
+            np.array([e[1] for e in entries], dtype=np.int64))
 
 
 def _joined(pieces: list[tuple[U8Array, IntArray, IntArray, IntArray]]) -> tuple[U8Array, IntArray, IntArray,
@@ -384,6 +406,17 @@ def _messages_varied(chunk: U8Array, cid: int | IntArray, offs: IntArray, times:
     return times, np.frombuffer(b"".join(pieces), dtype=np.uint8), lengths
 
 
+def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selected: dict[int, _Conn]
+                  ) -> tuple[dict[int, npt.NDArray[np.void]], int]:
+    """A chunk's index records (right after the chunk record) -> the wanted connections' entries and the number of
+    records in the chunk; the connections must be those its chunk info names."""
+    indexes, _ = _index_records(f, after, n_conns)
+    if set(indexes) != ids:
+        raise _UnusualError("chunk info and index records disagree")
+    mine = {conn_id: index for conn_id, index in indexes.items() if conn_id in selected}
+    return mine, sum(len(x) for x in indexes.values())
+
+
 def _index_records(f: _File, pos: int, count: int) -> tuple[dict[int, npt.NDArray[np.void]], int]:
     out: dict[int, npt.NDArray[np.void]] = {}
     for _ in range(count):
@@ -435,23 +468,27 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
     parts: dict[str, _Parts] = {}
     for c in selected.values():
         parts.setdefault(c.topic, _Parts([], [], []))
-    plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]] = []
-    for chunk_pos, n_conns, ids in chunks:
-        # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
-        compression, size, start, dlen, after = _chunk_head(f, chunk_pos)
-        indexes, _ = _index_records(f, after, n_conns)
-        if set(indexes) != ids:
-            raise _UnusualError("chunk info and index records disagree")
-        mine = {conn_id: index for conn_id, index in indexes.items() if conn_id in selected}
-        if not mine:
-            continue
-        plan.append(((compression, size, start, dlen), mine, sum(len(x) for x in indexes.values())))
-    if plan and all(head[0] == "none" and head[1] == head[3] for head, _m, _t in plan):
-        records = _records_uncompressed(f, plan)
+    # like rosbags' open(), every chunk header and index record is read; data only where it is wanted
+    heads = [(_chunk_head(f, chunk_pos), n_conns, ids) for chunk_pos, n_conns, ids in chunks]
+    if all(h[0] == "none" and h[1] == h[3] for h, _n, ids in heads if not ids.isdisjoint(selected)):
+        plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]] = []
+        for (compression, size, start, dlen, after), n_conns, ids in heads:
+            mine, total = _wanted_index(f, after, n_conns, ids, selected)
+            if mine:
+                plan.append(((compression, size, start, dlen), mine, total))
+        records = _records_uncompressed(f, plan) if plan else _joined([])
     else:
-        # chunks are read (and decompressed) a few ahead in threads, which copy the wanted records out of them
-        workers = WORKERS if any(head[0] != "none" for head, _m, _t in plan) else 1  # threads: decompression only
-        pieces = list(in_order(lambda item: _chunk_records(f, *item), plan, workers=workers))
+        # chunk by chunk: here the index records are parsed and the wanted records copied out (Python work), while
+        # threads read and decompress the next chunks (I/O and decompression release the GIL)
+        def planned() -> Iterator[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]]:
+            for (compression, size, start, dlen, after), n_conns, ids in heads:
+                mine, total = _wanted_index(f, after, n_conns, ids, selected)
+                if mine:
+                    yield (compression, size, start, dlen), mine, total
+
+        pieces = [piece if isinstance(piece, tuple) else _copy_records(piece, mine)
+                  for (_head, mine, _total), piece in in_order(lambda item: (item, _fetch(f.fork(), *item)),
+                                                                planned(), workers=WORKERS)]
         records = _joined(pieces)
     _parse_records(records, selected, parts)
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
