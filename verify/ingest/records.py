@@ -249,7 +249,7 @@ def retain_freed_memory() -> None:
     except (OSError, AttributeError):
         return
     mallopt(_M_MMAP_THRESHOLD, 32 << 20)
-    mallopt(_M_TRIM_THRESHOLD, 64 << 20)
+    mallopt(_M_TRIM_THRESHOLD, 16 << 20)
 
 
 def read_scratch(fd: int, pos: int, n: int) -> memoryview:
