@@ -236,7 +236,7 @@ def retain_freed_memory() -> None:
     Decompressors return a new ``bytes`` per chunk (1-4 MB). glibc serves such sizes with a fresh ``mmap`` or
     trims them off the heap when freed, so every 4 KiB page of every chunk is faulted in anew: measured here, 200
     lz4 chunks of 1.8 MB decompressed in 0.79 s (0.62 s of it system time) against 0.11 s once the memory is
-    reused. ``mallopt``: blocks below 32 MiB come from the heap (``M_MMAP_THRESHOLD``) and up to 64 MiB of free
+    reused. ``mallopt``: blocks below 32 MiB come from the heap (``M_MMAP_THRESHOLD``) and up to 16 MiB of free
     memory stays there (``M_TRIM_THRESHOLD``), so the process keeps at most that much more than it uses. Without
     glibc (musl, macOS) nothing is changed."""
     global _RETAINED  # noqa: PLW0603  # one process-wide setting, made once
