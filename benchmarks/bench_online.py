@@ -7,7 +7,8 @@ Ours: ``verify.online.OnlineMonitor`` fed one pose, one nominal and one command 
 ``--hours`` of run, with its default batching (the buffered samples are judged every ``max_pending`` = 100 pose
 samples, i.e. once per second of run, and each verdict carries the time of the sample that decided it);
 ``--update-every N`` also calls ``update()`` every N pose samples, as a ROS node's timer would. Reported: amortised
-microseconds per pose sample (the three pushes included), the slowest single push after the first, the values held.
+microseconds per pose sample (the three pushes included; a pass without timers around each push), the slowest
+single push after the first (a second pass timing every push), the values held.
 
 RTAMT: ``StlDiscreteTimeSpecification`` (its online monitor accepts past-time operators only), on
 ``historically(not obs) and once[6000:8000](mission_2) and once[0:3000](mission_1)`` -- the paper's formula shifted to
@@ -59,11 +60,24 @@ def run_ours(n: int, update_every: int) -> Ours:
     nxl, nyl = (x + 0.002).tolist(), (y - 0.002).tolist()
     u = np.clip(np.gradient(x) * 100.0, -0.2, 0.2).tolist()
     v = np.clip(np.gradient(y) * 100.0, -0.2, 0.2).tolist()
+    # amortised cost: a pass without per-push timers (two clock reads per push cost ~2 us here, not the monitor's)
+    mon = OnlineMonitor(sc)
+    push_nominal, push_pose, push_cmd = mon.push_nominal, mon.push_pose, mon.push_cmd
+    start, start_cpu = time.perf_counter_ns(), time.process_time()
+    for i in range(n):
+        push_nominal(tl[i], nxl[i], nyl[i])
+        push_pose(tl[i], xl[i], yl[i])
+        push_cmd(tl[i], u[i], v[i], 0.0)
+        if update_every and i % update_every == 0:
+            mon.update()
+    mon.update()
+    mon.close()
+    elapsed, elapsed_cpu = (time.perf_counter_ns() - start) * 1e-9, time.process_time() - start_cpu
+    # latency: a second pass timing every push (the slowest one after the first)
     mon = OnlineMonitor(sc)
     lines: list[str] = []
     slowest = slowest_cpu = over = 0
     perf, cpu = time.perf_counter_ns, time.thread_time_ns
-    start, start_cpu = perf(), time.process_time()
     for i in range(n):
         a, c = perf(), cpu()
         mon.push_nominal(tl[i], nxl[i], nyl[i])
@@ -78,7 +92,6 @@ def run_ours(n: int, update_every: int) -> Ours:
     lines.extend(d.line() for d in mon.update())
     held = mon.retained_positions
     res = mon.close()
-    elapsed, elapsed_cpu = (perf() - start) * 1e-9, time.process_time() - start_cpu
     lines.extend(d.line() for d in mon.final_decisions)
     return Ours(elapsed / n * 1e6, elapsed_cpu / n * 1e6, slowest * 1e-6, slowest_cpu * 1e-6, over, held, lines,
                 res.verdict)
