@@ -124,7 +124,7 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         fd = fh.fileno()
         size = os.fstat(fd).st_size
         # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
-        whole = _sparse_all(fd, size, selected, wanted)
+        whole = _sparse(fd, size, selected, wanted)
         if whole is not None:
             batches: Iterable[tuple[IntArray, IntArray, IntArray, IntArray, U8Array]] = [whole]
         else:
@@ -168,23 +168,21 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     returned bytes (the decompressed chunk, or only its wanted records: ``_sparse``)."""
     start = int(chunk.chunk_start_offset)
     usize = int(chunk.uncompressed_size)
-    got = _sparse(fd, chunk, wanted) if not chunk.compression else None
-    if got is not None:
-        pos, length, u8 = got
-    else:
-        (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
-        at, csize = start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size)
-        if at + csize > size:
-            raise _UnusualError("read past the end of the file")
-        # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer, then decompressed
-        compressed = _pread(fd, size, at, csize) if not chunk.compression else read_scratch(fd, at, csize)
-        raw = _decompress(compressed, chunk.compression, usize, crc)
-        del compressed
-        u8 = np.frombuffer(raw, dtype=np.uint8)
-        hints = _index_hints(fd, size, chunk, usize)
-        pos, op, length = _walk(raw, u8, hints)
-        is_msg = op == _OP_MESSAGE
-        pos, length = pos[is_msg], length[is_msg]
+    if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted)) is not None:
+        return sparse  # only its wanted records read
+    (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
+    at, csize = start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size)
+    if at + csize > size:
+        raise _UnusualError("read past the end of the file")
+    # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer, then decompressed
+    compressed = _pread(fd, size, at, csize) if not chunk.compression else read_scratch(fd, at, csize)
+    raw = _decompress(compressed, chunk.compression, usize, crc)
+    del compressed
+    u8 = np.frombuffer(raw, dtype=np.uint8)
+    hints = _index_hints(fd, size, chunk, usize)
+    pos, op, length = _walk(raw, u8, hints)
+    is_msg = op == _OP_MESSAGE
+    pos, length = pos[is_msg], length[is_msg]
     if np.any(length < _MSG_HEAD):
         raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
     channel = _read_u(u8, pos + 9, 2)
@@ -198,68 +196,17 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
 
 
-def _message_index(fd: int, pos: int) -> tuple[int, IntArray, IntArray]:
-    """The message index record at file position ``pos`` -> (channel, log times, record offsets)."""
-    head = os.pread(fd, 15, pos)
-    if len(head) != 15 or head[0] != _OP_MESSAGE_INDEX:
-        raise SpanError("not a message index record")
-    (rec_len, channel, arr_len) = struct.unpack_from("<QHI", head, 1)
-    if arr_len % 16 or arr_len + 6 > rec_len:
-        raise SpanError("message index record of a bad length")
-    body = os.pread(fd, arr_len, pos + 15)
-    if len(body) != arr_len:
-        raise SpanError("short read")
-    pairs = np.frombuffer(body, dtype="<u8").reshape(-1, 2)
-    if np.any(pairs >= np.uint64(2**63)):
-        raise SpanError("value beyond int64")
-    return int(channel), pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-
-
-def _sparse(fd: int, chunk: ChunkInfo, wanted: set[int]) -> tuple[IntArray, IntArray, U8Array] | None:
-    """The wanted channels' message records of an uncompressed chunk, read one by one at the offsets of their
-    message index records (``verify.ingest.records``) -> (record starts, content lengths, compact bytes); None
-    when every record of the chunk is wanted (the whole chunk is read) or anything disagrees with the index (the
-    chunk is then walked whole). Each record read must be a message of the channel and log time its index entry
-    names. Not checked here, unlike a whole read: the chunk's CRC, which covers bytes that are not read; and
-    messages missing from the message index (writers index every message; the summary's counts come from it)."""
-    counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
-    mine = sorted(cid for cid in wanted if counts.get(cid, 0))
-    if sum(counts[cid] for cid in mine) >= sum(counts.values()):
-        return None
-    try:
-        chans: list[IntArray] = []
-        times: list[IntArray] = []
-        offs: list[IntArray] = []
-        for cid in mine:
-            channel, log_ns, offsets = _message_index(fd, int(chunk.message_index_offsets[cid]))
-            if channel != cid:
-                return None
-            chans.append(np.full(offsets.shape[0], cid, dtype=np.int64))
-            times.append(log_ns)
-            offs.append(offsets)
-        offsets = np.concatenate(offs)
-        order = np.argsort(offsets, kind="stable")
-        offsets, chan, log_ns = offsets[order], np.concatenate(chans)[order], np.concatenate(times)[order]
-        base = int(chunk.chunk_start_offset) + 9 + 40
-        u8, pos = read_records(fd, base, int(chunk.uncompressed_size), offsets, MCAP)
-        if pos.shape[0] and (np.any(u8[pos] != _OP_MESSAGE) or np.any(_read_u(u8, pos + 1, 8) < _MSG_HEAD)):
-            return None
-        length = _read_u(u8, pos + 1, 8)
-        if not (np.array_equal(_read_u(u8, pos + 9, 2), chan) and np.array_equal(_read_u(u8, pos + 15, 8), log_ns)):
-            return None
-    except (SpanError, _UnusualError, KeyError):
-        return None
-    return pos, length, u8
-
-
-def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
-                ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array] | None:
-    """``_sparse`` for every chunk at once, when every chunk read is uncompressed and not all of its records are
-    wanted: the wanted channels' message index records of all chunks (one read per chunk), every wanted record read
-    at its file position (``verify.ingest.records``: one read per cluster of nearby records, each bounded by its
-    chunk), checked and ordered with a handful of numpy calls for the whole file. The result is what merging
-    ``_chunk_messages`` of each chunk gives: (log time, chunk offset, record position), i.e. (log time, file
-    position). None when any chunk is not of that kind or anything disagrees with an index (then chunk by chunk)."""
+def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
+            ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array] | None:
+    """The wanted channels' message records of uncompressed chunks whose records are not all wanted, read message
+    by message: the message index records of every chunk (one read per chunk) give each wanted message's file
+    position; the records are read there (``verify.ingest.records``: one read per cluster of nearby records, each
+    bounded by its chunk) and each must be a message of the channel and log time its index entry names; then kept
+    and ordered as ``_chunk_messages`` keeps and orders a chunk's messages, for all chunks at once: (log time, file
+    position), i.e. (log time, chunk offset, record position). Not checked, unlike a whole read: the chunks' CRCs,
+    which cover bytes that are not read; messages missing from the message index (writers index every message; the
+    summary's counts come from it). None when a chunk is compressed or has every record wanted, or anything
+    disagrees with an index (then the chunks are walked whole)."""
     if not chunks or any(c.compression for c in chunks):
         return None
     pairs: list[npt.NDArray[np.uint64]] = []  # per (chunk, channel): its message index entries (log time, offset)
@@ -278,16 +225,13 @@ def _sparse_all(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             base = int(chunk.chunk_start_offset) + 9 + 40
             limit = base + int(chunk.uncompressed_size)
             for cid in mine:
-                rel = int(chunk.message_index_offsets[cid]) - lo
-                if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
+                got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)
+                if got is None or got[0] != cid:
                     return None
-                (rec_len, channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
-                if channel != cid or arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
-                    return None
-                pairs.append(np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15))
-                meta.append((cid, arr_len // 16, base, limit, int(chunk.message_start_time),
+                pairs.append(got[1])
+                meta.append((cid, got[1].shape[0], base, limit, int(chunk.message_start_time),
                              int(chunk.message_end_time)))
-        flat = np.concatenate(pairs).reshape(-1, 2)
+        flat = np.concatenate(pairs)
         if np.any(flat >= np.uint64(2**63)):
             return None
         m = np.array(meta, dtype=np.int64).reshape(-1, 6)
@@ -326,6 +270,17 @@ def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:
     return values.astype(np.int64)
 
 
+def _index_record(region: bytes, rel: int) -> tuple[int, npt.NDArray[np.uint64]] | None:
+    """The message index record at ``rel`` in ``region`` -> (channel, its (log time, record offset) pairs as rows);
+    None when no well-formed message index record is there."""
+    if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
+        return None
+    (rec_len, channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
+    if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
+        return None
+    return int(channel), np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15).reshape(-1, 2)
+
+
 def _index_hints(fd: int, size: int, chunk: ChunkInfo, usize: int) -> IntArray:
     """Candidate record starts from the chunk's message index records (sorted, unique, inside the chunk). The index
     is only a hint, so a message index that cannot be parsed just gives no candidates."""
@@ -339,14 +294,9 @@ def _index_hints(fd: int, size: int, chunk: ChunkInfo, usize: int) -> IntArray:
     region = os.pread(fd, end - lo, lo)
     found: list[IntArray] = []
     for off in offsets:
-        rel = off - lo
-        if rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
-            continue
-        (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
-        if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
-            continue
-        pairs = np.frombuffer(region, dtype="<u8", count=arr_len // 8, offset=rel + 15)
-        found.append(pairs[1::2].astype(np.int64))
+        got = _index_record(region, off - lo)
+        if got is not None:
+            found.append(got[1][:, 1].astype(np.int64))
     if not found:
         return np.zeros(0, dtype=np.int64)
     cand = np.unique(np.concatenate(found))
