@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = ["MCAP", "ROS1", "WORKERS", "SpanError", "gather", "in_order", "read_records", "read_scratch",
-           "record_ends", "retain_freed_memory"]
+           "record_ends", "record_size_at", "retain_freed_memory"]
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -134,7 +134,7 @@ def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *
         room = int(lim[b - 1]) - last
         # the cluster and a little beyond: the last record's length is then usually known without a second read
         piece = _pread(fd, base + lo, last - lo + min(room, _SLACK_B))
-        size = _size_in(piece, kind, last - lo, room)
+        size = record_size_at(piece, kind, last - lo, room)
         if size is None:
             size = _record_size(fd, kind, base + last, room)
         n = last - lo + size
@@ -182,7 +182,7 @@ def _group_records(pieces: list[bytes], cuts: list[int], offsets: IntArray, lim:
     return gather(u8, pos, lengths), lengths
 
 
-def _size_in(piece: bytes, kind: str, rel: int, room: int) -> int | None:
+def record_size_at(piece: bytes, kind: str, rel: int, room: int) -> int | None:
     """Size of the record at ``rel`` in ``piece`` when its length fields are inside ``piece`` (else None);
     ``SpanError`` when it would not fit in ``room``."""
     if kind == ROS1:

@@ -11,11 +11,13 @@ per connection listing ``(time, offset)`` of its messages inside the uncompresse
 the message data records are located at those offsets and checked with numpy (same header layout, ``op`` = 2, the
 right connection id, time equal to the index), and the payloads are copied out with strided views (no per-message
 Python object). Messages are ordered as ``rosbags`` yields them: by (time, chunk position, offset). The file is
-opened read-only and read with positioned reads; chunks without a wanted connection are not read, and from an
-uncompressed chunk whose records are not all wanted only the wanted records are read (``verify.ingest.records``,
-at the index offsets). Compressed chunks are decompressed whole, a few ahead of the parser in threads
-(``verify.ingest.records.in_order``); what is kept is copied out of them, so the working set is a few chunks plus
-the wanted payloads, whatever the file's size.
+opened read-only and read with positioned reads; chunks without a wanted connection are not read. When every
+chunk with a wanted connection is uncompressed, the wanted records of all chunks are read in one pass at their file
+positions (``verify.ingest.records.read_records``: nothing else of the chunks is read or kept). Otherwise chunks
+are read and decompressed whole a few ahead in threads (``verify.ingest.records.in_order``) while this thread
+parses the index records and copies the wanted records out of each chunk, which is then dropped (an uncompressed
+chunk among them is read record by record). Either way the records are parsed once per topic, and the working set
+is a few chunks plus the wanted records, whatever the file's size.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from verify.ingest.records import (
     in_order,
     read_records,
     read_scratch,
+    record_size_at,
     retain_freed_memory,
 )
 
@@ -291,14 +294,11 @@ def _copy_records(chunk: bytes, mine: dict[int, npt.NDArray[np.void]]) -> tuple[
     lengths: list[int] = []
     for i, (o, _t, _cid) in enumerate(entries):
         room = (entries[i + 1][0] if i + 1 < len(entries) else size) - o
-        if room < 8:
-            raise _UnusualError("index offset outside its chunk or records overlap")
-        (hlen,) = struct.unpack_from("<I", chunk, o)
-        if 8 + hlen > room:
-            raise _UnusualError("index offset outside its chunk or records overlap")
-        (dlen,) = struct.unpack_from("<I", chunk, o + 4 + hlen)
-        n = 8 + hlen + dlen
-        if n > room:
+        try:
+            n = record_size_at(chunk, ROS1, o, room)
+        except SpanError:
+            n = None
+        if n is None:
             raise _UnusualError("index offset outside its chunk or records overlap")
         pieces.append(chunk[o : o + n])
         lengths.append(n)
@@ -500,22 +500,26 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
 
 def _records_uncompressed(f: _File, plan: list[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]],
                                                      int]]) -> tuple[U8Array, IntArray, IntArray, IntArray]:
-    """Every wanted record of uncompressed chunks in one pass: the index entries of all chunks as file positions,
-    the records read at them (``verify.ingest.records``: one ``pread`` per cluster of nearby records, each record
-    bounded by the end of its chunk) -> as ``_chunk_records``, for the whole file."""
-    entries = [(*_entries(mine, start), np.full(sum(x.shape[0] for x in mine.values()), start + size, dtype=np.int64))
-               for (_compression, size, start, _dlen), mine, _total in plan]
-    at = np.concatenate([e[0] for e in entries])
-    cid = np.concatenate([e[1] for e in entries])
-    t = np.concatenate([e[2] for e in entries])
-    lim = np.concatenate([e[3] for e in entries])
+    """Every wanted record of uncompressed chunks in one pass: the index entries of all chunks as file positions
+    (one concatenation and sort for the file), the records read at them (``verify.ingest.records``: one ``pread``
+    per cluster of nearby records, each record bounded by the end of its chunk) -> as ``_copy_records``, for the
+    whole file."""
+    items = [(start, start + size, cid, index) for (_compression, size, start, _dlen), mine, _total in plan
+             for cid, index in mine.items()]
+    counts = np.array([len(index) for *_, index in items], dtype=np.int64)
+    index = np.concatenate([x for *_, x in items])
+    at = index["offset"].astype(np.int64) + np.repeat(np.array([x[0] for x in items], dtype=np.int64), counts)
+    order = np.argsort(at, kind="stable")
+    at = at[order]
     if at.shape[0] > 1 and np.any(np.diff(at) <= 0):
-        raise _UnusualError("chunks overlap")
+        raise _UnusualError("two index entries for one record")
+    cid = np.repeat(np.array([x[2] for x in items], dtype=np.int64), counts)[order]
+    lim = np.repeat(np.array([x[1] for x in items], dtype=np.int64), counts)[order]
     try:
         u8, pos = read_records(f.fd, 0, f.size, at, ROS1, limits=lim)
     except SpanError as err:
         raise _UnusualError(str(err)) from err
-    return u8, pos, cid, t
+    return u8, pos, cid, _index_times(index)[order]
 
 
 def _parse_records(records: tuple[U8Array, IntArray, IntArray, IntArray], selected: dict[int, _Conn],
