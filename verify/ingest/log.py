@@ -174,19 +174,18 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
         offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
         return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
                          offsets_s=offsets)
-    except VerifyError:
+    except BaseException as err:
         if job is not None:
-            job.cancel()
+            job.cancel()  # the file digest of a log that cannot be certified is not needed
+        if isinstance(err, READ_ERRORS) and not isinstance(err, VerifyError):
+            raise _unreadable(p, err) from err
         raise
-    except READ_ERRORS as err:
-        if job is not None:
-            job.cancel()
-        fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
-        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
-    except BaseException:
-        if job is not None:
-            job.cancel()
-        raise
+
+
+def _unreadable(p: Path, err: BaseException) -> LogReadError:
+    """A reader's error on damaged bytes, as one line naming the file and the problem in words."""
+    fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
+    return LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p))
 
 
 def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DIGEST, *, salvage: bool = False
@@ -203,8 +202,7 @@ def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DI
     except VerifyError:
         raise
     except READ_ERRORS as err:
-        fmt = p.suffix.lstrip(".") or ("ROS2 bag" if p.is_dir() else "")
-        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}".replace("  ", " "), path=str(p)) from err
+        raise _unreadable(p, err) from err
     if got is None:  # only a cancelled digest has no value
         raise RuntimeError(f"digest of {p} was not computed")
     return got
