@@ -2,7 +2,9 @@
 
     python3 benchmarks/fuzz_certify.py [--cases 3000] [--seed 1] [--timeout 30] [--dir /tmp/fuzz_certify] [-v]
 
-Seed logs are written here (ROS1 ``.bag``, bare ``.mcap``, bare sqlite3 ``.db3`` and a ROS2 bag folder), each as a
+Seed logs are written here (ROS1 ``.bag``, bare ``.mcap``, bare sqlite3 ``.db3`` and a ROS2 bag folder; and, as a
+lab recording is, small chunks shared with a camera-like topic certification does not read: ROS1 uncompressed and
+lz4, MCAP uncompressed and zstd -- the message-level, one-pass and decompressing readers), each as a
 clean run (stays in R1: it passes ``G !(obs_1 | ... | obs_4)``) and a violating run (three separate visits to an
 obstacle's centre, so no single damage can hide all of them). Every case runs the real command line in this process
 (``tubempc.cli.main`` with stdout/stderr captured, a per-case alarm to detect hangs) and is classified:
@@ -47,7 +49,7 @@ from typing import Any
 
 import numpy as np
 from rosbags.rosbag1 import Writer as Writer1
-from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
@@ -58,7 +60,8 @@ SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
 TIME0_NS = 1_767_225_600 * 10**9
 RATE_HZ = 10.0
 END_S = 30.0
-FORMATS = ("bag", "mcap", "db3", "dir")
+FORMATS = ("bag", "mcap", "db3", "dir", "bag-cam", "bag-lz4", "mcap-cam", "mcap-zstd")
+CAMERA = "/camera/image_raw"  # the unread topic of the "-cam" and compressed formats
 POSE = "geometry_msgs/msg/PoseStamped"
 TWIST = "geometry_msgs/msg/Twist"
 STRING = "std_msgs/msg/String"
@@ -116,8 +119,10 @@ def _cdr_string_patch(payload: bytes, ros1: bool, new: bytes) -> bytes:
 
 
 def write_run(run: Run, path: Path, fmt: str) -> Path:
-    """Write ``run`` with rosbags writers; ``fmt``: bag, mcap (bare file), db3 (bare file), dir (sqlite3 folder)."""
-    ros1 = fmt == "bag"
+    """Write ``run`` with rosbags writers; ``fmt``: bag, mcap (bare file), db3 (bare file), dir (sqlite3 folder);
+    bag-cam / bag-lz4 / mcap-cam / mcap-zstd: with a 2 KB camera message per sample and chunks of a few samples."""
+    ros1 = fmt.startswith("bag")
+    camera = "-" in fmt
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     ser = store.serialize_ros1 if ros1 else store.serialize_cdr
     ty = store.types
@@ -146,6 +151,8 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
             tw = ty[TWIST](linear=v3(x=float(run.cmd[i, 0]), y=float(run.cmd[i, 1]), z=0.0),
                            angular=v3(x=0.0, y=0.0, z=float(run.cmd[i, 2])))
             msgs.append((int(run.t_ns[i]), topics.cmd_vel, TWIST, bytes(ser(tw, TWIST))))
+        if camera:
+            msgs.append((int(run.t_ns[i]) + 1, CAMERA, STRING, bytes(ser(ty[STRING](data="c" * 2000), STRING))))
         if "solver" in run.topics and i % 10 == 0:
             status = {"t_s": i / RATE_HZ, "status": "Solve_Succeeded", "success": True, "iterations": 4}
             data = bytes(ser(ty[STRING](data=json.dumps(status)), STRING))
@@ -157,21 +164,31 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
         msgs.append((TIME0_NS, topics.metadata, STRING, bytes(ser(ty[STRING](data=json.dumps(meta)), STRING))))
     msgs.sort(key=lambda m: m[0])
 
-    def write_all(writer: Any) -> None:
+    def write_all(writer: Any, close_chunk: Callable[[], None] | None = None) -> None:
         conns: dict[str, Any] = {}
-        for t, topic, msgtype, data in msgs:
+        for k, (t, topic, msgtype, data) in enumerate(msgs):
             if topic not in conns:
                 conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
             writer.write(conns[topic], t, data)
+            if close_chunk is not None and k % 40 == 39:
+                close_chunk()
 
     if ros1:
-        with Writer1(path) as w1:
+        w1 = Writer1(path)
+        if camera:
+            w1.chunk_threshold = 16 << 10
+        if fmt == "bag-lz4":
+            w1.set_compression(Writer1.CompressionFormat.LZ4)
+        with w1:
             write_all(w1)
         return path
-    storage = StoragePlugin.MCAP if fmt == "mcap" else StoragePlugin.SQLITE3
+    storage = StoragePlugin.MCAP if fmt.startswith("mcap") else StoragePlugin.SQLITE3
     bag_dir = path if fmt == "dir" else path.parent / (path.name + ".d")
-    with Writer2(bag_dir, version=9, storage_plugin=storage) as w2:
-        write_all(w2)
+    w2 = Writer2(bag_dir, version=9, storage_plugin=storage)
+    if fmt == "mcap-zstd":
+        w2.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with w2:
+        write_all(w2, w2.storage.close_chunk if camera else None)  # type: ignore[union-attr]
     if fmt == "dir":
         return path
     (inner,) = [p for p in bag_dir.iterdir() if p.suffix in (".mcap", ".db3")]
@@ -180,7 +197,8 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
     return path
 
 
-SUFFIX = {"bag": ".bag", "mcap": ".mcap", "db3": ".db3", "dir": ""}
+SUFFIX = {"bag": ".bag", "mcap": ".mcap", "db3": ".db3", "dir": "", "bag-cam": ".bag", "bag-lz4": ".bag",
+          "mcap-cam": ".mcap", "mcap-zstd": ".mcap"}
 
 
 def seed_path(root: Path, fmt: str, violating: bool) -> Path:
@@ -365,7 +383,7 @@ def content_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: 
             truth = "undecidable"
     elif kind == "outlier_stamp":
         k = rng.randrange(n)
-        run.stamp_ns[k] = rng.choice([-5 * 10**9, 0, 10**9, 86_400 * 10**9]) if fmt != "bag" else \
+        run.stamp_ns[k] = rng.choice([-5 * 10**9, 0, 10**9, 86_400 * 10**9]) if not fmt.startswith("bag") else \
             rng.choice([0, 10**9, 86_400 * 10**9])
 
         def must_pass(res: Outcome) -> str | None:
@@ -390,7 +408,7 @@ def content_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: 
         require = _not_unusable
     elif kind == "bad_status_utf8":
         body = b'{"success": \xff\xfe}'
-        run.status_patch = (struct.pack("<I", len(body)) + body if fmt == "bag"
+        run.status_patch = (struct.pack("<I", len(body)) + body if fmt.startswith("bag")
                             else b"\0\x01\0\0" + struct.pack("<I", len(body) + 1) + body + b"\0")
         require = _not_unusable
     elif kind == "wrong_pose_type":
