@@ -60,7 +60,7 @@ if sys.version_info >= (3, 14):
 else:
     from backports import zstd  # a rosbags dependency
 
-__all__ = ["TopicMessages", "gather", "read_mcap_storage"]
+__all__ = ["TopicMessages", "gather", "read_mcap_storage", "zstd"]
 
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
@@ -100,7 +100,7 @@ def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) 
     try:
         return _read(storage, connections)
     except (_UnusualError, SpanError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
-            AttributeError, TypeError, MemoryError):
+            AttributeError, TypeError, MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk
         return None
 
 

@@ -16,14 +16,19 @@ from rosbags.rosbag1 import ReaderError as ReaderError1
 from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.serde import SerdeError
 
-__all__ = ["READ_ERRORS", "in_words"]
+from verify.ingest.mcap import zstd
+
+__all__ = ["DECOMPRESS_ERRORS", "READ_ERRORS", "in_words"]
+
+#: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
+DECOMPRESS_ERRORS: tuple[type[BaseException], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
 
 #: what readers and decoders raise on damaged bytes (AssertionError: rosbags checks its index with ``assert``;
-#: RuntimeError: lz4; MemoryError: a corrupt size field; TypeError/AttributeError: a record missing a field)
+#: MemoryError: a corrupt size field; TypeError/AttributeError: a record missing a field)
 READ_ERRORS: tuple[type[BaseException], ...] = (
     ReaderError1, ReaderError2, SerdeError, AssertionError, OverflowError, UnicodeDecodeError, KeyError, IndexError,
-    ValueError, TypeError, AttributeError, struct.error, EOFError, OSError, sqlite3.Error, apsw.Error, zlib.error,
-    MemoryError, RecursionError, RuntimeError, NotImplementedError)
+    ValueError, TypeError, AttributeError, struct.error, EOFError, sqlite3.Error, apsw.Error, MemoryError,
+    RecursionError, NotImplementedError, *DECOMPRESS_ERRORS)
 
 _DETAIL_CHARS = 160
 
@@ -56,7 +61,7 @@ def in_words(err: BaseException) -> str:
         words = "its structure is nested too deeply"
     elif isinstance(err, sqlite3.Error | apsw.Error):
         words = "the sqlite3 database is damaged or not a rosbag2 database"
-    elif isinstance(err, zlib.error | RuntimeError) or "decompress" in str(err).lower():
+    elif isinstance(err, zlib.error | RuntimeError | zstd.ZstdError) or "decompress" in str(err).lower():
         words = "a compressed chunk cannot be decompressed"
     elif isinstance(err, struct.error | EOFError):
         words = "it ends in the middle of a record (truncated)"

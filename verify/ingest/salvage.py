@@ -3,7 +3,7 @@
 input: a ROS1 ``.bag`` or an ``.mcap`` file -> output: a ``Walk`` whose ``messages`` iterator yields
 ``SalvagedMessage`` for every message in a *complete* record (ROS1: complete chunks, walked from the file start;
 MCAP: complete top-level records and chunks, walked as a stream). The walk stops at the first incomplete or
-malformed record and says where (``stop_reason``). Files are opened read-only.
+malformed record, or chunk that does not decompress, and says where (``stop_reason``). Files are opened read-only.
 """
 
 from __future__ import annotations
@@ -13,6 +13,9 @@ import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from verify.ingest.mcap import zstd
+from verify.ingest.readerrors import DECOMPRESS_ERRORS
 
 __all__ = ["SalvagedMessage", "Walk", "walk_mcap", "walk_ros1"]
 
@@ -79,6 +82,11 @@ def _ros1_records(buf: bytes, pos: int) -> Iterator[tuple[int, dict[str, bytes],
         pos = nxt
 
 
+#: what ends a walk at a record: cut or malformed, or a chunk that does not decompress
+_STOPS: tuple[type[BaseException], ...] = (_IncompleteError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
+_STOPS_ROS1: tuple[type[BaseException], ...] = (KeyError, *_STOPS)  # ROS1: also a message of a connection not seen yet
+
+
 def _lz4(data: bytes) -> bytes:
     from lz4.frame import decompress  # type: ignore[import-untyped]  # a rosbags dependency
 
@@ -139,7 +147,7 @@ def walk_ros1(path: Path) -> Walk:
                 elif op == 0x07:
                     _add_ros1_conn(conns, header, data)
                 pos += 8 + hlen + dlen
-        except (_IncompleteError, struct.error, KeyError, OSError, ValueError, EOFError) as err:
+        except _STOPS_ROS1 as err:
             walk.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
             walk.stopped_at = pos
             return
@@ -172,10 +180,7 @@ def _mcap_decompress(data: bytes, compression: str, size: int) -> bytes:
     if compression == "":
         return data
     if compression == "zstd":
-        import zstandard  # type: ignore[import-not-found]  # a rosbags dependency
-
-        out: bytes = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-        return out
+        return zstd.ZstdDecompressor().decompress(data, max_length=size)
     if compression == "lz4":
         return _lz4(data)
     raise ValueError(f"unsupported MCAP chunk compression {compression!r}")
@@ -257,7 +262,7 @@ def walk_mcap(path: Path) -> Walk:
                 else:
                     yield from list(handle(op, rec))
                 pos += 9 + size
-        except (_IncompleteError, struct.error, OSError, ValueError, EOFError, ImportError) as err:
+        except _STOPS as err:
             walk.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
             walk.stopped_at = pos
             return
