@@ -31,7 +31,7 @@ from verify.ingest.decode import _joined, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.ingest.raw import RawLog, RawTopic, fast_ingest
 
-__all__ = ["FieldSamples", "SignalStream", "decode_field", "parse_field_path", "read_signals"]
+__all__ = ["FieldSamples", "SignalStream", "decode_field", "median_period_ns", "parse_field_path", "read_signals"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -265,6 +265,12 @@ def decode_field(raw: RawTopic, ros1: bool, field: str, *, fast: bool | None = N
                         np.asarray(raw.log_ns, dtype=np.int64), np.asarray(values, dtype=np.float64))
 
 
+def median_period_ns(t_ns: npt.NDArray[np.int64]) -> int:
+    """A signal's expected period without ``rate_hz``: the median spacing of its (sorted, distinct) message times;
+    0 (unknown) with fewer than two."""
+    return int(np.median(np.diff(t_ns))) if t_ns.shape[0] >= 2 else 0
+
+
 def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
                  offsets_ns: dict[str, int] | None = None) -> tuple[dict[str, SignalStream], dict[str, Any]]:
     """Every signal atom of the scenario from the raw log: streams on the pose's time base (header stamps when the
@@ -300,10 +306,7 @@ def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
         duplicates = int(t.shape[0] - t_unique.shape[0])
         conflicts = int(np.count_nonzero(conflict))
         t, v = t_unique, np.where(conflict, np.nan, v[first])
-        if spec.rate_hz is not None:
-            period = round(1e9 / spec.rate_hz)
-        else:
-            period = int(np.median(np.diff(t))) if t.shape[0] >= 2 else 0
+        period = round(1e9 / spec.rate_hz) if spec.rate_hz is not None else median_period_ns(t)
         streams[name] = SignalStream(name, spec, t.astype(np.int64), v, period, "header" if header else "log")
         quality[name] = {"topic": spec.topic, "type": topic.msgtype, "messages": int(cols.value.shape[0]),
                          "time_base": "header" if header else "log", "offset_vs_log_s": offset_vs_log,

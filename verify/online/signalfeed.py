@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import SignalSpec
-from verify.ingest.fields import SignalStream
+from verify.ingest.fields import SignalStream, median_period_ns
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.online.stream import Buffer
 from verify.signals import SignalBounds, signal_bounds, values_at
@@ -90,8 +90,7 @@ class SignalFeed:
         if self.fixed_period_ns is not None:
             return self.fixed_period_ns
         if final or self.messages >= 2 * max(self._estimated_at, 1):
-            t = self._all_times()
-            self._period_ns = int(np.median(np.diff(t))) if t.shape[0] >= 2 else 0
+            self._period_ns = median_period_ns(self._all_times())
             self._estimated_at = self.messages
         return self._period_ns
 
@@ -149,7 +148,7 @@ class SignalFeed:
         the compared distances differently from the hold used (then online may differ from offline)."""
         if self.fixed_period_ns is not None or not self._compared:
             return False
-        final = int(DROPOUT_FACTOR * self.period_ns(final=True))
+        final = self.final_hold_ns()
         return any(below > final or above <= final for below, above in self._compared.values())
 
     def final_hold_ns(self) -> int:
