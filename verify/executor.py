@@ -23,7 +23,7 @@ import os
 import re
 import sys
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
@@ -82,7 +82,13 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
         broken: list[int] = []
         pool = ProcessPoolExecutor(max_workers=n, mp_context=context)
         try:
-            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+            futures: dict[Future[R], int] = {}
+            for i, item in enumerate(items):
+                try:
+                    futures[pool.submit(fn, item)] = i
+                except BrokenProcessPool:  # a worker died before the last items were handed out: rerun them too
+                    broken.extend(range(i, len(items)))
+                    break
             for fut in as_completed(futures):
                 try:
                     results[futures[fut]] = fut.result()

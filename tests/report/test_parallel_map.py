@@ -5,6 +5,9 @@ from __future__ import annotations
 import faulthandler
 import functools
 import operator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
 
 import pytest
 
@@ -52,3 +55,19 @@ def test_a_worker_that_dies_is_rerun_alone_and_reported() -> None:
     assert out == [1, "died", 2, 3]
     with pytest.raises(RuntimeError, match="died twice"):
         parallel_map(operator.call, items, workers=2, progress=False)
+
+
+def test_a_pool_that_breaks_while_items_are_handed_out(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker can die before every item is submitted (a crash in the first items on a loaded machine): the pool
+    then refuses new work, and the items not handed out are rerun alone like the bystanders of a crash."""
+    real = ProcessPoolExecutor.submit
+    calls = {"n": 0}
+
+    def submit(self: ProcessPoolExecutor, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise BrokenProcessPool("A child process terminated abruptly, the process pool is not usable anymore")
+        return real(self, fn, *args, **kwargs)
+
+    monkeypatch.setattr(ProcessPoolExecutor, "submit", submit)
+    assert parallel_map(abs, [-1, -5, -2, -3], workers=2, progress=False) == [1, 5, 2, 3]
