@@ -30,6 +30,7 @@ from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
+from verify.outputs import write_output_file
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
 from verify.semantics.trajectory import check_trajectory, reported_margin
@@ -355,6 +356,5 @@ def write_certificate(result: HasCertificate, out_dir: str | Path) -> Path:
     Certificate.model_validate(result.certificate)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "certificate.json"
-    path.write_text(json.dumps(result.certificate, indent=2, sort_keys=False) + "\n", encoding="utf-8")
-    return path
+    return write_output_file(out / "certificate.json", json.dumps(result.certificate, indent=2, sort_keys=False)
+                             + "\n")

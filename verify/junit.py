@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Literal
 
 from verify.certificate import Certificate, Verdict
+from verify.outputs import write_output_file
 
 __all__ = ["INCONCLUSIVE_AS", "InconclusiveAs", "JUnitCase", "JUnitSuite", "certificate_suite", "suite_element",
            "write_junit"]
@@ -91,9 +92,7 @@ def write_junit(suites: Sequence[JUnitSuite], path: str | Path) -> Path:
         "time": f"{sum(s.time_s for s in suites):.3f}"})
     root.extend(suite_element(s) for s in suites)
     ET.indent(root)
-    target = Path(path)
-    ET.ElementTree(root).write(target, encoding="utf-8", xml_declaration=True)
-    return target
+    return write_output_file(path, ET.tostring(root, encoding="utf-8", xml_declaration=True))
 
 
 def _num(value: float | None, unit: str = "") -> str:

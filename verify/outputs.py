@@ -10,7 +10,13 @@ The policy, one for all commands (certify, regress, demo write a folder; simulat
 - an output of the wrong kind is always refused (``UnusableInputError``, exit 3): a file (or ``/dev/null``, a
   device) where a folder is needed, a folder that is not a bag where a log is needed, a path below a file, an
   unwritable or read-only place, and a report folder that is (or is inside) a log being certified (inputs are never
-  modified).
+  modified);
+- a path that cannot be made at all (a symlink loop, a name longer than the file system allows, a path over
+  PATH_MAX) is exit 3 naming ``--out``;
+- every file a command writes into its output folder goes through ``write_output_file``: it never follows a symlink
+  (nor writes into a sub-folder that is a symlink), never replaces an entry that is not a regular file (a symlink,
+  a folder, a FIFO: not the command's own output), and replaces a regular file by renaming a new file over it, so
+  a hard link to an input keeps the input's bytes.
 """
 
 from __future__ import annotations
@@ -18,12 +24,15 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+import stat
+import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
 from verify.errors import UnusableInputError
 
-__all__ = ["LOG_SUFFIXES", "prepare_output_dir", "prepare_output_log", "replace_output_log"]
+__all__ = ["LOG_SUFFIXES", "output_subdir", "prepare_output_dir", "prepare_output_log", "replace_output_log",
+           "write_output_file"]
 
 LOG_SUFFIXES = (".bag", ".mcap", ".db3")
 
@@ -39,6 +48,10 @@ def _os_words(err: OSError) -> str:
         return "no space left on the device"
     if err.errno == errno.ENOENT:
         return "a part of the path does not exist and cannot be created"
+    if err.errno == errno.ELOOP:
+        return "too many levels of symbolic links (a symlink loop)"
+    if err.errno == errno.ENAMETOOLONG:
+        return "the name or the path is longer than the file system allows"
     return err.strerror or err.__class__.__name__
 
 
@@ -51,7 +64,14 @@ def _below_a_file(path: Path) -> Path | None:
 
 def prepare_output_dir(path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
     """Create (or, with ``force``, reuse) the report folder ``path``; refuse what the policy above refuses."""
-    out = Path(path)
+    try:
+        return _prepare_output_dir(Path(path), force=force, inputs=inputs)
+    except (OSError, RuntimeError) as err:  # RuntimeError: pathlib's resolve() on a symlink loop
+        words = _os_words(err) if isinstance(err, OSError) else "too many levels of symbolic links (a symlink loop)"
+        raise UnusableInputError(f"--out cannot be made: {words}", path=str(path)) from None
+
+
+def _prepare_output_dir(out: Path, *, force: bool, inputs: Iterable[str | Path]) -> Path:
     if out.exists() and not out.is_dir():
         raise UnusableInputError("--out exists and is not a folder (reports need a folder)", path=str(out))
     if out.is_dir() and not force and any(out.iterdir()):
@@ -77,7 +97,14 @@ def prepare_output_dir(path: str | Path, *, force: bool = False, inputs: Iterabl
 
 def prepare_output_log(path: str | Path, *, force: bool = False) -> Path:
     """Check a log output path before the work starts (nothing is removed here)."""
-    out = Path(path)
+    try:
+        return _prepare_output_log(Path(path), force=force)
+    except (OSError, RuntimeError) as err:
+        words = _os_words(err) if isinstance(err, OSError) else "too many levels of symbolic links (a symlink loop)"
+        raise UnusableInputError(f"--out cannot be made: {words}", path=str(path)) from None
+
+
+def _prepare_output_log(out: Path, *, force: bool) -> Path:
     if out.exists() and not force:
         raise UnusableInputError("--out exists already: pass --force to replace it", path=str(out))
     if out.exists():
@@ -110,3 +137,58 @@ def replace_output_log(path: str | Path) -> Path:
     except OSError as err:
         raise UnusableInputError(f"cannot replace the existing log: {_os_words(err)}", path=str(out)) from None
     return out
+
+
+def _not_own(entry: Path) -> str | None:
+    """Why an existing entry is not one the command may replace (None: absent or a regular file)."""
+    try:
+        mode = os.lstat(entry).st_mode
+    except FileNotFoundError:
+        return None
+    if stat.S_ISREG(mode):
+        return None
+    return ("a symbolic link" if stat.S_ISLNK(mode) else "a folder" if stat.S_ISDIR(mode)
+            else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "not a regular file")
+
+
+def output_subdir(folder: Path, name: str) -> Path:
+    """``folder/name`` as a real folder (created); a symlink or a file there is refused, never followed."""
+    sub = folder / name
+    try:
+        mode = os.lstat(sub).st_mode
+    except FileNotFoundError:
+        try:
+            sub.mkdir()
+        except OSError as err:
+            raise UnusableInputError(f"cannot create {name}/ in the output folder: {_os_words(err)}",
+                                     path=str(sub)) from None
+        return sub
+    if not stat.S_ISDIR(mode):
+        what = "a symbolic link" if stat.S_ISLNK(mode) else "not a folder"
+        raise UnusableInputError(f"{name} in the output folder is {what}: not written through", path=str(sub))
+    return sub
+
+
+def write_output_file(path: str | Path, data: bytes | str) -> Path:
+    """Write one output file (see the module doc): a new file renamed over ``path``; a symlink, folder or special
+    file at ``path`` is refused (exit 3), never followed or replaced."""
+    target = Path(path)
+    why = _not_own(target)
+    if why is not None:
+        raise UnusableInputError(f"{target.name} in the output folder is {why}, not a file this command wrote: "
+                                 "not replaced", path=str(target))
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    except OSError as err:
+        raise UnusableInputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(raw)
+        os.chmod(tmp, 0o644)  # mkstemp makes 0o600; a report is for reading
+        os.replace(tmp, target)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        raise UnusableInputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
+    return target
+

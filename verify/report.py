@@ -29,6 +29,7 @@ from verify.certificate import Certificate, CheckEntry
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
+from verify.outputs import output_subdir, write_output_file
 
 __all__ = [
     "CertifyResultLike",
@@ -378,17 +379,14 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
                              inputs=result.inputs, robustness=result.robustness)
     written: dict[str, Path] = {}
     try:
-        (out / "figures").mkdir(parents=True, exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
+        fig_dir = output_subdir(out, "figures")
         for fig in figures:
-            path = out / "figures" / f"{fig.stem}.png"
-            path.write_bytes(fig.png)
-            written[f"figures/{fig.stem}.png"] = path
-        md = out / "report.md"
-        md.write_text(markdown_report(result, scenario, figures, sections=sections), encoding="utf-8")
-        written["report.md"] = md
-        page = out / "report.html"
-        page.write_text(html_report(result, scenario, figures, sections=sections), encoding="utf-8")
-        written["report.html"] = page
+            written[f"figures/{fig.stem}.png"] = write_output_file(fig_dir / f"{fig.stem}.png", fig.png)
+        written["report.md"] = write_output_file(out / "report.md",
+                                                 markdown_report(result, scenario, figures, sections=sections))
+        written["report.html"] = write_output_file(out / "report.html",
+                                                   html_report(result, scenario, figures, sections=sections))
         suite = certificate_suite(cert, suite_name=suite_name, inconclusive=junit_inconclusive)
         written["junit.xml"] = write_junit([suite], out / "junit.xml")
     except OSError as err:

@@ -55,6 +55,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
     )
     from tubempc.regress.compare import BaselineError
     from verify.junit import write_junit
+    from verify.outputs import write_output_file
 
     loaded = load_suite(suite_path)
     if baseline_path is None:
@@ -84,7 +85,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "diff.txt").write_text(text + "\n", encoding="utf-8")
+        write_output_file(out / "diff.txt", text + "\n")
         write_junit([comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)], out / "junit.xml")
     if comparison.regressed:
         raise click.exceptions.Exit(1)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +15,7 @@ from verify.batch.run import _PRELOAD, BatchItem, BatchResult
 from verify.certificate import Certificate
 from verify.executor import parallel_map
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
+from verify.outputs import output_subdir, write_output_file
 
 if TYPE_CHECKING:  # verify.report imports matplotlib (the 'report' extra): only when reports are written
     from verify.report import CertifyResultLike
@@ -47,8 +49,9 @@ class _WriteJob:
 
 def _write_item(job: _WriteJob) -> JUnitSuite:
     """Write one log's folder; return its JUnit suite (a picklable value)."""
-    item, sub = job.item, Path(job.folder)
-    sub.mkdir(parents=True, exist_ok=True)
+    item, folder = job.item, Path(job.folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    sub = output_subdir(folder.parent, folder.name)
     if item.result is not None:
         _write_certificate(item.result, sub)
         if job.reports:
@@ -59,7 +62,7 @@ def _write_item(job: _WriteJob) -> JUnitSuite:
         suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
                                   inconclusive=job.junit_inconclusive)
         return dataclasses.replace(suite, time_s=item.elapsed_s)
-    (sub / "error.txt").write_text((item.error or "unknown error") + "\n", encoding="utf-8")
+    write_output_file(sub / "error.txt", (item.error or "unknown error") + "\n")
     case = JUnitCase("read log", item.name, "error", item.verdict, item.error or "")
     return JUnitSuite(item.name, (case,), time_s=item.elapsed_s)
 
@@ -115,10 +118,11 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
                           preload=_PRELOAD)
     rows = batch.rows()
     columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
-    with (out / "summary.csv").open("w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=columns)
-        writer.writeheader()
-        writer.writerows(rows)
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=columns)
+    writer.writeheader()
+    writer.writerows(rows)
+    write_output_file(out / "summary.csv", table.getvalue())
     counts = batch.counts()
     lines = [f"# Batch certification: exit code {batch.exit_code}", "",
              f"Scenario `{_md_cell(batch.scenario.name)}`; {len(batch.items)} log(s): "
@@ -132,7 +136,7 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
         lines.append(f"| {link} | {row['verdict']} | {row['exit_code']} | {_md_cell(row['failed_checks'])} | "
                      f"{_md_cell(row['inconclusive_checks'])} | {_md_cell(row['worst_margin_m'])} | "
                      f"{_md_cell(row['first_violation_s'])} | {_md_cell(row['error'])} |")
-    (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    (out / "summary.html").write_text(_summary_html(batch, rows, reports), encoding="utf-8")
+    write_output_file(out / "summary.md", "\n".join(lines) + "\n")
+    write_output_file(out / "summary.html", _summary_html(batch, rows, reports))
     return {"summary.md": out / "summary.md", "summary.html": out / "summary.html", "summary.csv": out / "summary.csv",
             "junit.xml": write_junit(suites, out / "junit.xml")}
