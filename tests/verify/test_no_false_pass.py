@@ -14,10 +14,13 @@ from pathlib import Path
 from types import ModuleType
 
 import pytest
+from rosbags.serde import SerdeError
 
 from tubempc.cli import main
+from verify.errors import VerifyError
 
 ROOT = Path(__file__).resolve().parents[2]
+REFUSED = (SerdeError, VerifyError)
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
 
 
@@ -117,3 +120,56 @@ def test_out_paths_that_cannot_be_made_are_exit_3(seed_logs: dict[tuple[str, boo
                             "--out", out], capsys)
         assert code == 3, (out, err)
         one_line_error(err, words)
+
+
+# ---- finding 4: the fast decoders accept only what rosbags accepts --------------------------------------------------
+def _serialized(ros1: bool, msgtype: str, **fields: object) -> bytes:
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ty = store.types
+    hdr = ty["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
+                                   stamp=ty["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="map")
+    point = ty["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=0.0)
+    quat = ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+    pose = ty["geometry_msgs/msg/Pose"](position=point, orientation=quat)
+    v3 = ty["geometry_msgs/msg/Vector3"](x=0.5, y=0.0, z=0.0)
+    twist = ty["geometry_msgs/msg/Twist"](linear=v3, angular=v3)
+    if msgtype == "geometry_msgs/msg/PoseStamped":
+        msg = ty[msgtype](header=hdr, pose=pose)
+    elif msgtype == "nav_msgs/msg/Odometry":
+        import numpy as np
+
+        msg = ty[msgtype](header=hdr, child_frame_id="base_link",
+                          pose=ty["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+                          twist=ty["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
+    else:
+        msg = ty[msgtype](header=hdr, twist=twist)
+    ser = store.serialize_ros1 if ros1 else store.serialize_cdr
+    return bytes(ser(msg, msgtype))
+
+
+@pytest.mark.parametrize("msgtype", ["geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry",
+                                     "geometry_msgs/msg/TwistStamped"])
+@pytest.mark.parametrize("damage", ["terminator", "trailing"])
+def test_fast_decoders_refuse_what_rosbags_refuses(msgtype: str, damage: str) -> None:
+    from verify.ingest.decode import decode_pose, decode_twist
+    from verify.ingest.fields import decode_field
+    from verify.ingest.raw import RawTopic
+
+    good = _serialized(False, msgtype)
+    if damage == "terminator":  # the NUL after header.frame_id ("map\0" at bytes 16..19) flipped
+        assert good[19] == 0
+        bad = good[:19] + b"X" + good[20:]
+    else:  # eight bytes the layout does not explain
+        bad = good + b"\0" * 8
+    payloads = [good, bad, good, good]
+    raw = RawTopic("/t", msgtype, True, [1, 2, 3, 4], payloads)
+    decode = decode_twist if msgtype.endswith("TwistStamped") else decode_pose
+    for fast in (True, False):
+        with pytest.raises(REFUSED, match=r"terminator|mismatch"):
+            decode(raw, False, fast=fast)  # type: ignore[operator]
+    field = "twist.linear.x" if msgtype.endswith("TwistStamped") else "header.stamp.sec"
+    for fast in (True, False):
+        with pytest.raises(REFUSED, match=r"terminator|mismatch"):
+            decode_field(raw, False, field, fast=fast)

@@ -146,6 +146,30 @@ def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray, 
     return True
 
 
+def _strings_ok(u8: npt.NDArray[np.uint8], len_at: IntArray, str_len: IntArray, end: IntArray, ros1: bool, *,
+                packed: int | None = None) -> bool:
+    """Whether the length-prefixed strings at ``len_at`` are what rosbags' deserializer accepts (``check_string``):
+    inside the message, in CDR at least one byte long and ending with the NUL terminator, UTF-8 before it."""
+    stop = len_at + 4 + str_len
+    if np.any(stop > end):
+        return False
+    if not ros1:
+        if np.any(str_len < 1) or np.any(u8[stop - 1] != 0):
+            return False
+        return _utf8_strings(u8, len_at + 4, str_len - 1, packed)
+    return _utf8_strings(u8, len_at + 4, str_len, packed)
+
+
+def _size_ok(after: IntArray, end: IntArray, ros1: bool) -> bool:
+    """Whether a message ends where its layout does, as rosbags requires (ROS1 exactly; CDR up to 3 padding bytes)."""
+    extra = end - after
+    return bool(np.all(extra == 0)) if ros1 else bool(np.all((extra >= 0) & (extra <= 3)))
+
+
+#: bytes after Odometry's pose position/orientation: pose covariance, twist, twist covariance (float64s)
+_ODOMETRY_TAIL = 8 * (36 + 6 + 36)
+
+
 def _align(pos: IntArray, base: int, to: int) -> IntArray:
     rel = pos - base
     return base + (rel + (to - 1)) // to * to
@@ -168,19 +192,24 @@ def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
     len_at = offs + 12
     str_len = _u32(u8, len_at, packed)
     pos = len_at + 4 + str_len  # after header.frame_id
-    if np.any(pos > offs + lens) or not _utf8_strings(u8, len_at + 4, str_len if ros1 else str_len - 1, packed):
-        return None  # the slow path decides (and rejects) a cut message or a frame id that is not UTF-8
+    end = offs + lens
+    if not _strings_ok(u8, len_at, str_len, end, ros1, packed=packed):
+        return None  # the slow path decides (and rejects) a cut message or a frame id rosbags refuses
     if raw.msgtype == ODOMETRY:
         if not ros1:
             pos = offs + _align(pos - offs, base, 4)
-        if np.any(pos + 4 > offs + lens):
+        if np.any(pos + 4 > end):
             return None
         child_len = _u32(u8, pos, packed)
+        if not _strings_ok(u8, pos, child_len, end, ros1):
+            return None
         pos = pos + 4 + child_len
     if not ros1:
         pos = offs + _align(pos - offs, base, 8)
-    if np.any(pos + 56 > offs + lens):
+    if np.any(pos + 56 > end):
         return None
+    if not _size_ok(pos + 56 + (_ODOMETRY_TAIL if raw.msgtype == ODOMETRY else 0), end, ros1):
+        return None  # bytes the layout does not explain: rosbags refuses the message, so the slow path decides
     start_rel = pos - offs
     if np.all(lens == lens[0]) and np.all(start_rel == start_rel[0]):
         size = int(lens[0])
@@ -256,8 +285,11 @@ def _twist_stamped_fast(raw: RawTopic, ros1: bool) -> TwistColumns | None:
     mat = u8.reshape(n, size)
     if not ros1 and not (np.all(mat[:, 0] == 0) and np.all(mat[:, 1] == 1)):
         return None  # not little-endian CDR
-    str_len = np.ascontiguousarray(mat[:, 12:16]).view("<u4").ravel()
+    str_len = np.ascontiguousarray(mat[:, 12:16]).view("<u4").ravel().astype(np.int64)
     if not np.all(str_len == str_len[0]):
+        return None
+    offs = np.arange(n, dtype=np.int64) * size
+    if not _strings_ok(u8, offs + 12, str_len, offs + size, ros1, packed=size):
         return None
     start = 16 + int(str_len[0])
     if not ros1:

@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario, SignalSpec
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError
-from verify.ingest.decode import _joined, typestore
+from verify.ingest.decode import _joined, _size_ok, _strings_ok, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.ingest.raw import RawLog, RawTopic, fast_ingest
 
@@ -150,9 +150,9 @@ class _Walk:
             name = detail[0]
             if name == "string":
                 n = self.u32()
+                if not _strings_ok(self.u8, self.pos - 4, n, self.end, self.ros1):
+                    raise _DeclineError  # cut, unterminated or not UTF-8: rosbags decides (and refuses)
                 self.pos = self.pos + n
-                if np.any(self.pos > self.end):
-                    raise _DeclineError
                 return
             size = _PRIMITIVES.get(name, ("", 0))[1]
             if not size:
@@ -188,6 +188,14 @@ def _bulk_field(raw: RawTopic, ros1: bool, steps: list[str | int]) -> FloatArray
             return None
         if not (np.all(u8[offs] == 0) and np.all(u8[offs + 1] == 1)):
             return None  # big-endian or other encapsulation
+    whole = _Walk(store, u8, offs, lens, ros1)
+    try:
+        for _, fdesc in store.fielddefs[raw.msgtype][1]:
+            whole.skip(fdesc)
+    except (_DeclineError, KeyError, IndexError, ValueError):
+        return None
+    if not _size_ok(whole.pos, whole.end, ros1):
+        return None  # bytes the layout does not explain (or too few): rosbags refuses, the per-message path says so
     walk = _Walk(store, u8, offs, lens, ros1)
     msgtype = raw.msgtype
     k = 0
