@@ -86,6 +86,38 @@ class Run:
     status_patch: bytes | None = None  # raw bytes replacing one solver status payload
     pose_type: str = POSE
     topics: tuple[str, ...] = ("pose", "nominal", "cmd_vel", "solver", "metadata")
+    # more messages: (log time ns, topic, type, builder(typestore types, ros1) -> message)
+    extra: list[tuple[int, str, str, Callable[[Any, bool], Any]]] = field(default_factory=list)
+
+
+#: the signal topic of the campaign's signal families: a motor temperature (sensor_msgs/Temperature, in ROS1 and 2)
+TEMP_TOPIC = "/motor/temperature"
+TEMPERATURE = "sensor_msgs/msg/Temperature"
+TEMP_LIMIT_C = 70.0
+
+
+def temperature(stamp_ns: int, celsius: float) -> Callable[[Any, bool], Any]:
+    """A builder of one ``sensor_msgs/Temperature`` message stamped ``stamp_ns``."""
+    def build(ty: Any, ros1: bool) -> Any:
+        sec, nsec = divmod(int(stamp_ns), 10**9)
+        header = ty["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
+                                           stamp=ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                           frame_id="motor")
+        return ty[TEMPERATURE](header=header, temperature=float(celsius), variance=0.0)
+    return build
+
+
+def temperature_stream(run: Run, celsius: float = 40.0) -> list[tuple[int, str, str, Callable[[Any, bool], Any]]]:
+    """A well-stamped temperature message beside every pose sample (5 ms before it)."""
+    return [(int(t) - 5_000_000, TEMP_TOPIC, TEMPERATURE, temperature(int(t) - 5_000_000, celsius))
+            for t in run.t_ns]
+
+
+def signal_scenario_text(rate_hz: float | None = None) -> str:
+    """The campaign's scenario with the signal atom ``motor_ok`` (temperature <= TEMP_LIMIT_C)."""
+    rate = "" if rate_hz is None else f", rate_hz: {rate_hz!r}"
+    return (builtin_scenario_text("nexus-sml").rstrip("\n") + "\nsignals:\n  motor_ok: {topic: " + TEMP_TOPIC
+            + ", field: temperature, op: '<=', value: " + f"{TEMP_LIMIT_C}, unit: degC{rate}" + "}\n")
 
 
 def base_run(*, violating: bool) -> Run:
@@ -159,6 +191,8 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
             if run.status_patch is not None and i == 100:
                 data = run.status_patch
             msgs.append((int(run.t_ns[i]), topics.solver, STRING, data))
+    for t_ns, topic, msgtype, build in run.extra:
+        msgs.append((t_ns, topic, msgtype, bytes(ser(build(ty, ros1), msgtype))))
     if "metadata" in run.topics:
         meta = {"generator": "fuzz_certify", "scenario_sha256": SCENARIO.sha256(), "time0_ns": TIME0_NS}
         msgs.append((TIME0_NS, topics.metadata, STRING, bytes(ser(ty[STRING](data=json.dumps(meta)), STRING))))

@@ -29,7 +29,10 @@ T0 = 1_700_000_000 * 10**9
 
 
 def _scenario(rate_hz: float | None) -> Scenario:
-    signals = {k: SignalSpec(**{**v.model_dump(), "rate_hz": rate_hz}) for k, v in SCENARIO.signals.items()}
+    """The example's signals on a topic of their own (a signal on the pose topic shares the pose's samples: the
+    tests here push signal messages at their own times)."""
+    signals = {k: SignalSpec(**{**v.model_dump(), "rate_hz": rate_hz, "topic": "/wheel_speed"})
+               for k, v in SCENARIO.signals.items()}
     return SCENARIO.model_copy(update={"signals": signals})
 
 
@@ -47,7 +50,8 @@ def _streams(sc: Scenario, messages: list[tuple[int, float]]) -> dict[str, Signa
     for name, spec in sc.signals.items():
         period = round(1e9 / spec.rate_hz) if spec.rate_hz is not None else (
             int(np.median(np.diff(tu))) if tu.shape[0] >= 2 else 0)
-        out[name] = SignalStream(name, spec, tu, value.copy(), period, "header")
+        out[name] = SignalStream(name, spec, tu, value.copy(), period, "header",
+                                 follows_pose=spec.topic == sc.topics.pose)
     return out
 
 

@@ -10,8 +10,10 @@ from __future__ import annotations
 import importlib.util
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 from rosbags.serde import SerdeError
@@ -173,3 +175,143 @@ def test_fast_decoders_refuse_what_rosbags_refuses(msgtype: str, damage: str) ->
     for fast in (True, False):
         with pytest.raises(REFUSED, match=r"terminator|mismatch"):
             decode_field(raw, False, field, fast=fast)
+
+
+# ---- finding 1: unset stamps on a signal topic ----------------------------------------------------------------------
+SIGNAL_SPEC = "G[0,inf) motor_ok"
+
+
+def _signal_log(tmp_path: Path, fmt: str, faulty: list[tuple[float, int | None, float]]) -> tuple[Path, Path]:
+    """A clean pose run with a temperature signal (40 degC beside every pose sample) and ``faulty`` extra messages
+    (log time s, header stamp ns or None for a good stamp, degC); and the scenario file with ``motor_ok``."""
+    run = FUZZ.base_run(violating=False)
+    run.extra = FUZZ.temperature_stream(run)
+    for at_s, stamp, celsius in faulty:
+        log_ns = FUZZ.TIME0_NS + round(at_s * 1e9)
+        run.extra.append((log_ns, FUZZ.TEMP_TOPIC, FUZZ.TEMPERATURE,
+                          FUZZ.temperature(log_ns if stamp is None else stamp, celsius)))
+    log = FUZZ.write_run(run, tmp_path / f"run{FUZZ.SUFFIX[fmt]}", fmt)
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(FUZZ.signal_scenario_text())
+    return log, scenario
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap", "db3"])
+def test_unset_stamps_on_a_signal_topic_are_judged(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                   fmt: str) -> None:
+    # a second publisher that never sets its stamp reports 95 degC for 1 s in the middle of the run
+    hot = [(10.0 + k / 10 - 0.002, 0, 95.0) for k in range(10)]  # held at the pose samples
+    log, scenario = _signal_log(tmp_path, fmt, hot)
+    for base in ("auto", "header", "log"):
+        code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                            "--time-base", base], capsys)
+        assert code == 1, (base, err)
+        code, out, err = run(["watch", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                              "--time-base", base], capsys)
+        assert code == 1, (base, out, err)
+    (tmp_path / "clean").mkdir()
+    clean, scenario = _signal_log(tmp_path / "clean", fmt, [])
+    assert run(["certify", str(clean), "--scenario", str(scenario), "--spec", SIGNAL_SPEC], capsys)[0] == 0
+
+
+# ---- finding 3 and issue 24: clock offsets and rates checked where they enter ----------------------------------------
+@pytest.mark.parametrize("seconds", ["7.6e9", "9.3e9", "1e12", "1e300", "-5e9"])
+def test_clock_offsets_out_of_range_are_exit_3_naming_the_option(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                 seconds: str) -> None:
+    hot = [(10.0 + k / 10 - 0.002, None, 95.0) for k in range(10)]  # a violation the offset could hide
+    log, scenario = _signal_log(tmp_path, "mcap", hot)
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                        "--clock-offset", f"{FUZZ.TEMP_TOPIC}={seconds}"], capsys)
+    assert code == 3, err
+    one_line_error(err, "--clock-offset", "out of range")
+    text = scenario.read_text() + f"clock_offsets: {{{FUZZ.TEMP_TOPIC}: {seconds}}}\n"
+    scenario.write_text(text)
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC], capsys)
+    assert code == 3, err
+    one_line_error(err, "clock_offsets", "out of range")
+
+
+def test_clock_offset_at_the_limit_is_judged(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    hot = [(10.0 + k / 10 - 0.002, None, 95.0) for k in range(10)]
+    log, scenario = _signal_log(tmp_path, "mcap", hot)
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                        "--clock-offset", f"{FUZZ.TEMP_TOPIC}=4e9"], capsys)
+    assert code == 2, err  # the signal is moved 127 years away: unknown over the run, never a pass
+
+
+def test_clock_offset_for_an_unknown_topic_lists_the_known_ones(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    log, scenario = _signal_log(tmp_path, "mcap", [])
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                        "--clock-offset", "/motor/temperatur=0.02"], capsys)
+    assert code == 3, err
+    one_line_error(err, "--clock-offset", "/motor/temperatur,", FUZZ.TEMP_TOPIC, "/qualisys/nexus/pose")
+    scenario.write_text(scenario.read_text() + "clock_offsets: {/imu/dat: 0.02}\n")
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC], capsys)
+    assert code == 3, err
+    one_line_error(err, "clock_offsets", "/imu/dat", FUZZ.TEMP_TOPIC)
+
+
+@pytest.mark.parametrize("rate", ["1e-300", "1e300"])
+def test_signal_rate_out_of_range_names_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                  rate: str) -> None:
+    log, scenario = _signal_log(tmp_path, "mcap", [])
+    scenario.write_text(FUZZ.signal_scenario_text(float(rate)))
+    code, _, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC], capsys)
+    assert code == 3, err
+    one_line_error(err, "signals.motor_ok.rate_hz", "out of range")
+
+
+# ---- issue 24 item 5: a signal on the pose topic shares the pose's samples ------------------------------------------
+def _odometry(stamp_ns: int, x: float, y: float, vx: float) -> Callable[[Any, bool], Any]:
+    """A builder of one nav_msgs/Odometry message (rosbags types of either ROS version)."""
+    import numpy as np
+
+    def build(ty: Any, ros1: bool) -> Any:
+        sec, nsec = divmod(stamp_ns, 10**9)
+        header = ty["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
+                                           stamp=ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                           frame_id="odom")
+        pose = ty["geometry_msgs/msg/Pose"](position=ty["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                                            orientation=ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0,
+                                                                                          w=1.0))
+        v3 = ty["geometry_msgs/msg/Vector3"]
+        twist = ty["geometry_msgs/msg/Twist"](linear=v3(x=vx, y=0.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0))
+        return ty["nav_msgs/msg/Odometry"](
+            header=header, child_frame_id="base_link",
+            pose=ty["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+            twist=ty["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
+    return build
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_a_signal_on_the_pose_topic_is_known_wherever_the_pose_is(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str],
+                                                                  fmt: str) -> None:
+    """A Husky-like log: Odometry at 10 Hz with 0.2 s dropouts every 3 s, a speed atom on its twist: the pose
+    check bridges the dropouts with the speed bound, the atom with the pose's samples (pass); a fast sample fails."""
+    run0 = FUZZ.base_run(violating=False)
+    run0.topics = ("metadata",)
+    r1 = FUZZ.SCENARIO.region("R1").center
+    for fast in (False, True):
+        extra = []
+        for i, t_ns in enumerate(run0.t_ns.tolist()):
+            if i % 30 == 15:
+                continue  # a dropout: 0.2 s between two samples (2 periods)
+            vx = 1.5 if fast and i == 200 else 0.05
+            extra.append((t_ns, "/odom", "nav_msgs/msg/Odometry", _odometry(t_ns, r1[0], r1[1], vx)))
+        run0.extra = extra
+        folder = tmp_path / f"fast{fast}"
+        folder.mkdir()
+        log = FUZZ.write_run(run0, folder / f"husky{FUZZ.SUFFIX[fmt]}", fmt)
+        scenario = folder / "husky.yaml"
+        text = FUZZ.builtin_scenario_text("nexus-sml").replace(
+            "topics: {pose: /qualisys/nexus/pose, cmd_vel: /nexus/cmd_vel, nominal: /nexus/nominal_pose}",
+            "topics: {pose: /odom}")
+        assert "topics: {pose: /odom}" in text
+        scenario.write_text(text + "signals:\n  slow: {topic: /odom, field: twist.twist.linear.x, op: '<=', "
+                                   "value: 1.0, unit: m/s}\n")
+        for command in ("certify", "watch"):
+            code, out, err = run([command, str(log), "--scenario", str(scenario), "--spec", "G[0,inf) slow",
+                                  "--time-base", "auto"], capsys)
+            assert code == (1 if fast else 0), (command, fast, out, err)

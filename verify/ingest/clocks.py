@@ -15,17 +15,55 @@ moves the topic onto the pose's clock. Corrections of the pose topic move the wh
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["CLOCK_OFFSET_THRESHOLD_S", "clock_report", "median_offset_s"]
+from verify.errors import ScenarioInputError
+
+__all__ = [
+    "CLOCK_OFFSET_LIMIT_S",
+    "CLOCK_OFFSET_THRESHOLD_S",
+    "check_offset_topics",
+    "clock_offsets_ns",
+    "clock_report",
+    "median_offset_s",
+]
 
 IntArray = npt.NDArray[np.int64]
 
 #: two topics whose clocks differ by more than this (seconds, after corrections) are reported
 CLOCK_OFFSET_THRESHOLD_S = 0.1
+#: a correction larger than this (s, about 127 years: a simulated clock moved onto wall time fits) is refused; with
+#: ROS times (at most 2**32 s) the corrected times stay inside int64 nanoseconds
+CLOCK_OFFSET_LIMIT_S = 4e9
+
+
+def clock_offsets_ns(scenario_s: Mapping[str, float], option_s: Mapping[str, float] | None) -> dict[str, int]:
+    """The corrections in ns (``--clock-offset`` over ``clock_offsets:``), each checked for range: a value that is
+    not finite or larger than ``CLOCK_OFFSET_LIMIT_S`` is exit 3 naming where it was given."""
+    out: dict[str, int] = {}
+    for where, given in (("clock_offsets:", scenario_s), ("--clock-offset", option_s or {})):
+        for topic, sec in given.items():
+            if not (isinstance(sec, int | float) and math.isfinite(sec) and abs(sec) <= CLOCK_OFFSET_LIMIT_S):
+                raise ScenarioInputError(f"{where} {topic}={sec!r} s is out of range: a clock offset is finite and "
+                                         f"at most {CLOCK_OFFSET_LIMIT_S:g} s in size")
+            out[topic] = round(sec * 1e9)
+    return out
+
+
+def check_offset_topics(scenario_s: Iterable[str], option_s: Iterable[str], log_topics: Iterable[str],
+                        path: str) -> None:
+    """A correction for a topic the log does not hold (a typo) is exit 3 listing the log's topics."""
+    known = set(log_topics)
+    for where, topics in (("--clock-offset", option_s), ("clock_offsets:", scenario_s)):
+        unknown = sorted(set(topics) - known)
+        if unknown:
+            raise ScenarioInputError(f"{where} names {', '.join(unknown)}, which the log does not hold; its topics: "
+                                     f"{', '.join(sorted(known)) or 'none'}", path=path)
 
 
 def median_offset_s(t_used_ns: IntArray, log_ns: IntArray) -> float | None:

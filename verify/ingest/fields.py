@@ -26,15 +26,20 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import Scenario, SignalSpec
-from verify.errors import LogReadError, MissingTopicError, UnusableInputError
+from verify.errors import LogReadError, MissingTopicError, ScenarioInputError, UnusableInputError
 from verify.ingest.decode import _joined, _size_ok, _strings_ok, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.ingest.raw import RawLog, RawTopic, fast_ingest
+from verify.ingest.timebase import TimeBase, judged_samples, stream_time_base
 
-__all__ = ["FieldSamples", "SignalStream", "decode_field", "median_period_ns", "parse_field_path", "read_signals"]
+__all__ = ["HOLD_FOREVER_NS", "RATE_HZ_RANGE", "FieldSamples", "SignalStream", "decode_field", "median_period_ns",
+           "parse_field_path", "read_signals", "signal_period_ns"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+
+#: the hold of a signal on the pose topic: no gap between two pose samples expires it
+HOLD_FOREVER_NS = 2**62
 
 _TOKEN = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
 
@@ -59,10 +64,14 @@ class SignalStream:
     value: FloatArray
     period_ns: int  # expected period: the spec's rate_hz, else the stream's median spacing (0: unknown)
     time_base: str  # "header" or "log"
+    follows_pose: bool = False  # read from the pose topic: known wherever the pose is (its gaps are the pose's)
 
     @property
     def hold_ns(self) -> int:
-        """How long a value holds after its message (1.5 expected periods)."""
+        """How long a value holds after its message: 1.5 expected periods; on the pose topic, until the next
+        message (the pose's own gaps are bridged by the speed bound, the signal's by its last value)."""
+        if self.follows_pose:
+            return HOLD_FOREVER_NS
         return int(DROPOUT_FACTOR * self.period_ns)
 
 
@@ -279,10 +288,29 @@ def median_period_ns(t_ns: npt.NDArray[np.int64]) -> int:
     return int(np.median(np.diff(t_ns))) if t_ns.shape[0] >= 2 else 0
 
 
-def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
-                 offsets_ns: dict[str, int] | None = None) -> tuple[dict[str, SignalStream], dict[str, Any]]:
-    """Every signal atom of the scenario from the raw log: streams on the pose's time base (header stamps when the
-    message has a header and the pose uses them), with ``offsets_ns[topic]`` added; and their data-quality notes.
+#: ``signals.<name>.rate_hz`` must lie in this range (Hz): its period (1 ns .. 11.6 days) is an int64 nanosecond count
+RATE_HZ_RANGE = (1e-6, 1e9)
+
+
+def signal_period_ns(name: str, spec: SignalSpec, t_ns: IntArray) -> int:
+    """The expected period: ``rate_hz``'s (range-checked: ``ScenarioInputError`` naming the field), else the median
+    spacing of the messages."""
+    if spec.rate_hz is None:
+        return median_period_ns(t_ns)
+    lo, hi = RATE_HZ_RANGE
+    if not (lo <= spec.rate_hz <= hi):  # also NaN
+        raise ScenarioInputError(f"signals.{name}.rate_hz={spec.rate_hz!r} is out of range: expected {lo:g} to "
+                                 f"{hi:g} Hz")
+    return round(1e9 / spec.rate_hz)
+
+
+def read_signals(raw: RawLog, scenario: Scenario, base: TimeBase, path: str,
+                 offsets_ns: dict[str, int] | None = None, *, pose_topic: str | None = None,
+                 ) -> tuple[dict[str, SignalStream], dict[str, Any]]:
+    """Every signal atom of the scenario from the raw log: streams under the time rules of every stream
+    (``verify.ingest.timebase.stream_time_base``; ``base``: the pose's), with ``offsets_ns[topic]`` added; and their
+    data-quality notes (``problems``: why the stream's stamps cannot order it on an explicit header base). A signal
+    on ``pose_topic`` shares the pose's samples (``SignalStream.follows_pose``).
     A topic absent from the log (or without messages) or a field that does not resolve is exit 3 naming both."""
     streams: dict[str, SignalStream] = {}
     quality: dict[str, Any] = {}
@@ -300,27 +328,27 @@ def read_signals(raw: RawLog, scenario: Scenario, base_name: str, path: str,
             except UnusableInputError as err:
                 raise type(err)(f"signal {name}: {err.reason}", path=path) from err
         cols = cache[key]
-        header = cols.stamp_ns is not None and base_name == "header"
-        t = cols.stamp_ns if header and cols.stamp_ns is not None else cols.log_ns
-        t = t + (offsets_ns or {}).get(spec.topic, 0)
+        tb = stream_time_base(cols.stamp_ns, cols.log_ns, requested=base.requested, pose_base=base.name)
+        t = tb.t_ns + (offsets_ns or {}).get(spec.topic, 0)
         offset_vs_log = round(float(np.median((t - cols.log_ns).astype(np.float64))) * 1e-9, 9)
-        order = np.argsort(t, kind="stable")
-        t, v = t[order], cols.value[order]
-        # one value per instant; duplicates of a stamp that disagree make the atom unknown there (NaN)
-        t_unique, first = np.unique(t, return_index=True)
-        lo = np.minimum.reduceat(v, first) if v.size else v
-        hi = np.maximum.reduceat(v, first) if v.size else v
-        conflict = lo != hi
-        duplicates = int(t.shape[0] - t_unique.shape[0])
-        conflicts = int(np.count_nonzero(conflict))
-        t, v = t_unique, np.where(conflict, np.nan, v[first])
-        period = round(1e9 / spec.rate_hz) if spec.rate_hz is not None else median_period_ns(t)
-        streams[name] = SignalStream(name, spec, t.astype(np.int64), v, period, "header" if header else "log")
+        # one value per instant; duplicates of an instant that disagree make the atom unknown there (NaN)
+        js = judged_samples(t, cols.value, agree_tol=0.0)
+        v = cols.value[js.index].copy()
+        v[js.conflict] = np.nan
+        t = js.t_ns
+        period = signal_period_ns(name, spec, t)
+        follows = pose_topic is not None and spec.topic == pose_topic
+        streams[name] = SignalStream(name, spec, t.astype(np.int64), v, period, tb.name, follows_pose=follows)
         quality[name] = {"topic": spec.topic, "type": topic.msgtype, "messages": int(cols.value.shape[0]),
-                         "time_base": "header" if header else "log", "offset_vs_log_s": offset_vs_log,
-                         "duplicate_stamps": duplicates,
-                         "conflicting_duplicates": conflicts, "nan_values": int(np.isnan(v).sum()),
-                         "period_source": "signals.rate_hz" if spec.rate_hz is not None else "median spacing"}
+                         "time_base": tb.name, "offset_vs_log_s": offset_vs_log,
+                         "retimed_stamps": tb.retimed,
+                         "duplicate_stamps": js.read - int(js.t_ns.shape[0]),
+                         "conflicting_duplicates": int(np.count_nonzero(js.conflict)),
+                         "nan_values": int(np.isnan(v).sum()),
+                         "period_source": "pose samples (signal on the pose topic)" if follows
+                         else "signals.rate_hz" if spec.rate_hz is not None else "median spacing",
+                         **({"note": tb.note} if tb.note else {}),
+                         **({"problem": tb.note} if tb.note and not tb.usable else {})}
     return streams, quality
 
 

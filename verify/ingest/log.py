@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
-from verify.ingest.clocks import clock_report, median_offset_s
+from verify.ingest.clocks import check_offset_topics, clock_offsets_ns, clock_report, median_offset_s
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import (
     DEFAULT_DIGEST,
@@ -37,7 +37,7 @@ from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
-from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples
+from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples, stream_time_base
 
 __all__ = ["LogData", "PoseStream", "file_sha256", "log_digest", "read_log", "wanted_topics"]
 
@@ -165,15 +165,15 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
     times) extends and overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
     if time_base not in TIME_BASES:
         raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
+    clock_offsets_ns(scenario.clock_offsets, clock_offsets)  # their ranges, before the log is read
     p = Path(path)
     _check_path(p)
     if digest not in DIGESTS:
         raise UnusableInputError(f"digest={digest!r}: expected one of {', '.join(DIGESTS)}")
     job = None if digest == MESSAGES_DIGEST else start_digest(p, digest)
     try:
-        offsets = {**scenario.clock_offsets, **(clock_offsets or {})}
         return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
-                         offsets_s=offsets)
+                         option_offsets_s=dict(clock_offsets or {}))
     except BaseException as err:
         if job is not None:
             job.cancel()  # the file digest of a log that cannot be certified is not needed
@@ -228,11 +228,13 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
 
 
 def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob | None, offsets_s: dict[str, float]) -> LogData:
-    offsets_ns = {topic: round(sec * 1e9) for topic, sec in offsets_s.items()}
+              job: DigestJob | None, option_offsets_s: dict[str, float]) -> LogData:
+    offsets_s = {**scenario.clock_offsets, **option_offsets_s}
+    offsets_ns = clock_offsets_ns(scenario.clock_offsets, option_offsets_s)
     clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
     raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
+    check_offset_topics(scenario.clock_offsets, option_offsets_s, raw.available, str(p))
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
         if not topic.has_definition:
@@ -292,7 +294,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         nominal_topic = t.nominal
         ncols = _decode_optional("nominal", nominal_topic, lambda: decode_pose(nraw, raw.ros1), quality)
     if ncols is not None:
-        nbase = choose_time_base(ncols.stamp_ns, ncols.log_ns, "log" if base.name == "log" else "header")
+        nbase = stream_time_base(ncols.stamp_ns, ncols.log_ns, requested=base.requested, pose_base=base.name)
         nst = nbase.t_ns + offsets_ns.get(nominal_topic, 0)
         clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
@@ -302,7 +304,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         samples["nominal"] = {**njs.counts(), "retimed": nbase.retimed}
         if nbase.note:
             quality["notes"].append(f"{t.nominal}: {nbase.note}")
-            problems["nominal"] = nbase.note
+            if not nbase.usable:
+                problems["nominal"] = nbase.note
     elif "nominal" not in quality:
         quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
 
@@ -313,10 +316,11 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         cmd_topic = t.cmd_vel
         tw = _decode_optional("cmd_vel", cmd_topic, lambda: decode_twist(craw, raw.ros1), quality)
     if tw is not None:
-        # TwistStamped carries a header: on the header time base its stamps are used (Twist has only log time)
-        header_cmd = tw.stamp_ns is not None and base.name != "log"
-        cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + offsets_ns.get(cmd_topic, 0)
-        clock_streams[cmd_topic] = ("header" if header_cmd else "log", median_offset_s(cst, tw.log_ns))
+        # TwistStamped carries a header: under the rules of every stream (Twist has only log time)
+        cbase = stream_time_base(tw.stamp_ns, tw.log_ns, requested=base.requested, pose_base=base.name)
+        header_cmd = cbase.name == "header"
+        cst = cbase.t_ns + offsets_ns.get(cmd_topic, 0)
+        clock_streams[cmd_topic] = (cbase.name, median_offset_s(cst, tw.log_ns))
         corder = clean_order(cst)
         cjs = judged_samples(cst, tw.u)
         cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
@@ -325,17 +329,26 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
         cq.update(cjs.counts())
         cq["type"] = craw.msgtype if craw is not None else "?"
-        cq["time_base"] = "header" if header_cmd else "log"
+        cq["time_base"] = cbase.name
+        cq["retimed_stamps"] = cbase.retimed
         quality["cmd_vel"] = cq
-        samples["cmd_vel"] = cjs.counts()
+        samples["cmd_vel"] = {**cjs.counts(), "retimed": cbase.retimed}
+        if cbase.note:
+            quality["notes"].append(f"{cmd_topic}: {cbase.note}")
+            if not cbase.usable:
+                problems["cmd_vel"] = cbase.note
     elif "cmd_vel" not in quality:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
-    signals, signal_quality = read_signals(raw, scenario, base.name, str(p), offsets_ns)
+    signals, signal_quality = read_signals(raw, scenario, base, str(p), offsets_ns, pose_topic=pose_topic)
     if signal_quality:
         quality["signals"] = signal_quality
-        for sq in signal_quality.values():
+        for name, sq in signal_quality.items():
             clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
+            if "note" in sq:
+                quality["notes"].append(f"signal {name} ({sq['topic']}): {sq['note']}")
+            if "problem" in sq:
+                problems[f"signal {name}"] = sq["problem"]
     clocks = clock_report(pose_topic, clock_streams, offsets_s)
     quality["clocks"] = clocks
     quality["notes"].extend(clocks["findings"])

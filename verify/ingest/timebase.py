@@ -11,7 +11,11 @@ Rules (the certificate states which applied):
   from their log time (interpolated between the good samples' stamps), so one bad stamp never moves time 0;
 - the header stamps *cannot order the samples* when more than 5 % of them are outliers, repeat an earlier stamp, or
   go backwards in reading order. ``auto`` then uses log time (with a data-quality finding); an explicit ``header``
-  keeps them but the certificate cannot pass.
+  keeps them but the certificate cannot pass;
+- every stream is under these rules (``stream_time_base``): the pose, the nominal, the commands and every signal
+  topic. A stream beside the pose uses its header stamps (outliers re-timed) when its messages have a header and the
+  pose is judged on header time, with the base requested for the pose (``auto``: log time for that stream when its
+  own stamps cannot order its samples); else log time. A stream whose stamps are all unset is on log time.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from verify.ingest.quality import NEAR_1970_NS
 
 __all__ = ["TIME_BASES", "UNORDERABLE_FRACTION", "JudgedSamples", "TimeBase", "choose_time_base", "header_outliers",
-           "judged_samples"]
+           "judged_samples", "stream_time_base"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -97,7 +101,9 @@ def _retime(stamps_ns: IntArray, log_ns: IntArray, out: BoolArray) -> IntArray:
     nanoseconds exact in float64."""
     t = stamps_ns.copy()
     good = np.flatnonzero(~out)
-    if not out.any() or good.size == 0:
+    if good.size == 0:
+        return log_ns.copy()  # no stamp to interpolate between: the messages' log times
+    if not out.any():
         return t
     order = good[np.argsort(log_ns[good], kind="stable")]
     offset = stamps_ns - log_ns
@@ -139,6 +145,16 @@ def choose_time_base(stamps_ns: IntArray, log_ns: IntArray, requested: str) -> T
     return TimeBase("header", requested, _retime(stamps_ns, log_ns, out), n_out, tuple(problems), not problems)
 
 
+def stream_time_base(stamps_ns: IntArray | None, log_ns: IntArray, *, requested: str, pose_base: str) -> TimeBase:
+    """The times of a stream beside the pose (nominal, commands, a signal topic): see the module docstring.
+    ``stamps_ns``: its header stamps (None: its messages have no header); ``requested``: the base asked for the
+    pose; ``pose_base``: the base the pose uses."""
+    log_ns = np.asarray(log_ns, dtype=np.int64)
+    if stamps_ns is None or pose_base == "log" or requested == "log":
+        return TimeBase("log", requested, log_ns, 0, (), True)
+    return choose_time_base(stamps_ns, log_ns, requested)
+
+
 @dataclass(frozen=True, slots=True)
 class JudgedSamples:
     """A stream sorted by time with every sample accounted for.
@@ -160,8 +176,9 @@ class JudgedSamples:
                 "conflicting_duplicates": self.conflicting}
 
 
-def judged_samples(t_ns: IntArray, values: FloatArray) -> JudgedSamples:
-    """Sort by time; duplicates whose ``values`` rows agree (NaN equal to NaN) are merged, others are conflicts."""
+def judged_samples(t_ns: IntArray, values: FloatArray, *, agree_tol: float = AGREE_TOL) -> JudgedSamples:
+    """Sort by time; duplicates whose ``values`` rows agree within ``agree_tol`` (NaN equal to NaN) are merged,
+    others are conflicts (signal values: exactly equal, as the online feed merges them)."""
     n = int(t_ns.shape[0])
     if n < 2 or bool(np.all(t_ns[1:] > t_ns[:-1])):  # strictly increasing (the usual case): nothing to sort or merge
         every = np.arange(n, dtype=np.int64)
@@ -174,7 +191,7 @@ def judged_samples(t_ns: IntArray, values: FloatArray) -> JudgedSamples:
     group = np.cumsum(first) - 1
     vals = np.asarray(values, dtype=np.float64).reshape(n, -1)[order]
     head = vals[starts][group]
-    same = np.all((np.abs(vals - head) <= AGREE_TOL) | (np.isnan(vals) & np.isnan(head)), axis=1)
+    same = np.all((vals == head) | (np.abs(vals - head) <= agree_tol) | (np.isnan(vals) & np.isnan(head)), axis=1)
     dup = ~first
     conflict_rows = dup & ~same
     conflict_group = np.zeros(starts.shape[0], dtype=bool)

@@ -164,7 +164,8 @@ class OnlineMonitor:
         self.max_pending = max_pending
         self._names = sorted(atoms(self.formula))
         # a name that is both a label and a signal is the signal (as verify.certify)
-        self._feeds = {n: SignalFeed(n, sc.signals[n]) for n in self._names if n in sc.signals}
+        self._feeds = {n: SignalFeed(n, sc.signals[n], pose_topic=sc.topics.pose) for n in self._names
+                       if n in sc.signals}
         self._region_names = [n for n in self._names if n not in self._feeds]
         self._signal_rows = [k for k, n in enumerate(self._names) if n in self._feeds]
         self.max_signal_lag_ns = round(max_signal_lag_s * 1e9)

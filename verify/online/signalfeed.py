@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import SignalSpec
-from verify.ingest.fields import SignalStream, median_period_ns
+from verify.ingest.fields import SignalStream, median_period_ns, signal_period_ns
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.online.stream import Buffer
 from verify.signals import SignalBounds, signal_bounds, values_at
@@ -42,9 +42,10 @@ _NEVER = -(2**63)
 class SignalFeed:
     """One signal atom's messages between the last judged pose time and the newest message."""
 
-    def __init__(self, name: str, spec: SignalSpec) -> None:
+    def __init__(self, name: str, spec: SignalSpec, *, pose_topic: str | None = None) -> None:
         self.name = name
         self.spec = spec
+        self.follows_pose = pose_topic is not None and spec.topic == pose_topic  # shares the pose's samples
         self.t: list[int] = []  # retained messages: sorted, one per instant
         self.v: list[float] = []
         self.horizon = _NEVER  # the last pose time judged with this signal: messages at or before it are late
@@ -52,7 +53,8 @@ class SignalFeed:
         self.merged = 0  # a second message at an instant with the same value
         self.conflicting = 0  # ... with another value (the atom is unknown there)
         self.late = 0  # messages for an instant already judged (not used; the formula cannot pass)
-        self.fixed_period_ns = round(1e9 / spec.rate_hz) if spec.rate_hz is not None else None
+        self.fixed_period_ns = signal_period_ns(name, spec, np.zeros(0, dtype=np.int64)) if (
+            spec.rate_hz is not None or self.follows_pose) else None
         self._history = Buffer(np.int64)  # without rate_hz: the times of the messages dropped from ``t``
         self._period_ns = 0
         self._estimated_at = 0  # message count of the last estimate
@@ -64,7 +66,7 @@ class SignalFeed:
             self.late += 1
             return
         i = bisect_left(self.t, t_ns)
-        if i < len(self.t) and self.t[i] == t_ns:  # as verify.ingest.fields.read_signals: exact equality merges
+        if i < len(self.t) and self.t[i] == t_ns:  # verify.ingest.timebase.judged_samples with agree_tol=0
             if self.v[i] == value:
                 self.merged += 1
             else:
@@ -96,7 +98,7 @@ class SignalFeed:
 
     def _stream(self, period_ns: int) -> SignalStream:
         return SignalStream(self.name, self.spec, np.asarray(self.t, dtype=np.int64),
-                            np.asarray(self.v, dtype=np.float64), period_ns, "online")
+                            np.asarray(self.v, dtype=np.float64), period_ns, "online", follows_pose=self.follows_pose)
 
     # ---- judging ----------------------------------------------------------------------------------------------------
     def bounds(self, t_ns: IntArray, entries_ns: IntArray) -> tuple[SignalBounds, tuple[FloatArray, FloatArray]]:

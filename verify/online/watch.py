@@ -30,11 +30,12 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError
+from verify.ingest.clocks import clock_offsets_ns
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
 from verify.ingest.raw import RawTopic
 from verify.ingest.salvage import SalvagedMessage
-from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base
+from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
 from verify.online.follow import open_follower
 from verify.online.monitor import Decision, OnlineMonitor, OnlineResult
 
@@ -71,7 +72,7 @@ class _Feeder:
         self.base_note: str | None = None
         self.path = path
         # as read_log: the scenario's clock_offsets (topic -> s) added to that topic's times
-        self.offsets_ns = {topic: round(sec * 1e9) for topic, sec in scenario.clock_offsets.items()}
+        self.offsets_ns = clock_offsets_ns(scenario.clock_offsets, None)  # range-checked as read_log's
         self.pose_topic: str | None = None
         self.seen_topics: dict[str, str] = {}
         self._held: list[SalvagedMessage] = []  # auto: the messages read before the base is chosen
@@ -155,39 +156,46 @@ class _Feeder:
                 self._push_pose(msgs, self.monitor.push_pose, child)
             if t.cmd_vel in by_topic:
                 tw = decode_twist(self._raw(by_topic[t.cmd_vel]), self.ros1)
-                # as read_log: a TwistStamped's header stamps unless the pose is judged on log time
-                header_cmd = tw.stamp_ns is not None and self.time_base != "log"
-                cst = (tw.stamp_ns if header_cmd and tw.stamp_ns is not None else tw.log_ns) + self.offsets_ns.get(
-                    t.cmd_vel, 0)
+                cst = self._times(tw.stamp_ns, tw.log_ns) + self.offsets_ns.get(t.cmd_vel, 0)
                 for k in np.argsort(cst, kind="stable").tolist():
                     self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
         except LogReadError as err:
             raise LogReadError(err.reason, path=str(self.path)) from err
 
     def _push_signals(self, msgs: list[SalvagedMessage], fields: list[tuple[str, str]]) -> None:
-        """As ``verify.ingest.fields.read_signals``: header stamps when the message has a header and the pose is
-        judged on header stamps, else log time (plus the topic's clock offset)."""
+        """Times under the rules of every stream (``_times``), plus the topic's clock offset."""
         raw = self._raw(msgs)
         decoded: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, fld in fields:
             if fld not in decoded:
                 cols = decode_field(raw, self.ros1, fld)
-                header = cols.stamp_ns is not None and self.time_base == "header"
-                stamps = cols.stamp_ns if header and cols.stamp_ns is not None else cols.log_ns
                 offset = self.offsets_ns.get(msgs[0].topic, 0)
-                decoded[fld] = (np.asarray(stamps, dtype=np.int64) + offset, cols.value)
+                decoded[fld] = (self._times(cols.stamp_ns, cols.log_ns) + offset, cols.value)
             stamps, values = decoded[fld]
             for k in np.argsort(stamps, kind="stable").tolist():
                 self.monitor.push_signal(name, int(stamps[k]), float(values[k]))
 
     def _push_pose(self, msgs: list[SalvagedMessage], push: Callable[..., None], child: str | None) -> None:
         cols = decode_pose(self._raw(msgs), self.ros1, child_frame=child)
-        stamps = (cols.stamp_ns if self.time_base == "header" else cols.log_ns) + self.offsets_ns.get(msgs[0].topic, 0)
+        log_ns = np.asarray(cols.log_ns, dtype=np.int64)
+        if push == self.monitor.push_pose:  # the pose: its stamps' outliers re-timed on the base chosen
+            times = choose_time_base(cols.stamp_ns, log_ns, self.time_base or "header").t_ns
+        else:
+            times = self._times(cols.stamp_ns, log_ns)
+        stamps = times + self.offsets_ns.get(msgs[0].topic, 0)
         if self.requested == "auto" and self.time_base == "header" and push == self.monitor.push_pose:
             self._count_stamps(np.asarray(cols.stamp_ns, dtype=np.int64))
         for k in np.argsort(stamps, kind="stable").tolist():
             push(int(stamps[k]), float(cols.x_m[k]), float(cols.y_m[k]))
 
+
+    def _times(self, stamps_ns: npt.NDArray[np.int64] | None, log_ns: npt.ArrayLike) -> npt.NDArray[np.int64]:
+        """A stream beside the pose, under the rules of every stream (``verify.ingest.timebase.stream_time_base``),
+        applied to the messages of one poll (all of them when the log is read once)."""
+        base = stream_time_base(stamps_ns, np.asarray(log_ns, dtype=np.int64),
+                                requested="log" if self.time_base == "log" else self.requested,
+                                pose_base=self.time_base or "header")
+        return base.t_ns
 
     def _count_stamps(self, stamps: npt.NDArray[np.int64]) -> None:
         """Stamps that are zero or negative, repeat the previous one or go back (reading order)."""
