@@ -199,11 +199,11 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
     msgs.sort(key=lambda m: m[0])
 
     def write_all(writer: Any, close_chunk: Callable[[], None] | None = None) -> None:
-        conns: dict[str, Any] = {}
+        conns: dict[tuple[str, str], Any] = {}
         for k, (t, topic, msgtype, data) in enumerate(msgs):
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            writer.write(conns[topic], t, data)
+            if (topic, msgtype) not in conns:  # a topic written with two types gets two connections
+                conns[topic, msgtype] = writer.add_connection(topic, msgtype, typestore=store)
+            writer.write(conns[topic, msgtype], t, data)
             if close_chunk is not None and k % 40 == 39:
                 close_chunk()
 

@@ -315,3 +315,41 @@ def test_a_signal_on_the_pose_topic_is_known_wherever_the_pose_is(tmp_path: Path
             code, out, err = run([command, str(log), "--scenario", str(scenario), "--spec", "G[0,inf) slow",
                                   "--time-base", "auto"], capsys)
             assert code == (1 if fast else 0), (command, fast, out, err)
+
+
+# ---- finding 2: one topic, one type -----------------------------------------------------------------------------
+def _pose_stamped(stamp_ns: int, x: float, y: float) -> Callable[[Any, bool], Any]:
+    def build(ty: Any, ros1: bool) -> Any:
+        sec, nsec = divmod(stamp_ns, 10**9)
+        header = ty["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
+                                           stamp=ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                           frame_id="odom")
+        return ty["geometry_msgs/msg/PoseStamped"](header=header, pose=ty["geometry_msgs/msg/Pose"](
+            position=ty["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+            orientation=ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+    return build
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap", "db3", "dir"])
+def test_one_topic_with_two_types_is_exit_3_naming_both(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch, fmt: str) -> None:
+    """One PoseStamped published on /odom before the robot's Odometry stream, which drives through an obstacle."""
+    run0 = FUZZ.base_run(violating=True)
+    run0.topics = ("metadata",)
+    run0.extra = [(int(run0.t_ns[0]) - 1_000_000, "/odom", "geometry_msgs/msg/PoseStamped",
+                   _pose_stamped(int(run0.t_ns[0]) - 1_000_000, *run0.xy[0]))]
+    run0.extra += [(t_ns, "/odom", "nav_msgs/msg/Odometry", _odometry(t_ns, float(x), float(y), 0.0))
+                   for t_ns, (x, y) in zip(run0.t_ns.tolist(), run0.xy, strict=True)]
+    log = FUZZ.write_run(run0, tmp_path / f"two{FUZZ.SUFFIX[fmt]}", fmt)
+    scenario = tmp_path / "odom.yaml"
+    scenario.write_text(FUZZ.builtin_scenario_text("nexus-sml").replace(
+        "topics: {pose: /qualisys/nexus/pose, cmd_vel: /nexus/cmd_vel, nominal: /nexus/nominal_pose}",
+        "topics: {pose: /odom}"))
+    for fast in ("0", "1"):
+        monkeypatch.setenv("TUBEMPC_FAST_INGEST", fast)
+        for argv in (["certify", str(log)], ["certify", str(log), "--salvage"], ["watch", str(log)]):
+            if "--salvage" in argv and fmt in ("db3", "dir"):
+                continue
+            code, out, err = run([*argv, "--scenario", str(scenario), "--spec", SPEC], capsys)
+            assert code == 3, (fast, argv, out, err)
+            one_line_error(err, "/odom", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry")

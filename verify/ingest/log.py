@@ -179,6 +179,8 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
             job.cancel()  # the file digest of a log that cannot be certified is not needed
         if isinstance(err, READ_ERRORS) and not isinstance(err, VerifyError):
             raise _unreadable(p, err) from err
+        if isinstance(err, LogReadError) and err.path is None:  # a reader's error that could not name the file
+            raise LogReadError(err.reason, path=str(p)) from err
         raise
 
 

@@ -43,7 +43,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
-from verify.ingest.readerrors import in_words
+from verify.ingest.readerrors import in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 from verify.ingest.sqlite import QuickReader, read_sqlite_storage
@@ -379,6 +379,8 @@ def _split_by_topic(rows: list[tuple[Connection, int, bytes | memoryview]], topi
 
 def _topics_from(conns: Iterable[Connection]) -> dict[str, RawTopic]:
     out: dict[str, RawTopic] = {}
+    conns = list(conns)
+    one_type_per_topic((c.topic, c.msgtype) for c in conns)
     for c in conns:
         has_def = c.msgdef.format != MessageDefinitionFormat.NONE and bool(c.msgdef.data.strip())
         if c.topic not in out:
@@ -406,6 +408,8 @@ def _salvage(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog
             if m.topic not in out:
                 out[m.topic] = RawTopic(m.topic, m.msgtype, m.has_definition)
                 logs[m.topic], payloads[m.topic] = [], []
+            elif m.msgtype != out[m.topic].msgtype:
+                one_type_per_topic([(m.topic, out[m.topic].msgtype), (m.topic, m.msgtype)])
             logs[m.topic].append(m.log_ns)
             payloads[m.topic].append(m.payload)
         stops.append(f"{file.name}: {walk.stop_reason()}")

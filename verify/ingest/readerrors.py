@@ -10,15 +10,17 @@ from __future__ import annotations
 import sqlite3
 import struct
 import zlib
+from collections.abc import Iterable
 
 import apsw  # rosbags' sqlite3 driver
 from rosbags.rosbag1 import ReaderError as ReaderError1
 from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.serde import SerdeError
 
+from verify.errors import LogReadError
 from verify.ingest.mcap import zstd
 
-__all__ = ["DECOMPRESS_ERRORS", "READ_ERRORS", "in_words"]
+__all__ = ["DECOMPRESS_ERRORS", "READ_ERRORS", "in_words", "one_type_per_topic"]
 
 #: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
 DECOMPRESS_ERRORS: tuple[type[BaseException], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
@@ -72,3 +74,15 @@ def in_words(err: BaseException) -> str:
     else:
         words = "its records are malformed"
     return f"{words} ({_detail(err)})"
+
+
+def one_type_per_topic(pairs: Iterable[tuple[str, str]], path: str | None = None) -> None:
+    """One topic, one type: a topic carried by connections (or messages) of two message types is refused naming
+    both (each reader calls this on the topics it reads, so the fast and the plain paths agree)."""
+    seen: dict[str, str] = {}
+    for topic, msgtype in pairs:
+        first = seen.setdefault(topic, msgtype)
+        if first != msgtype:
+            raise LogReadError(f"topic {topic} is carried by connections of two message types, {first} and "
+                               f"{msgtype}: one topic must have one type (the messages of one would be decoded as "
+                               f"the other)", path=path)

@@ -35,6 +35,7 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
+from verify.ingest.readerrors import one_type_per_topic
 from verify.ingest.records import (
     ROS1,
     WORKERS,
@@ -465,6 +466,7 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
         return None
     available = {c.topic: c.msgtype for c in conns}
     selected = {c.cid: c for c in conns if c.topic in wanted}
+    one_type_per_topic((c.topic, c.msgtype) for c in selected.values())
     parts: dict[str, _Parts] = {}
     for c in selected.values():
         parts.setdefault(c.topic, _Parts([], [], []))

@@ -34,6 +34,7 @@ from verify.ingest.clocks import clock_offsets_ns
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
 from verify.ingest.raw import RawTopic
+from verify.ingest.readerrors import one_type_per_topic
 from verify.ingest.salvage import SalvagedMessage
 from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
 from verify.online.follow import open_follower
@@ -133,6 +134,8 @@ class _Feeder:
 
     def _raw(self, msgs: list[SalvagedMessage]) -> RawTopic:
         m0 = msgs[0]
+        one_type_per_topic([(m0.topic, self.seen_topics.get(m0.topic, m0.msgtype)),
+                            *((m.topic, m.msgtype) for m in msgs)], str(self.path))
         return RawTopic(m0.topic, m0.msgtype, m0.has_definition, [m.log_ns for m in msgs], [m.payload for m in msgs])
 
     def _feed(self, messages: list[SalvagedMessage]) -> None:
