@@ -43,6 +43,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
+from verify.ingest.mcapfile import read_bag_metadata, read_mcap_log
 from verify.ingest.readerrors import in_words
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
@@ -215,6 +216,11 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     own = fast_ingest()
+    if fmt == "mcap" and (not path.is_dir() or read_bag_metadata(path).compression_mode is None):
+        got = read_mcap_log(path, wanted, fast=own)
+        out = {topic: RawTopic(topic, t.msgtype, t.has_definition, t.log_ns, t.payloads)
+               for topic, t in got.topics.items()}
+        return RawLog(str(path), fmt, False, out, got.available, False, tuple(notes))
     if fmt == "sqlite3" and own and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
         return quick
     reader: Reader1 | Reader2

@@ -21,7 +21,7 @@ from verify.ingest.mcap import zstd
 __all__ = ["DECOMPRESS_ERRORS", "READ_ERRORS", "in_words"]
 
 #: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
-DECOMPRESS_ERRORS: tuple[type[BaseException], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
+DECOMPRESS_ERRORS: tuple[type[Exception], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
 
 #: what readers and decoders raise on damaged bytes (AssertionError: rosbags checks its index with ``assert``;
 #: MemoryError: a corrupt size field; TypeError/AttributeError: a record missing a field)

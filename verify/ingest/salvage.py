@@ -14,12 +14,11 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from verify.ingest.mcap import zstd
+from verify.ingest.mcaprecords import MessageRecord, Scan, lz4_decompress, scan
 from verify.ingest.readerrors import DECOMPRESS_ERRORS
 
-__all__ = ["SalvagedMessage", "Walk", "walk_mcap", "walk_ros1"]
+__all__ = ["SalvagedMessage", "Walk", "mcap_message", "walk_mcap", "walk_ros1"]
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
 
 
@@ -87,13 +86,6 @@ _STOPS: tuple[type[BaseException], ...] = (_IncompleteError, struct.error, Value
 _STOPS_ROS1: tuple[type[BaseException], ...] = (KeyError, *_STOPS)  # ROS1: also a message of a connection not seen yet
 
 
-def _lz4(data: bytes) -> bytes:
-    from lz4.frame import decompress  # type: ignore[import-untyped]  # a rosbags dependency
-
-    out: bytes = decompress(data)
-    return out
-
-
 def walk_ros1(path: Path) -> Walk:
     walk = Walk(path)
     buf = path.read_bytes()
@@ -137,7 +129,7 @@ def walk_ros1(path: Path) -> Walk:
                     if compression == "bz2":
                         inner = bz2.decompress(data)
                     elif compression == "lz4":
-                        inner = _lz4(data)
+                        inner = lz4_decompress(data)
                     else:
                         inner = data
                     got, cut = chunk_messages(inner)
@@ -171,102 +163,29 @@ def _add_ros1_conn(conns: dict[int, tuple[str, str, bool]], header: dict[str, by
 
 
 # ---- MCAP ----------------------------------------------------------------------------------------------------------
-def _mcap_string(rec: bytes, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", rec, pos)
-    return _take(rec, pos + 4, n).decode(), pos + 4 + n
-
-
-def _mcap_decompress(data: bytes, compression: str, size: int) -> bytes:
-    if compression == "":
-        return data
-    if compression == "zstd":
-        return zstd.ZstdDecompressor().decompress(data, max_length=size)
-    if compression == "lz4":
-        return _lz4(data)
-    raise ValueError(f"unsupported MCAP chunk compression {compression!r}")
-
-
-def _mcap_records(buf: bytes, pos: int, end: int) -> Iterator[tuple[int, bytes, int]]:
-    while pos < end:
-        op = _take(buf, pos, 1)[0]
-        (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-        rec = _take(buf, pos + 9, size)
-        yield op, rec, pos + 9 + size
-        pos += 9 + size
+def mcap_message(found: Scan, msg: MessageRecord) -> SalvagedMessage | None:
+    """An MCAP message of a channel declared so far, as a salvaged message (None: its channel is not known)."""
+    channel = found.channels.get(msg.channel_id)
+    if channel is None:
+        return None
+    schema = found.schemas.get(channel.schema_id)
+    name, has_def = (schema.name, schema.has_data) if schema is not None else ("", False)
+    return SalvagedMessage(channel.topic, name, has_def, msg.log_ns, bytes(msg.payload))
 
 
 def walk_mcap(path: Path) -> Walk:
+    """The record layer's scan (``verify.ingest.mcaprecords.scan``) as a salvage walk: the messages of channels
+    declared before them, in file order, up to the first record that is cut, malformed or does not decompress."""
     walk = Walk(path)
     buf = path.read_bytes()
 
     def gen() -> Iterator[SalvagedMessage]:
-        if not buf.startswith(_MCAP_MAGIC):
-            walk.reason, walk.stopped_at = "not an MCAP file (bad magic)", 0
-            return
-        schemas: dict[int, tuple[str, bool]] = {}
-        channels: dict[int, tuple[str, str, bool]] = {}
-        pos = len(_MCAP_MAGIC)
-
-        def handle(op: int, rec: bytes) -> Iterator[SalvagedMessage]:
-            if op == 0x03:
-                (sid,) = struct.unpack_from("<H", rec, 0)
-                name, p = _mcap_string(rec, 2)
-                _enc, p = _mcap_string(rec, p)
-                (dlen,) = struct.unpack_from("<I", rec, p)
-                schemas[sid] = (name, dlen > 0)
-            elif op == 0x04:
-                cid, sid = struct.unpack_from("<HH", rec, 0)
-                topic, _ = _mcap_string(rec, 4)
-                name, has_def = schemas.get(sid, ("", False))
-                channels[cid] = (topic, name, has_def)
-            elif op == 0x05:
-                cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", rec, 0)
-                if cid in channels:
-                    topic, name, has_def = channels[cid]
-                    yield SalvagedMessage(topic, name, has_def, log_time, rec[22:])
-
-        def inner_messages(inner: bytes) -> tuple[list[SalvagedMessage], bool]:
-            """Messages of the complete records of a chunk's content; flag: the content ended mid-record."""
-            got: list[SalvagedMessage] = []
-            try:
-                for iop, irec, _ in _mcap_records(inner, 0, len(inner)):
-                    got.extend(handle(iop, irec))
-            except (_IncompleteError, struct.error):
-                return got, True
-            return got, False
-
-        try:
-            while pos < len(buf):
-                op = _take(buf, pos, 1)[0]
-                (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-                if op == 0x06 and pos + 9 + size > len(buf):
-                    # a truncated chunk: an uncompressed one still holds complete records up to the cut
-                    rec = buf[pos + 9 :]
-                    comp, p = _mcap_string(rec, 28)
-                    if comp != "":
-                        raise _IncompleteError
-                    got, _ = inner_messages(rec[p + 8 :])
-                    yield from got
-                    raise _IncompleteError
-                rec = _take(buf, pos + 9, size)
-                if op == 0x06:
-                    _start, _end, usize, _crc = struct.unpack_from("<QQQI", rec, 0)
-                    comp, p = _mcap_string(rec, 28)
-                    (clen,) = struct.unpack_from("<Q", rec, p)
-                    got, cut = inner_messages(_mcap_decompress(_take(rec, p + 8, clen), comp, usize))
-                    yield from got
-                    if cut:
-                        raise _IncompleteError
-                elif op == 0x02:  # footer: the stream is complete
-                    break
-                else:
-                    yield from list(handle(op, rec))
-                pos += 9 + size
-        except _STOPS as err:
-            walk.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
-            walk.stopped_at = pos
-            return
-        walk.reason, walk.stopped_at = "reached the end of the data", None
+        found = Scan({}, {})
+        for msg in scan(buf, found):
+            if (got := mcap_message(found, msg)) is not None:
+                yield got
+        walk.stopped_at = found.stopped_at
+        walk.reason = "reached the end of the data" if found.complete else found.reason
 
     walk.messages = gen()
     return walk

@@ -20,24 +20,28 @@ from pathlib import Path
 from typing import Protocol
 
 from verify.errors import LogReadError
+from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
+from verify.ingest.mcaprecords import CutError, MalformedError, Scan, lz4_decompress, record_messages
+from verify.ingest.mcaprecords import Op as McapOp
+from verify.ingest.mcaprecords import walk as mcap_walk
+from verify.ingest.readerrors import DECOMPRESS_ERRORS
 from verify.ingest.salvage import (
     SalvagedMessage,
     _add_ros1_conn,
     _IncompleteError,
-    _lz4,
-    _mcap_decompress,
-    _mcap_records,
-    _mcap_string,
     _ros1_header,
     _ros1_records,
     _take,
+    mcap_message,
     walk_mcap,
     walk_ros1,
 )
 
 __all__ = ["Follower", "open_follower"]
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: what a complete MCAP record raises when its bytes are damaged
+_MCAP_DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, ImportError, *DECOMPRESS_ERRORS)
+
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
 
 
@@ -62,7 +66,8 @@ def _read_from(path: Path, pos: int) -> bytes:
 
 
 class McapFollower:
-    """Top-level MCAP records from a byte offset; a chunk is read once it is complete."""
+    """Top-level MCAP records from a byte offset, through the record layer (``verify.ingest.mcaprecords``); a chunk
+    is read once it is complete."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -70,26 +75,7 @@ class McapFollower:
         self.finished = False
         self.delivered = 0
         self.pos = 0
-        self.schemas: dict[int, tuple[str, bool]] = {}
-        self.channels: dict[int, tuple[str, str, bool]] = {}
-
-    def _handle(self, op: int, rec: bytes, out: list[SalvagedMessage]) -> None:
-        if op == 0x03:
-            (sid,) = struct.unpack_from("<H", rec, 0)
-            name, p = _mcap_string(rec, 2)
-            _enc, p = _mcap_string(rec, p)
-            (dlen,) = struct.unpack_from("<I", rec, p)
-            self.schemas[sid] = (name, dlen > 0)
-        elif op == 0x04:
-            cid, sid = struct.unpack_from("<HH", rec, 0)
-            topic, _ = _mcap_string(rec, 4)
-            name, has_def = self.schemas.get(sid, ("", False))
-            self.channels[cid] = (topic, name, has_def)
-        elif op == 0x05:
-            cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", rec, 0)
-            if cid in self.channels:
-                topic, name, has_def = self.channels[cid]
-                out.append(SalvagedMessage(topic, name, has_def, log_time, bytes(rec[22:])))
+        self.found = Scan({}, {})
 
     def poll(self) -> list[SalvagedMessage]:
         out: list[SalvagedMessage] = []
@@ -98,35 +84,25 @@ class McapFollower:
         buf = _read_from(self.path, self.pos)
         pos = 0
         if self.pos == 0:
-            if len(buf) < len(_MCAP_MAGIC):
+            if len(buf) < len(MCAP_MAGIC):
                 return out
-            if not buf.startswith(_MCAP_MAGIC):
+            if not buf.startswith(MCAP_MAGIC):
                 raise LogReadError("not an MCAP file (bad magic)", path=str(self.path))
-            pos = len(_MCAP_MAGIC)
+            pos = len(MCAP_MAGIC)
         try:
-            while pos < len(buf):
-                op = _take(buf, pos, 1)[0]
-                (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-                rec = _take(buf, pos + 9, size)
-                got: list[SalvagedMessage] = []
-                if op == 0x06:
-                    _start, _end, usize, _crc = struct.unpack_from("<QQQI", rec, 0)
-                    comp, p = _mcap_string(rec, 28)
-                    (clen,) = struct.unpack_from("<Q", rec, p)
-                    inner = _mcap_decompress(_take(rec, p + 8, clen), comp, usize)
-                    for iop, irec, _ in _mcap_records(inner, 0, len(inner)):
-                        self._handle(iop, irec, got)
-                elif op in (0x02, 0x0F):  # footer / data end: the recorder closed the file
+            for op, rec, nxt in mcap_walk(buf, pos, len(buf)):
+                if op in (McapOp.FOOTER, McapOp.DATA_END):  # the recorder closed the file
                     self.finished = True
                 else:
-                    self._handle(op, rec, got)
-                out.extend(got)
-                pos += 9 + size
+                    for msg in record_messages(op, rec, self.found, check_crc=False):
+                        if (got := mcap_message(self.found, msg)) is not None:
+                            out.append(got)
+                pos = nxt
                 if self.finished:
                     break
-        except _IncompleteError:
+        except CutError:
             pass  # a record still being written: read it again next time
-        except (struct.error, ValueError, ImportError) as err:
+        except _MCAP_DAMAGE as err:
             raise LogReadError(f"malformed MCAP record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
         self.pos += pos
         self.delivered += len(out)
@@ -194,7 +170,7 @@ class Ros1Follower:
                 elif op == 0x05:
                     compression = header.get("compression", b"none").decode()
                     inner = bz2.decompress(data) if compression == "bz2" else (
-                        _lz4(data) if compression == "lz4" else data)
+                        lz4_decompress(data) if compression == "lz4" else data)
                     self._chunk(inner, got)
                 elif op == 0x07:
                     _add_ros1_conn(self.conns, header, data)
