@@ -24,6 +24,7 @@ from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, lz4_decompress, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
+from verify.ingest.raw import check_log_path
 from verify.ingest.readerrors import DECOMPRESS_ERRORS
 from verify.ingest.salvage import (
     SalvagedMessage,
@@ -263,6 +264,7 @@ class FolderFollower:
         out: list[SalvagedMessage] = []
         for f in self._storage():
             if f not in self.files:
+                check_log_path(f)  # a FIFO would block the poll for ever
                 self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f)
                 self.format = self.files[f].format
             out.extend(self.files[f].poll())

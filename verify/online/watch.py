@@ -32,7 +32,7 @@ from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
-from verify.ingest.raw import RawTopic
+from verify.ingest.raw import RawTopic, check_log_path
 from verify.ingest.salvage import SalvagedMessage
 from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base
 from verify.online.follow import open_follower
@@ -216,6 +216,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
                            path=str(p))
     if time_base not in TIME_BASES:
         raise LogReadError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}", path=str(p))
+    check_log_path(p)
     follower = open_follower(p)
     feeder = _Feeder(monitor, monitor.scenario, follower.format == "ros1", time_base, p)
     decisions: list[Decision] = []
