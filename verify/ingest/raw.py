@@ -4,15 +4,17 @@ input: a log path (ROS1 ``.bag``, bare ``.mcap`` / ``.db3``, or a ROS2 bag direc
 ``RawLog`` (per topic: message type, whether the bag carries its definition, log times in ns, raw payloads).
 
 An indexed ROS1 bag is read by our own chunk reader (``verify.ingest.ros1``: index records, chunk decompression,
-numpy slicing of the message records) when it is well-formed; anything unusual goes to ``rosbags``. Otherwise
-opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; the latter reads bare
-``.mcap`` and ``.db3`` files directly, sqlite3 with ``immutable=1`` so a ``-wal`` file is neither read nor
-checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with ``salvage=True`` the complete records
-are read by a stream walk (``verify.ingest.salvage``) and the result is marked partial.
+numpy slicing of the message records) when it is well-formed; anything unusual goes to ``rosbags``. MCAP files and
+MCAP bag folders are read as the format defines them (``verify.ingest.mcapfile``). Otherwise opening uses
+``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; sqlite3 with ``immutable=1`` so a
+``-wal`` file is neither read nor checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with
+``salvage=True`` the complete records are read by a stream walk (``verify.ingest.salvage``) and the result is marked
+partial. A log path or bag folder holding a FIFO, device or socket is refused before it is opened.
 
-``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own readers off: every log is then opened and read by plain
-``rosbags`` (its ``Reader.messages``), and decoded by one ``deserialize`` per message (``verify.ingest.decode``,
-``.fields``). The format of a log is decided by rosbags' own dispatch (``detect_format``).
+``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own fast readers off: ROS1 and sqlite3 logs are then opened
+and read by plain ``rosbags`` (its ``Reader.messages``), MCAP by the record scan, and every payload decoded by one
+``deserialize`` per message (``verify.ingest.decode``, ``.fields``). The format of a log is decided by rosbags' own
+dispatch (``detect_format``).
 """
 
 from __future__ import annotations
