@@ -24,10 +24,12 @@ from rosbags.serde import SerdeError
 
 from tubempc.cli import main
 from tubempc.scenario import builtin_scenario, builtin_scenario_text
+from verify.errors import LogReadError
 from verify.ingest import decode as decode_module
 from verify.ingest import log as log_module
 from verify.ingest.decode import decode_pose
 from verify.ingest.raw import RawTopic
+from verify.ingest.readerrors import LibraryError
 
 ROOT = Path(__file__).resolve().parents[2]
 #: every case holds with our own readers and with plain rosbags (TUBEMPC_FAST_INGEST=0): the same exit and message
@@ -90,8 +92,10 @@ def test_seed_logs_pass_and_fail_as_built(seed_logs: dict[tuple[str, bool], Path
 def test_library_errors_become_one_line_exit_3(seed_logs: dict[tuple[str, bool], Path], monkeypatch: Any,
                                                capsys: pytest.CaptureFixture[str], exc: Exception,
                                                words: str) -> None:
+    """Library errors are translated where the library is called (``LibraryError``) and keep their words; the same
+    exception raised bare by our code is a bug (exit 70) when it is one a library raises only on bad bytes."""
     def boom(*args: Any, **kwargs: Any) -> Any:
-        raise exc
+        raise LibraryError(exc) if isinstance(exc, AssertionError | KeyError | TypeError) else exc
 
     monkeypatch.setattr(log_module, "read_raw", boom)
     path = seed_logs["bag", False]
@@ -101,6 +105,13 @@ def test_library_errors_become_one_line_exit_3(seed_logs: dict[tuple[str, bool],
     # --debug adds the traceback before the same line and never changes the exit code
     code, _, err = run(["--debug", "certify", str(path), "--scenario", "nexus-sml"], capsys)
     assert code == 3 and "Traceback" in err and err.strip().splitlines()[-1].startswith("tubempc: error: ")
+    if isinstance(exc, AssertionError | KeyError | TypeError):
+
+        def bug(*args: Any, **kwargs: Any) -> Any:
+            raise exc
+
+        monkeypatch.setattr(log_module, "read_raw", bug)
+        assert run(["certify", str(path), "--scenario", "nexus-sml"], capsys)[0] == 70
 
 
 def test_internal_error_keeps_exit_70_with_debug(seed_logs: dict[tuple[str, bool], Path], monkeypatch: Any,
@@ -163,7 +174,7 @@ def test_fast_and_rosbags_decoders_agree_on_invalid_utf8(ros1: bool) -> None:
     assert np.array_equal(fast.x_m, slow.x_m) and np.array_equal(fast.stamp_ns, slow.stamp_ns)
     bad = _pose_topic(ros1, b"w\xff\xfeorld")
     for use_fast in (True, False):
-        with pytest.raises(SerdeError):
+        with pytest.raises(LogReadError, match="a message cannot be decoded"):  # rosbags' SerdeError, in words
             decode_pose(bad, ros1, fast=use_fast)
     assert decode_module._utf8_strings(np.frombuffer(b"ab\xc3\xa9", dtype=np.uint8), np.array([0]),
                                        np.array([4]))

@@ -45,11 +45,20 @@ def _is_ros2_bag_dir(path: Path) -> bool:
     return (path / "metadata.yaml").is_file()
 
 
-def _scan(folder: Path) -> list[Path]:
+def _scan(folder: Path, seen: set[Path] | None = None) -> list[Path]:
+    """Logs under ``folder``; a folder reached again (symlinks to itself or to an ancestor) is scanned once."""
+    seen = set() if seen is None else seen
+    try:
+        key = folder.resolve()
+    except (OSError, RuntimeError):  # a symlink loop that cannot be resolved
+        return []
+    if key in seen:
+        return []
+    seen.add(key)
     found: list[Path] = []
     for entry in sorted(folder.iterdir(), key=lambda p: p.name):
         if entry.is_dir():
-            found.extend([entry] if _is_ros2_bag_dir(entry) else _scan(entry))
+            found.extend([entry] if _is_ros2_bag_dir(entry) else _scan(entry, seen))
         elif entry.is_file() and entry.suffix.lower() in LOG_SUFFIXES:
             found.append(entry)
     return found

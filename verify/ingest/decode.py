@@ -25,7 +25,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from verify.errors import LogReadError
 from verify.ingest.raw import RawTopic, fast_ingest
-from verify.ingest.readerrors import READ_ERRORS
+from verify.ingest.readerrors import LibraryError, deserialize, in_words
 from verify.ingest.ros1 import PayloadBuffer
 
 __all__ = [
@@ -249,7 +249,7 @@ def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fa
     rows: list[tuple[float, float, float, float, float, float]] = []
     try:
         for log_ns, payload in zip(raw.log_ns, raw.payloads, strict=True):
-            msg = deser(payload, raw.msgtype)
+            msg = deserialize(deser, payload, raw.msgtype)
             if raw.msgtype == POSE_STAMPED:
                 items = [(msg.header, msg.pose.position, msg.pose.orientation)]
             elif raw.msgtype == ODOMETRY:
@@ -265,11 +265,8 @@ def decode_pose(raw: RawTopic, ros1: bool, *, child_frame: str | None = None, fa
                 stamps.append(_stamp(header))
                 logs.append(log_ns)
                 rows.append((p.x, p.y, q.x, q.y, q.z, q.w))
-    except (ValueError, KeyError, IndexError, AttributeError) as err:
-        if isinstance(err, LogReadError):
-            raise
-        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({err.__class__.__name__}: {err})"
-                           ) from err
+    except LibraryError as err:
+        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({in_words(err)})") from err
     arr = np.asarray(rows, dtype=np.float64).reshape(-1, 6)
     return PoseColumns(np.asarray(stamps, dtype=np.int64), np.asarray(logs, dtype=np.int64), arr[:, 0].copy(),
                        arr[:, 1].copy(), arr[:, 2:6].copy(), False)
@@ -331,9 +328,9 @@ def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool | None = None) -> Twis
     store = typestore(ros1)
     deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
     try:
-        msgs = [deser(p, raw.msgtype) for p in raw.payloads]
-    except (ValueError, KeyError, IndexError) as err:
-        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({err})") from err
+        msgs = [deserialize(deser, p, raw.msgtype) for p in raw.payloads]
+    except LibraryError as err:
+        raise LogReadError(f"topic {raw.topic}: cannot decode {raw.msgtype} ({in_words(err)})") from err
     stamps = None
     if raw.msgtype == TWIST_STAMPED:
         stamps = np.array([_stamp(m.header) for m in msgs], dtype=np.int64)
@@ -349,7 +346,7 @@ def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:
     out: list[tuple[int, str]] = []
     for log_ns, payload in zip(raw.log_ns, raw.payloads, strict=True):
         try:
-            out.append((log_ns, str(deser(payload, raw.msgtype).data)))
-        except READ_ERRORS:
+            out.append((log_ns, str(deserialize(deser, payload, raw.msgtype).data)))
+        except LibraryError:
             continue
     return out

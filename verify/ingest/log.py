@@ -35,7 +35,7 @@ from verify.ingest.digest import (
 )
 from verify.ingest.fields import SignalStream, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
-from verify.ingest.raw import RawLog, read_raw
+from verify.ingest.raw import RawLog, check_bag_folder, read_raw, special_file_kind
 from verify.ingest.readerrors import READ_ERRORS, in_words
 from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples, stream_time_base
 
@@ -147,11 +147,9 @@ def _check_path(p: Path) -> None:
     except OSError as err:
         raise LogReadError(f"cannot be read ({err.strerror or err.__class__.__name__})", path=str(p)) from None
     if stat.S_ISDIR(mode):
+        check_bag_folder(p)  # and every file inside it
         return
-    if not stat.S_ISREG(mode):
-        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a character device" if stat.S_ISCHR(mode)
-                else "a block device" if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
-                else "not a regular file")
+    if (kind := special_file_kind(mode)) is not None:
         raise LogReadError(f"is {kind}: a log must be a regular file or a ROS2 bag folder", path=str(p))
 
 

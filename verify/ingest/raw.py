@@ -4,15 +4,17 @@ input: a log path (ROS1 ``.bag``, bare ``.mcap`` / ``.db3``, or a ROS2 bag direc
 ``RawLog`` (per topic: message type, whether the bag carries its definition, log times in ns, raw payloads).
 
 An indexed ROS1 bag is read by our own chunk reader (``verify.ingest.ros1``: index records, chunk decompression,
-numpy slicing of the message records) when it is well-formed; anything unusual goes to ``rosbags``. Otherwise
-opening uses ``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; the latter reads bare
-``.mcap`` and ``.db3`` files directly, sqlite3 with ``immutable=1`` so a ``-wal`` file is neither read nor
-checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with ``salvage=True`` the complete records
-are read by a stream walk (``verify.ingest.salvage``) and the result is marked partial.
+numpy slicing of the message records) when it is well-formed; anything unusual goes to ``rosbags``. MCAP files and
+MCAP bag folders are read as the format defines them (``verify.ingest.mcapfile``). Otherwise opening uses
+``rosbags`` readers (``rosbags.rosbag1.Reader``, ``rosbags.rosbag2.Reader``; sqlite3 with ``immutable=1`` so a
+``-wal`` file is neither read nor checkpointed). A truncated or unindexed file raises ``TruncatedLogError``; with
+``salvage=True`` the complete records are read by a stream walk (``verify.ingest.salvage``) and the result is marked
+partial. A log path or bag folder holding a FIFO, device or socket is refused before it is opened.
 
-``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own readers off: every log is then opened and read by plain
-``rosbags`` (its ``Reader.messages``), and decoded by one ``deserialize`` per message (``verify.ingest.decode``,
-``.fields``). The format of a log is decided by rosbags' own dispatch (``detect_format``).
+``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own fast readers off: ROS1 and sqlite3 logs are then opened
+and read by plain ``rosbags`` (its ``Reader.messages``), MCAP by the record scan, and every payload decoded by one
+``deserialize`` per message (``verify.ingest.decode``, ``.fields``). The format of a log is decided by rosbags' own
+dispatch (``detect_format``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import gc
 import os
 import sqlite3
+import stat
 import struct
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -40,15 +43,18 @@ from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.rosbag2.reader import DirectoryReader
 from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+from rosbags.serde import SerdeError
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
-from verify.ingest.readerrors import in_words, one_type_per_topic
+from verify.ingest.mcapfile import read_bag_metadata, read_mcap_log
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
 from verify.ingest.sqlite import QuickReader, read_sqlite_storage
 
-__all__ = ["FAST_INGEST_ENV", "RawLog", "RawTopic", "detect_format", "fast_ingest", "read_raw"]
+__all__ = ["FAST_INGEST_ENV", "RawLog", "RawTopic", "check_bag_folder", "check_log_path", "detect_format",
+           "fast_ingest", "read_raw", "special_file_kind"]
 
 #: environment variable: "0" (or "false", "no", "off") reads every log through plain rosbags
 FAST_INGEST_ENV = "TUBEMPC_FAST_INGEST"
@@ -154,11 +160,54 @@ def _storage_files(path: Path, fmt: str) -> list[Path]:
     return sorted(p for p in path.iterdir() if p.suffix == ext)
 
 
+def special_file_kind(mode: int) -> str | None:
+    """What a file that is not regular (nor a folder) is, in words; None for a regular file or a folder."""
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a character device" if stat.S_ISCHR(mode)
+            else "a block device" if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "not a regular file")
+
+
+def check_bag_folder(folder: Path) -> None:
+    """Refuse a bag folder holding a FIFO, device or socket (itself or as a symlink's target), before any file of
+    it is opened: a reader, a digest or a follower would block on it for ever. Entries that vanish meanwhile or
+    dangle are left to the reader (which names a missing storage file)."""
+    try:
+        entries = sorted(folder.iterdir())
+    except OSError as err:
+        raise LogReadError(f"cannot list the bag folder ({err.strerror or err.__class__.__name__})",
+                           path=str(folder)) from None
+    for entry in entries:
+        try:
+            mode = entry.stat().st_mode
+        except OSError:
+            continue
+        if (kind := special_file_kind(mode)) is not None:
+            raise LogReadError(f"{entry.name} inside the bag folder is {kind}: a ROS2 bag folder holds regular "
+                               f"files", path=str(folder))
+
+
+def check_log_path(path: Path) -> None:
+    """A log is a regular file or a bag folder of regular files (``check_bag_folder``); refused otherwise, before
+    it is opened."""
+    try:
+        mode = path.stat().st_mode
+    except OSError as err:
+        raise LogReadError(f"cannot be read ({err.strerror or err.__class__.__name__})", path=str(path)) from None
+    if stat.S_ISDIR(mode):
+        check_bag_folder(path)
+    elif (kind := special_file_kind(mode)) is not None:
+        raise LogReadError(f"is {kind}: a log must be a regular file or a ROS2 bag folder", path=str(path))
+
+
 def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) -> RawLog:
     """Read the raw payloads of ``topics`` (those present) from the log at ``path``."""
     p = Path(path)
     if not p.exists():
         raise LogReadError("no such file or directory", path=str(p))
+    if p.is_dir():
+        check_bag_folder(p)
     fmt = detect_format(p)
     wanted = set(topics)
     notes: list[str] = []
@@ -198,16 +247,22 @@ def _gc_paused() -> Iterator[None]:
             gc.enable()
 
 
-# What the readers raise on a damaged file (apsw: rosbags' sqlite3 driver, e.g. CorruptError on a truncated .db3).
-_READ_ERRORS = (ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw.Error, struct.error, EOFError,
-                ValueError, KeyError, IndexError)
+#: What rosbags' readers raise on a damaged file, caught only around their calls (open, messages): rosbags checks
+#: its index with ``assert`` and indexes its records unguarded, so KeyError, IndexError, TypeError, AttributeError
+#: and AssertionError from it mean damaged bytes (apsw: rosbags' sqlite3 driver, e.g. CorruptError on a truncated
+#: .db3).
+_READ_ERRORS: tuple[type[Exception], ...] = (
+    ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw.Error, struct.error, EOFError, ValueError,
+    KeyError, IndexError, TypeError, AttributeError, AssertionError, UnicodeDecodeError, OverflowError, MemoryError,
+    RecursionError, NotImplementedError, SerdeError, *DECOMPRESS_ERRORS)
 
 
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
     text = " ".join(str(err).split()) or err.__class__.__name__
     hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
     if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
-        return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]})", path=str(path))
+        return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]}); --salvage reads its complete "
+                                 f"records", path=str(path))
     if isinstance(err, sqlite3.DatabaseError | apsw.Error):
         return TruncatedLogError(f"unreadable sqlite3 database: {in_words(err)}", path=str(path))
     return LogReadError(f"unreadable {fmt} log: {in_words(err)}", path=str(path))
@@ -215,6 +270,11 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     own = fast_ingest()
+    if fmt == "mcap" and (not path.is_dir() or read_bag_metadata(path).compression_mode is None):
+        got = read_mcap_log(path, wanted, fast=own)
+        out = {topic: RawTopic(topic, t.msgtype, t.has_definition, t.log_ns, t.payloads)
+               for topic, t in got.topics.items()}
+        return RawLog(str(path), fmt, False, out, got.available, False, tuple(notes))
     if fmt == "sqlite3" and own and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
         return quick
     reader: Reader1 | Reader2

@@ -10,7 +10,8 @@ from __future__ import annotations
 import sqlite3
 import struct
 import zlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import apsw  # rosbags' sqlite3 driver
 from rosbags.rosbag1 import ReaderError as ReaderError1
@@ -18,19 +19,49 @@ from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.serde import SerdeError
 
 from verify.errors import LogReadError
-from verify.ingest.mcap import zstd
+from verify.ingest.mcaprecords import zstd
 
-__all__ = ["DECOMPRESS_ERRORS", "READ_ERRORS", "in_words", "one_type_per_topic"]
+__all__ = [
+    "DECOMPRESS_ERRORS", "DESERIALIZE_ERRORS", "READ_ERRORS", "LibraryError", "deserialize", "in_words",
+    "one_type_per_topic"]
 
 #: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
-DECOMPRESS_ERRORS: tuple[type[BaseException], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
+DECOMPRESS_ERRORS: tuple[type[Exception], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
 
-#: what readers and decoders raise on damaged bytes (AssertionError: rosbags checks its index with ``assert``;
-#: MemoryError: a corrupt size field; TypeError/AttributeError: a record missing a field)
+#: what rosbags' deserializers raise on bytes that are not a message of their type (an index or count past the
+#: payload, a length field that asks for too much, text that is not UTF-8): caught only around the library's call
+#: (``deserialize``), never around our own code
+DESERIALIZE_ERRORS: tuple[type[Exception], ...] = (
+    SerdeError, struct.error, IndexError, KeyError, ValueError, UnicodeDecodeError, AssertionError, TypeError,
+    AttributeError, MemoryError, OverflowError, RecursionError, NotImplementedError)
+
+
+class LibraryError(Exception):
+    """A library's error on damaged input, caught where the library is called; ``original`` is that error (its
+    type decides the words: ``in_words``)."""
+
+    def __init__(self, original: BaseException) -> None:
+        self.original = original
+        super().__init__(str(original))
+
+
+def deserialize(deser: Callable[[Any, str], Any], payload: Any, msgtype: str) -> Any:
+    """``deser(payload, msgtype)`` (a rosbags typestore's ``deserialize_cdr`` / ``deserialize_ros1``) with its
+    errors on damaged bytes raised as ``LibraryError``."""
+    try:
+        return deser(payload, msgtype)
+    except DESERIALIZE_ERRORS as err:
+        raise LibraryError(err) from err
+
+
+#: what the read boundary (``read_log``, ``log_digest``) turns into exit 3: the readers' own errors on damaged
+#: bytes, and library errors translated where the library is called (``LibraryError``). A ``TypeError``,
+#: ``AttributeError``, ``KeyError``, ``IndexError`` or ``AssertionError`` is not here: raised by our code it is a bug
+#: (exit 70); raised by a library on bad bytes it arrives as ``LibraryError``.
 READ_ERRORS: tuple[type[BaseException], ...] = (
-    ReaderError1, ReaderError2, SerdeError, AssertionError, OverflowError, UnicodeDecodeError, KeyError, IndexError,
-    ValueError, TypeError, AttributeError, struct.error, EOFError, sqlite3.Error, apsw.Error, MemoryError,
-    RecursionError, NotImplementedError, *DECOMPRESS_ERRORS)
+    ReaderError1, ReaderError2, SerdeError, LibraryError, OverflowError, UnicodeDecodeError, ValueError,
+    struct.error, EOFError, sqlite3.Error, apsw.Error, MemoryError, RecursionError, NotImplementedError,
+    *DECOMPRESS_ERRORS)
 
 _DETAIL_CHARS = 160
 
@@ -44,6 +75,8 @@ def _detail(err: BaseException) -> str:
 
 def in_words(err: BaseException) -> str:
     """What is wrong with the file, in words, with the library's message as detail in parentheses."""
+    if isinstance(err, LibraryError):
+        err = err.original
     name = err.__class__.__name__
     if isinstance(err, NotImplementedError):
         words = "it uses a feature this reader does not support"

@@ -8,19 +8,19 @@ malformed record, or chunk that does not decompress, and says where (``stop_reas
 
 from __future__ import annotations
 
-import bz2
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from verify.ingest.mcap import zstd
+from verify.ingest.mcaprecords import MessageRecord, Scan, scan
 from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
+from verify.ingest.ros1records import MalformedError as Ros1MalformedError
+from verify.ingest.ros1records import Ros1Message, Ros1Stream
 
-__all__ = ["SalvagedMessage", "Walk", "walk_mcap", "walk_ros1"]
+__all__ = ["SalvagedMessage", "Walk", "mcap_message", "ros1_message", "walk_mcap", "walk_ros1"]
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_ROS1_MAGIC = b"#ROSBAG V2.0\n"
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,227 +46,76 @@ class Walk:
         return f"{self.reason}{where}"
 
 
-class _IncompleteError(Exception):
-    pass
-
-
-def _take(buf: bytes, pos: int, size: int) -> bytes:
-    if size < 0 or pos + size > len(buf):
-        raise _IncompleteError
-    return buf[pos : pos + size]
-
-
 # ---- ROS1 ----------------------------------------------------------------------------------------------------------
-def _ros1_header(raw: bytes) -> dict[str, bytes]:
-    fields: dict[str, bytes] = {}
-    pos = 0
-    while pos < len(raw):
-        (size,) = struct.unpack_from("<I", raw, pos)
-        item = _take(raw, pos + 4, size)
-        name, _, value = item.partition(b"=")
-        fields[name.decode("ascii", "replace")] = value
-        pos += 4 + size
-    return fields
+#: what ends a ROS1 walk at a record: malformed, or a chunk that does not decompress
+_ROS1_STOPS: tuple[type[Exception], ...] = (Ros1MalformedError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
 
 
-def _ros1_records(buf: bytes, pos: int) -> Iterator[tuple[int, dict[str, bytes], bytes, int]]:
-    """Yield (op, header, data, next_pos); raises _IncompleteError on a partial record."""
-    while pos < len(buf):
-        (hlen,) = struct.unpack_from("<I", _take(buf, pos, 4))
-        header = _ros1_header(_take(buf, pos + 4, hlen))
-        (dlen,) = struct.unpack_from("<I", _take(buf, pos + 4 + hlen, 4))
-        data = _take(buf, pos + 8 + hlen, dlen)
-        nxt = pos + 8 + hlen + dlen
-        op = header.get("op", b"\x00")[0]
-        yield op, header, data, nxt
-        pos = nxt
-
-
-#: what ends a walk at a record: cut or malformed, or a chunk that does not decompress
-_STOPS: tuple[type[BaseException], ...] = (_IncompleteError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
-_STOPS_ROS1: tuple[type[BaseException], ...] = (KeyError, *_STOPS)  # ROS1: also a message of a connection not seen yet
-
-
-def _lz4(data: bytes) -> bytes:
-    from lz4.frame import decompress  # type: ignore[import-untyped]  # a rosbags dependency
-
-    out: bytes = decompress(data)
-    return out
+def ros1_message(stream: Ros1Stream, msg: Ros1Message) -> SalvagedMessage | None:
+    """A ROS1 message of a connection read so far, as a salvaged message (None: its connection is not known)."""
+    conn = stream.connections.get(msg.conn)
+    if conn is None:
+        return None
+    topic, typ, has_def = conn
+    return SalvagedMessage(topic, typ, has_def, msg.log_ns, msg.payload)
 
 
 def walk_ros1(path: Path) -> Walk:
+    """The record layer's stream (``verify.ingest.ros1records.Ros1Stream``) over the whole file as a salvage walk:
+    the messages of complete records (and of the complete records of a cut or still open uncompressed chunk), in
+    file order, up to the first record that is cut, malformed or does not decompress."""
     walk = Walk(path)
     buf = path.read_bytes()
 
     def gen() -> Iterator[SalvagedMessage]:
-        if not buf.startswith(_ROS1_MAGIC):
+        if not buf.startswith(ROS1_MAGIC):
             walk.reason, walk.stopped_at = "not a ROS1 bag (bad magic)", 0
             return
-        conns: dict[int, tuple[str, str, bool]] = {}
-        pos = len(_ROS1_MAGIC)
-        def chunk_messages(inner: bytes) -> tuple[list[SalvagedMessage], bool]:
-            got: list[SalvagedMessage] = []
-            try:
-                for iop, ih, idata, _ in _ros1_records(inner, 0):
-                    if iop == 0x07:
-                        _add_ros1_conn(conns, ih, idata)
-                    elif iop == 0x02:
-                        cid = struct.unpack("<I", ih["conn"])[0]
-                        sec, nsec = struct.unpack("<II", ih["time"])
-                        if cid in conns:
-                            topic, typ, has_def = conns[cid]
-                            got.append(SalvagedMessage(topic, typ, has_def, sec * 10**9 + nsec, idata))
-            except (_IncompleteError, struct.error, KeyError):
-                return got, True
-            return got, False
-
+        stream = Ros1Stream()
+        got: list[Ros1Message] = []
+        error: Exception | None = None
         try:
-            while pos < len(buf):
-                (hlen,) = struct.unpack_from("<I", _take(buf, pos, 4))
-                header = _ros1_header(_take(buf, pos + 4, hlen))
-                (dlen,) = struct.unpack_from("<I", _take(buf, pos + 4 + hlen, 4))
-                op = header.get("op", b"\x00")[0]
-                compression = header.get("compression", b"none").decode()
-                if pos + 8 + hlen + dlen > len(buf):
-                    if op == 0x05 and compression == "none":  # a cut uncompressed chunk: its complete records
-                        got, _ = chunk_messages(buf[pos + 8 + hlen :])
-                        yield from got
-                    raise _IncompleteError
-                data = buf[pos + 8 + hlen : pos + 8 + hlen + dlen]
-                if op == 0x05:
-                    if compression == "bz2":
-                        inner = bz2.decompress(data)
-                    elif compression == "lz4":
-                        inner = _lz4(data)
-                    else:
-                        inner = data
-                    got, cut = chunk_messages(inner)
-                    yield from got
-                    if cut:
-                        raise _IncompleteError
-                elif op == 0x07:
-                    _add_ros1_conn(conns, header, data)
-                pos += 8 + hlen + dlen
-        except _STOPS_ROS1 as err:
-            walk.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
-            walk.stopped_at = pos
-            return
-        walk.reason, walk.stopped_at = "reached the end of the file", None
+            stream.feed(buf, 0, got)
+        except _ROS1_STOPS as err:
+            error = err
+        for msg in got:
+            if (m := ros1_message(stream, msg)) is not None:
+                yield m
+        if error is None and (stream.closed or (stream.chunk is None and stream.pos >= len(buf))):
+            walk.reason, walk.stopped_at = "reached the end of the file", None
+        else:
+            name = error.__class__.__name__ if error is not None else "CutError"
+            walk.reason = f"stopped at an incomplete record ({name})"
+            walk.stopped_at = stream.resume_at
 
     walk.messages = gen()
     return walk
 
 
-def _add_ros1_conn(conns: dict[int, tuple[str, str, bool]], header: dict[str, bytes], data: bytes) -> None:
-    cid = struct.unpack("<I", header["conn"])[0]
-    topic = header["topic"].decode()
-    fields = _ros1_header(data)
-    typ = fields.get("type", b"").decode()
-    has_def = bool(fields.get("message_definition", b"").strip())
-    # ROS1 type names are pkg/Name; use the ROS2-style pkg/msg/Name as rosbags does
-    if typ.count("/") == 1:
-        pkg, name = typ.split("/")
-        typ = f"{pkg}/msg/{name}"
-    conns[cid] = (topic, typ, has_def)
-
-
 # ---- MCAP ----------------------------------------------------------------------------------------------------------
-def _mcap_string(rec: bytes, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", rec, pos)
-    return _take(rec, pos + 4, n).decode(), pos + 4 + n
-
-
-def _mcap_decompress(data: bytes, compression: str, size: int) -> bytes:
-    if compression == "":
-        return data
-    if compression == "zstd":
-        return zstd.ZstdDecompressor().decompress(data, max_length=size)
-    if compression == "lz4":
-        return _lz4(data)
-    raise ValueError(f"unsupported MCAP chunk compression {compression!r}")
-
-
-def _mcap_records(buf: bytes, pos: int, end: int) -> Iterator[tuple[int, bytes, int]]:
-    while pos < end:
-        op = _take(buf, pos, 1)[0]
-        (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-        rec = _take(buf, pos + 9, size)
-        yield op, rec, pos + 9 + size
-        pos += 9 + size
+def mcap_message(found: Scan, msg: MessageRecord) -> SalvagedMessage | None:
+    """An MCAP message of a channel declared so far, as a salvaged message (None: its channel is not known)."""
+    channel = found.channels.get(msg.channel_id)
+    if channel is None:
+        return None
+    schema = found.schemas.get(channel.schema_id)
+    name, has_def = (schema.name, schema.has_data) if schema is not None else ("", False)
+    return SalvagedMessage(channel.topic, name, has_def, msg.log_ns, bytes(msg.payload))
 
 
 def walk_mcap(path: Path) -> Walk:
+    """The record layer's scan (``verify.ingest.mcaprecords.scan``) as a salvage walk: the messages of channels
+    declared before them, in file order, up to the first record that is cut, malformed or does not decompress."""
     walk = Walk(path)
     buf = path.read_bytes()
 
     def gen() -> Iterator[SalvagedMessage]:
-        if not buf.startswith(_MCAP_MAGIC):
-            walk.reason, walk.stopped_at = "not an MCAP file (bad magic)", 0
-            return
-        schemas: dict[int, tuple[str, bool]] = {}
-        channels: dict[int, tuple[str, str, bool]] = {}
-        pos = len(_MCAP_MAGIC)
-
-        def handle(op: int, rec: bytes) -> Iterator[SalvagedMessage]:
-            if op == 0x03:
-                (sid,) = struct.unpack_from("<H", rec, 0)
-                name, p = _mcap_string(rec, 2)
-                _enc, p = _mcap_string(rec, p)
-                (dlen,) = struct.unpack_from("<I", rec, p)
-                schemas[sid] = (name, dlen > 0)
-            elif op == 0x04:
-                cid, sid = struct.unpack_from("<HH", rec, 0)
-                topic, _ = _mcap_string(rec, 4)
-                name, has_def = schemas.get(sid, ("", False))
-                channels[cid] = (topic, name, has_def)
-            elif op == 0x05:
-                cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", rec, 0)
-                if cid in channels:
-                    topic, name, has_def = channels[cid]
-                    yield SalvagedMessage(topic, name, has_def, log_time, rec[22:])
-
-        def inner_messages(inner: bytes) -> tuple[list[SalvagedMessage], bool]:
-            """Messages of the complete records of a chunk's content; flag: the content ended mid-record."""
-            got: list[SalvagedMessage] = []
-            try:
-                for iop, irec, _ in _mcap_records(inner, 0, len(inner)):
-                    got.extend(handle(iop, irec))
-            except (_IncompleteError, struct.error):
-                return got, True
-            return got, False
-
-        try:
-            while pos < len(buf):
-                op = _take(buf, pos, 1)[0]
-                (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-                if op == 0x06 and pos + 9 + size > len(buf):
-                    # a truncated chunk: an uncompressed one still holds complete records up to the cut
-                    rec = buf[pos + 9 :]
-                    comp, p = _mcap_string(rec, 28)
-                    if comp != "":
-                        raise _IncompleteError
-                    got, _ = inner_messages(rec[p + 8 :])
-                    yield from got
-                    raise _IncompleteError
-                rec = _take(buf, pos + 9, size)
-                if op == 0x06:
-                    _start, _end, usize, _crc = struct.unpack_from("<QQQI", rec, 0)
-                    comp, p = _mcap_string(rec, 28)
-                    (clen,) = struct.unpack_from("<Q", rec, p)
-                    got, cut = inner_messages(_mcap_decompress(_take(rec, p + 8, clen), comp, usize))
-                    yield from got
-                    if cut:
-                        raise _IncompleteError
-                elif op == 0x02:  # footer: the stream is complete
-                    break
-                else:
-                    yield from list(handle(op, rec))
-                pos += 9 + size
-        except _STOPS as err:
-            walk.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
-            walk.stopped_at = pos
-            return
-        walk.reason, walk.stopped_at = "reached the end of the data", None
+        found = Scan({}, {})
+        for msg in scan(buf, found):
+            if (got := mcap_message(found, msg)) is not None:
+                yield got
+        walk.stopped_at = found.stopped_at
+        walk.reason = "reached the end of the data" if found.complete else found.reason
 
     walk.messages = gen()
     return walk

@@ -12,7 +12,6 @@ re-read, never what was consumed. Files are opened read-only. ``rest`` reads, af
 
 from __future__ import annotations
 
-import bz2
 import sqlite3
 import struct
 from collections.abc import Iterator
@@ -20,25 +19,25 @@ from pathlib import Path
 from typing import Protocol
 
 from verify.errors import LogReadError
-from verify.ingest.salvage import (
-    SalvagedMessage,
-    _add_ros1_conn,
-    _IncompleteError,
-    _lz4,
-    _mcap_decompress,
-    _mcap_records,
-    _mcap_string,
-    _ros1_header,
-    _ros1_records,
-    _take,
-    walk_mcap,
-    walk_ros1,
-)
+from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
+from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
+from verify.ingest.mcaprecords import Op as McapOp
+from verify.ingest.mcaprecords import walk as mcap_walk
+from verify.ingest.raw import check_log_path
+from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
+from verify.ingest.ros1records import CutError as Ros1CutError
+from verify.ingest.ros1records import MalformedError as Ros1MalformedError
+from verify.ingest.ros1records import Op as Ros1Op
+from verify.ingest.ros1records import Ros1Message, Ros1Stream, record_at
+from verify.ingest.salvage import SalvagedMessage, mcap_message, ros1_message, walk_mcap, walk_ros1
 
-__all__ = ["Follower", "open_follower"]
+__all__ = ["Follower", "log_bytes", "open_follower"]
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+#: what a complete MCAP record raises when its bytes are damaged
+_MCAP_DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, ImportError, *DECOMPRESS_ERRORS)
+_ROS1_DAMAGE: tuple[type[Exception], ...] = (Ros1MalformedError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
+
 
 
 class Follower(Protocol):
@@ -62,7 +61,8 @@ def _read_from(path: Path, pos: int) -> bytes:
 
 
 class McapFollower:
-    """Top-level MCAP records from a byte offset; a chunk is read once it is complete."""
+    """Top-level MCAP records from a byte offset, through the record layer (``verify.ingest.mcaprecords``); a chunk
+    is read once it is complete."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -70,26 +70,7 @@ class McapFollower:
         self.finished = False
         self.delivered = 0
         self.pos = 0
-        self.schemas: dict[int, tuple[str, bool]] = {}
-        self.channels: dict[int, tuple[str, str, bool]] = {}
-
-    def _handle(self, op: int, rec: bytes, out: list[SalvagedMessage]) -> None:
-        if op == 0x03:
-            (sid,) = struct.unpack_from("<H", rec, 0)
-            name, p = _mcap_string(rec, 2)
-            _enc, p = _mcap_string(rec, p)
-            (dlen,) = struct.unpack_from("<I", rec, p)
-            self.schemas[sid] = (name, dlen > 0)
-        elif op == 0x04:
-            cid, sid = struct.unpack_from("<HH", rec, 0)
-            topic, _ = _mcap_string(rec, 4)
-            name, has_def = self.schemas.get(sid, ("", False))
-            self.channels[cid] = (topic, name, has_def)
-        elif op == 0x05:
-            cid, _seq, log_time, _pub = struct.unpack_from("<HIQQ", rec, 0)
-            if cid in self.channels:
-                topic, name, has_def = self.channels[cid]
-                out.append(SalvagedMessage(topic, name, has_def, log_time, bytes(rec[22:])))
+        self.found = Scan({}, {})
 
     def poll(self) -> list[SalvagedMessage]:
         out: list[SalvagedMessage] = []
@@ -98,35 +79,25 @@ class McapFollower:
         buf = _read_from(self.path, self.pos)
         pos = 0
         if self.pos == 0:
-            if len(buf) < len(_MCAP_MAGIC):
+            if len(buf) < len(MCAP_MAGIC):
                 return out
-            if not buf.startswith(_MCAP_MAGIC):
+            if not buf.startswith(MCAP_MAGIC):
                 raise LogReadError("not an MCAP file (bad magic)", path=str(self.path))
-            pos = len(_MCAP_MAGIC)
+            pos = len(MCAP_MAGIC)
         try:
-            while pos < len(buf):
-                op = _take(buf, pos, 1)[0]
-                (size,) = struct.unpack("<Q", _take(buf, pos + 1, 8))
-                rec = _take(buf, pos + 9, size)
-                got: list[SalvagedMessage] = []
-                if op == 0x06:
-                    _start, _end, usize, _crc = struct.unpack_from("<QQQI", rec, 0)
-                    comp, p = _mcap_string(rec, 28)
-                    (clen,) = struct.unpack_from("<Q", rec, p)
-                    inner = _mcap_decompress(_take(rec, p + 8, clen), comp, usize)
-                    for iop, irec, _ in _mcap_records(inner, 0, len(inner)):
-                        self._handle(iop, irec, got)
-                elif op in (0x02, 0x0F):  # footer / data end: the recorder closed the file
+            for op, rec, nxt in mcap_walk(buf, pos, len(buf)):
+                if op in (McapOp.FOOTER, McapOp.DATA_END):  # the recorder closed the file
                     self.finished = True
                 else:
-                    self._handle(op, rec, got)
-                out.extend(got)
-                pos += 9 + size
+                    for msg in record_messages(op, rec, self.found, check_crc=False):
+                        if (got := mcap_message(self.found, msg)) is not None:
+                            out.append(got)
+                pos = nxt
                 if self.finished:
                     break
-        except _IncompleteError:
+        except CutError:
             pass  # a record still being written: read it again next time
-        except (struct.error, ValueError, ImportError) as err:
+        except _MCAP_DAMAGE as err:
             raise LogReadError(f"malformed MCAP record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
         self.pos += pos
         self.delivered += len(out)
@@ -143,85 +114,55 @@ def _rest_of_walk(messages: Iterator[SalvagedMessage], delivered: int) -> list[S
 
 
 class Ros1Follower:
-    """ROS1 records from a byte offset; chunks are read once complete; the file is finished when the bag header
-    points to the index (rosbag writes it last)."""
+    """ROS1 records from a byte offset through the record layer's stream (``Ros1Stream``): the message records of an
+    open uncompressed chunk are read as they are appended, a compressed chunk once it is closed; the file is
+    finished when the bag header points to the index (rosbag writes it last)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.format = "ros1"
         self.finished = False
         self.delivered = 0
-        self.pos = 0
-        self.index_pos = 0
-        self.conns: dict[int, tuple[str, str, bool]] = {}
-
-    def _chunk(self, inner: bytes, out: list[SalvagedMessage]) -> None:
-        for iop, ih, idata, _ in _ros1_records(inner, 0):
-            if iop == 0x07:
-                _add_ros1_conn(self.conns, ih, idata)
-            elif iop == 0x02:
-                cid = struct.unpack("<I", ih["conn"])[0]
-                sec, nsec = struct.unpack("<II", ih["time"])
-                if cid in self.conns:
-                    topic, typ, has_def = self.conns[cid]
-                    out.append(SalvagedMessage(topic, typ, has_def, sec * 10**9 + nsec, idata))
+        self.stream = Ros1Stream()
 
     def poll(self) -> list[SalvagedMessage]:
-        out: list[SalvagedMessage] = []
         if self.finished:
-            return out
-        buf = _read_from(self.path, self.pos)
-        pos = 0
-        if self.pos == 0:
-            if len(buf) < len(_ROS1_MAGIC):
-                return out
-            if not buf.startswith(_ROS1_MAGIC):
+            return []
+        base = self.stream.resume_at
+        if base == len(ROS1_MAGIC):
+            head = _read_from(self.path, 0)
+            if len(head) < len(ROS1_MAGIC):
+                return []
+            if not head.startswith(ROS1_MAGIC):
                 raise LogReadError("not a ROS1 bag (bad magic)", path=str(self.path))
-            pos = len(_ROS1_MAGIC)
+            buf = head[base:]
+        else:
+            buf = _read_from(self.path, base)
+        got: list[Ros1Message] = []
         try:
-            while pos < len(buf):
-                if self.index_pos and self.pos + pos >= self.index_pos:
-                    self.finished = True
-                    break
-                (hlen,) = struct.unpack_from("<I", _take(buf, pos, 4))
-                header = _ros1_header(_take(buf, pos + 4, hlen))
-                (dlen,) = struct.unpack_from("<I", _take(buf, pos + 4 + hlen, 4))
-                data = _take(buf, pos + 8 + hlen, dlen)
-                op = header.get("op", b"\x00")[0]
-                got: list[SalvagedMessage] = []
-                if op == 0x03:  # bag header: index_pos is 0 until the recorder closes the bag
-                    self.index_pos = struct.unpack("<Q", header.get("index_pos", b"\0" * 8))[0]
-                elif op == 0x05:
-                    compression = header.get("compression", b"none").decode()
-                    inner = bz2.decompress(data) if compression == "bz2" else (
-                        _lz4(data) if compression == "lz4" else data)
-                    self._chunk(inner, got)
-                elif op == 0x07:
-                    _add_ros1_conn(self.conns, header, data)
-                out.extend(got)
-                pos += 8 + hlen + dlen
-        except _IncompleteError:
-            pass
-        except (struct.error, KeyError, ValueError, OSError, EOFError) as err:
-            raise LogReadError(f"malformed ROS1 record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
-        self.pos += pos
-        if not self.finished and self.pos > 0:
+            self.stream.feed(buf, base, got)
+        except _ROS1_DAMAGE as err:
+            raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
+                               path=str(self.path)) from err
+        if not self.stream.closed:
             self._recheck_header()
+        self.finished = self.stream.closed
+        out = [m for m in (ros1_message(self.stream, g) for g in got) if m is not None]
         self.delivered += len(out)
         return out
 
     def _recheck_header(self) -> None:
         """The recorder rewrites the bag header's index_pos when it closes the bag."""
-        head = _read_from(self.path, 0)[: 8192]
+        head = _read_from(self.path, 0)[:8192]
         try:
-            pos = len(_ROS1_MAGIC)
-            (hlen,) = struct.unpack_from("<I", _take(head, pos, 4))
-            header = _ros1_header(_take(head, pos + 4, hlen))
-            self.index_pos = struct.unpack("<Q", header.get("index_pos", b"\0" * 8))[0]
-        except (_IncompleteError, struct.error):
+            rec = record_at(head, len(ROS1_MAGIC), len(head))
+        except (Ros1CutError, Ros1MalformedError, struct.error):
             return
-        if self.index_pos and self.pos >= self.index_pos:
-            self.finished = True
+        raw = rec.header.get("index_pos", b"")
+        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8:
+            self.stream.index_pos = int(struct.unpack("<Q", raw)[0])
+        if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
+            self.stream.closed = True
 
     def rest(self) -> list[SalvagedMessage]:
         return _rest_of_walk(walk_ros1(self.path).messages, self.delivered)
@@ -287,6 +228,7 @@ class FolderFollower:
         out: list[SalvagedMessage] = []
         for f in self._storage():
             if f not in self.files:
+                check_log_path(f)  # a FIFO would block the poll for ever
                 self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f)
                 self.format = self.files[f].format
             out.extend(self.files[f].poll())
@@ -296,6 +238,22 @@ class FolderFollower:
 
     def rest(self) -> list[SalvagedMessage]:
         return [m for f in self.files.values() for m in f.rest()]
+
+
+def log_bytes(path: Path) -> int:
+    """How many bytes the log holds now: a file's size, or the sum over a bag folder's files (storage, a sqlite3
+    ``-wal`` journal, metadata.yaml); what the idle timer watches, so that a recorder filling a chunk that cannot
+    be read yet (MCAP, a compressed ROS1 chunk) still counts as writing."""
+    try:
+        if not path.is_dir():
+            total = path.stat().st_size
+            for journal in (path.with_name(path.name + "-wal"),):
+                if journal.is_file():
+                    total += journal.stat().st_size
+            return total
+        return sum(f.stat().st_size for f in path.iterdir() if f.is_file())
+    except OSError:
+        return -1  # vanished or unreadable meanwhile: the next poll says what is wrong
 
 
 def open_follower(path: Path) -> McapFollower | Ros1Follower | SqliteFollower | FolderFollower:

@@ -14,8 +14,9 @@ log. Certify applies the rule to the whole stream; if the stamps read after the 
 zero in more than ``UNORDERABLE_FRACTION`` of the stream, a note says that certify would choose log time.
 
 It stops when every check and obligation is decided, when the recorder has closed the log, when the log has not
-grown for ``idle_timeout`` seconds (``follow``), or after one read (no ``follow``). A log its recorder did not close
-is judged as ``--salvage`` judges it: its complete records, partial, never a pass.
+grown for ``idle_timeout`` seconds (its bytes: ``verify.online.follow.log_bytes``; ``follow``), or after one read
+(no ``follow``). A log its recorder did not close is judged as ``--salvage`` judges it: its complete records,
+partial, never a pass.
 """
 
 from __future__ import annotations
@@ -33,11 +34,11 @@ from verify.errors import LogReadError, MissingTopicError
 from verify.ingest.clocks import clock_offsets_ns
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
-from verify.ingest.raw import RawTopic
+from verify.ingest.raw import RawTopic, check_log_path
 from verify.ingest.readerrors import one_type_per_topic
 from verify.ingest.salvage import SalvagedMessage
 from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
-from verify.online.follow import open_follower
+from verify.online.follow import log_bytes, open_follower
 from verify.online.monitor import Decision, OnlineMonitor, OnlineResult
 
 __all__ = ["WatchResult", "watch_log"]
@@ -227,6 +228,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
                            path=str(p))
     if time_base not in TIME_BASES:
         raise LogReadError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}", path=str(p))
+    check_log_path(p)
     follower = open_follower(p)
     feeder = _Feeder(monitor, monitor.scenario, follower.format == "ros1", time_base, p)
     decisions: list[Decision] = []
@@ -239,13 +241,15 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
                 on_decision(d)
 
     last_growth = time.monotonic()
+    last_bytes = log_bytes(p)
     while True:
         msgs = follower.poll()
         if msgs:
             count += len(msgs)
             feeder.feed(msgs)
             report(monitor.update())
-            last_growth = time.monotonic()
+        if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes
+            last_bytes, last_growth = now_bytes, time.monotonic()
         if follower.finished:
             reason = "the recorder closed the log"
             break

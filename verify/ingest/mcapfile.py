@@ -1,0 +1,326 @@
+"""MCAP logs as the format defines them: a bare ``.mcap`` file or an MCAP bag folder -> the wanted topics' messages.
+
+input: a path (a ``.mcap`` file, or a ROS2 bag folder whose storage is MCAP) and topic names -> output: an
+``McapLog`` (per wanted topic present: message type, whether the file carries its definition, log times in ns and
+payloads, in log-time order; every topic of the log with its type).
+
+Every storage file is read in one of two ways that give the same messages in the same order:
+- **indexed** (``fast``, the default): our chunk reader (``verify.ingest.mcap``) driven by the summary rosbags reads,
+  used only when that summary describes the whole file: a chunk index for every chunk, with message indexes; every
+  channel of those indexes declared in the summary with its schema; the statistics' message count equal to what
+  the chunk indexes hold. Anything else is read the second way.
+- **scan** (``TUBEMPC_FAST_INGEST=0``, and every file the indexed reader declines): the record layer's scan over
+  the whole file (``verify.ingest.mcaprecords``), which finds schemas and channels wherever the file has them
+  (summary or data section), reads unchunked and chunked messages alike (none / lz4 / zstd), skips attachments,
+  metadata and padding; the messages are sorted stably by log time (the order indexed reading gives: log time,
+  then file position).
+
+Never silently empty: a file (statistics) or bag (metadata.yaml) that declares more messages on a topic than can be
+read is refused naming the topic; a wanted channel whose schema is missing or whose encoding is not CDR is refused
+naming the channel. A storage file that ends inside a record is ``TruncatedLogError`` naming that file
+(``--salvage`` reads its complete records).
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import stat
+import struct
+from collections.abc import Iterable
+from dataclasses import dataclass
+from operator import itemgetter
+from pathlib import Path, PurePath
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.rosbag2.storage_mcap import McapReader
+
+from verify.errors import LogReadError, TruncatedLogError
+from verify.ingest.mcap import read_mcap_storage
+from verify.ingest.mcaprecords import CutError, MalformedError, Scan, scan
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words
+from verify.ingest.ros1 import PayloadBuffer
+
+__all__ = ["BagMetadata", "McapLog", "McapTopic", "read_bag_metadata", "read_mcap_log", "regular_file"]
+
+IntArray = npt.NDArray[np.int64]
+#: libyaml's safe loader when PyYAML has it, else the pure-Python one
+_SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_METADATA_MAX_BYTES = 64 << 20
+_SCHEMALESS = "__schemaless__"  # rosbags' message type for a channel whose schema it did not find
+_MAX_VERSION = 9  # the newest rosbag2 metadata version rosbags reads
+
+
+@dataclass(slots=True)
+class McapTopic:
+    msgtype: str
+    has_definition: bool
+    log_ns: list[int] | IntArray
+    payloads: list[bytes] | PayloadBuffer
+
+
+@dataclass(frozen=True, slots=True)
+class McapLog:
+    topics: dict[str, McapTopic]
+    available: dict[str, str]
+
+
+@dataclass(frozen=True, slots=True)
+class BagMetadata:
+    """What a ROS2 bag folder's metadata.yaml says: storage files, compression, per topic its type and count."""
+
+    files: tuple[Path, ...]
+    compression_mode: str | None
+    types: dict[str, str]
+    counts: dict[str, int]
+
+
+def regular_file(path: Path, what: str) -> None:
+    """Refuse anything but a regular file (a FIFO or device would block or never end) before it is opened."""
+    try:
+        mode = path.stat().st_mode
+    except OSError as err:
+        raise LogReadError(f"{what} {path.name} cannot be read ({err.strerror or err.__class__.__name__})",
+                           path=str(path.parent)) from None
+    if not stat.S_ISREG(mode):
+        raise LogReadError(f"{what} {path.name} is not a regular file (a FIFO, device, socket or folder)",
+                           path=str(path.parent))
+
+
+def read_bag_metadata(folder: Path) -> BagMetadata:
+    """The metadata.yaml of a bag folder (the keys rosbags requires), without opening any storage file."""
+    meta = folder / "metadata.yaml"
+    regular_file(meta, "metadata file")
+
+    def bad(why: str) -> LogReadError:
+        return LogReadError(f"unreadable ROS2 bag: its metadata.yaml is incomplete or malformed ({why})",
+                            path=str(folder))
+
+    try:
+        if meta.stat().st_size > _METADATA_MAX_BYTES:
+            raise bad("larger than 64 MiB")
+        doc = yaml.load(meta.read_text(encoding="utf-8"), Loader=_SAFE_LOADER)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError, ValueError) as err:
+        raise bad(f"{err.__class__.__name__}: {' '.join(str(err).split())[:160]}") from err
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    if not isinstance(info, dict):
+        raise bad("no rosbag2_bagfile_information")
+    version = info.get("version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise bad("no integer version")
+    if version > _MAX_VERSION:
+        raise LogReadError(f"unreadable ROS2 bag: metadata version {version} is newer than rosbags reads "
+                           f"({_MAX_VERSION})", path=str(folder))
+    rel = info.get("relative_file_paths")
+    if not isinstance(rel, list) or not all(isinstance(x, str) for x in rel):
+        raise bad("relative_file_paths is not a list of file names")
+    mode = info.get("compression_mode") or None
+    if mode is not None and not isinstance(mode, str):
+        raise bad("compression_mode is not a string")
+    mode = None if mode is None or mode.lower() == "none" else mode.lower()
+    types: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    entries = info.get("topics_with_message_count", [])
+    if not isinstance(entries, list):
+        raise bad("topics_with_message_count is not a list")
+    for entry in entries:
+        tm = entry.get("topic_metadata") if isinstance(entry, dict) else None
+        name = tm.get("name") if isinstance(tm, dict) else None
+        typ = tm.get("type") if isinstance(tm, dict) else None
+        count = entry.get("message_count", 0) if isinstance(entry, dict) else None
+        if not isinstance(name, str) or not isinstance(typ, str) or not isinstance(count, int) or count < 0:
+            raise bad("a topics_with_message_count entry lacks its name, type or count")
+        types.setdefault(name, typ)
+        counts[name] = counts.get(name, 0) + count
+    files = tuple(folder / PurePath(x).name for x in rel)
+    for f in files:
+        if not f.exists():
+            raise LogReadError(f"unreadable ROS2 bag: storage file {f.name} named by metadata.yaml is missing",
+                               path=str(folder))
+        regular_file(f, "storage file")
+    return BagMetadata(files, mode, types, counts)
+
+
+def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
+    """The wanted topics of an MCAP file or MCAP bag folder (see the module docstring)."""
+    want = set(wanted)
+    meta = read_bag_metadata(path) if path.is_dir() else None
+    files = meta.files if meta is not None else (path,)
+    shown = str(path)
+    per_file: list[tuple[McapLog, dict[str, int]]] | None = None
+    if fast:
+        got = [_read_indexed(f, want) for f in files]
+        per_file = None if any(g is None for g in got) else [g for g in got if g is not None]
+    if per_file is None:
+        per_file = [_read_scanned(f, want, shown, named=meta is not None) for f in files]
+    topics: dict[str, McapTopic] = {}
+    available: dict[str, str] = dict(meta.types) if meta is not None else {}
+    declared: dict[str, int] = {}
+    for log, counts in per_file:
+        for topic, typ in log.available.items():
+            available.setdefault(topic, typ)
+        for topic, n in counts.items():
+            declared[topic] = declared.get(topic, 0) + n
+        for topic, t in log.topics.items():
+            topics[topic] = t if topic not in topics else _concat(topics[topic], t)
+    if meta is not None:
+        for topic, n in meta.counts.items():
+            declared[topic] = max(declared.get(topic, 0), n)
+    for topic in sorted(want):
+        want_n = declared.get(topic, 0)
+        got_n = len(topics[topic].payloads) if topic in topics else 0
+        if want_n > got_n:
+            raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
+                                    f"can be read", path=shown)
+    return McapLog(topics, available)
+
+
+def _concat(a: McapTopic, b: McapTopic) -> McapTopic:
+    """One topic's messages of two storage files, the first file's first (as rosbags reads a folder's files)."""
+    if isinstance(a.payloads, PayloadBuffer) and isinstance(b.payloads, PayloadBuffer):
+        lengths = np.concatenate([a.payloads.lengths, b.payloads.lengths])
+        offsets = np.zeros(lengths.shape[0], dtype=np.int64)
+        if lengths.shape[0] > 1:
+            np.cumsum(lengths[:-1], out=offsets[1:])
+        return McapTopic(a.msgtype, a.has_definition and b.has_definition,
+                         np.concatenate([np.asarray(a.log_ns, dtype=np.int64), np.asarray(b.log_ns, dtype=np.int64)]),
+                         PayloadBuffer(np.concatenate([a.payloads.data, b.payloads.data]), offsets, lengths))
+    return McapTopic(a.msgtype, a.has_definition and b.has_definition, [*a.log_ns, *b.log_ns],
+                     [*a.payloads, *b.payloads])
+
+
+#: what rosbags' MCAP storage raises on bytes it does not read (its summary reading checks state with ``assert``);
+#: any of these only means "not read this way": the scan then reads the file and decides
+_ROSBAGS_OPEN_ERRORS: tuple[type[BaseException], ...] = (
+    ReaderError, AssertionError, struct.error, OSError, EOFError, ValueError, KeyError, IndexError, TypeError,
+    OverflowError, MemoryError)
+
+
+def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] | None:
+    """The wanted topics through rosbags' summary and our chunk reader, when the summary describes the whole file
+    (module docstring); None otherwise."""
+    storage = McapReader(file)
+    try:
+        storage.open()
+    except _ROSBAGS_OPEN_ERRORS:
+        return None
+    try:
+        if not _summary_is_complete(storage):
+            return None
+        conns = [c for c in storage.connections if c.topic in want]
+        if any(c.msgtype == _SCHEMALESS for c in conns):
+            return None
+        got = read_mcap_storage(storage, conns) if conns else {}
+        if got is None:
+            return None
+        topics: dict[str, McapTopic] = {}
+        counts: dict[str, int] = {}
+        for c in conns:
+            counts[c.topic] = counts.get(c.topic, 0) + int(c.msgcount)
+            has_def = bool(c.msgdef.data.strip())
+            if c.topic in topics:
+                topics[c.topic].has_definition &= has_def
+                continue
+            m = got[c.topic]
+            topics[c.topic] = McapTopic(c.msgtype, has_def, m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths))
+        available: dict[str, str] = {}
+        for c in storage.connections:
+            available.setdefault(c.topic, c.msgtype)
+        return McapLog(topics, available), counts
+    finally:
+        storage.close()
+
+
+def _summary_is_complete(storage: McapReader) -> bool:
+    chunks = storage.chunks
+    if not chunks or storage.statistics is None:
+        return False
+    indexed = 0
+    for chunk in chunks:
+        if not chunk.message_index_offsets:
+            return False  # a chunk index without message indexes: what the chunk holds is not known
+        if any(int(cid) not in storage.channels for cid in chunk.message_index_offsets):
+            return False  # a channel declared only in the data section
+        indexed += sum(int(n) for n in chunk.channel_count.values())
+    if any(ch.schema == _SCHEMALESS for ch in storage.channels.values()):
+        return False
+    # messages outside the chunks (or missing from their message indexes) are counted by the statistics
+    return int(storage.statistics.message_count) == indexed
+
+
+def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:
+    """The wanted topics of one storage file by a scan of all its records (module docstring)."""
+    where = f"storage file {file.name}: " if named else ""
+    found = Scan({}, {})
+    kept: list[tuple[int, int, bytes]] = []  # channel id, log time, payload
+    channel_ids: set[int] = set()
+    try:
+        with file.open("rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size == 0:
+                raise TruncatedLogError(f"truncated mcap log: {where}the file is empty", path=shown)
+            # mapped, not read: the scan copies only the wanted payloads (the map is released with its last view)
+            buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+            for msg in scan(memoryview(buf), found):
+                channel_ids.add(msg.channel_id)
+                ch = found.channels.get(msg.channel_id)
+                if ch is None or ch.topic in want:
+                    kept.append((msg.channel_id, msg.log_ns, bytes(msg.payload)))
+    except OSError as err:
+        raise LogReadError(f"unreadable mcap log: {where}it cannot be read from disk ({err.strerror})",
+                           path=shown) from err
+    stop = found.error
+    if stop is not None or not found.complete:
+        at = f" at byte {found.stopped_at}" if found.stopped_at is not None else ""
+        if isinstance(stop, CutError) or stop is None:
+            raise TruncatedLogError(f"truncated or unindexed mcap log: {where}it ends inside a record{at} (a "
+                                    f"recorder that was killed; --salvage reads its complete records)", path=shown)
+        if isinstance(stop, MalformedError) and str(stop) == "bad magic":
+            raise LogReadError(f"unreadable mcap log: {where}not an MCAP file (its first bytes are not the MCAP "
+                               f"magic)", path=shown)
+        if isinstance(stop, DECOMPRESS_ERRORS):
+            raise LogReadError(f"unreadable mcap log: {where}a compressed chunk{at} cannot be decompressed "
+                               f"({stop.__class__.__name__})", path=shown)
+        raise LogReadError(f"unreadable mcap log: {where}a record{at} is malformed: {in_words(stop)}", path=shown)
+    for cid in sorted(channel_ids - set(found.channels)):
+        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
+                           f"declares", path=shown)
+    topics: dict[str, McapTopic] = {}
+    columns: dict[str, tuple[list[int], list[bytes]]] = {}
+    for cid, ch in sorted(found.channels.items()):
+        if ch.topic not in want:
+            continue
+        schema = found.schemas.get(ch.schema_id)
+        if schema is None:
+            raise LogReadError(f"unreadable mcap log: {where}channel {cid} ({ch.topic}) has no schema record "
+                               f"(schema id {ch.schema_id}): its message type is unknown", path=shown)
+        if ch.message_encoding != "cdr":
+            raise LogReadError(f"unreadable mcap log: {where}channel {cid} ({ch.topic}) is encoded as "
+                               f"{ch.message_encoding!r}; ROS2 logs are CDR", path=shown)
+        if ch.topic not in topics:
+            topics[ch.topic] = McapTopic(schema.name, schema.has_data, [], [])
+        else:
+            topics[ch.topic].has_definition &= schema.has_data
+    # stable sort by log time: indexed reading's order (log time, then file position)
+    kept.sort(key=itemgetter(1))
+    for topic in topics:
+        columns[topic] = ([], [])
+    for cid, log_ns, payload in kept:
+        col = columns[found.channels[cid].topic]
+        col[0].append(log_ns)
+        col[1].append(payload)
+    for topic, (logs, payloads) in columns.items():
+        topics[topic].log_ns, topics[topic].payloads = logs, payloads
+    available: dict[str, str] = {}
+    for ch in found.channels.values():
+        schema = found.schemas.get(ch.schema_id)
+        available.setdefault(ch.topic, schema.name if schema is not None else "")
+    counts: dict[str, int] = {}
+    for cid, n in (found.declared or {}).items():
+        ch = found.channels.get(cid)
+        if ch is not None and ch.topic in want:
+            counts[ch.topic] = counts.get(ch.topic, 0) + n
+    return McapLog(topics, available), counts
