@@ -71,10 +71,15 @@ def test_scenario_list_and_unknown_scenario_name_lists_builtins() -> None:
 
 
 def test_quiet_and_verbose_on_every_command() -> None:
+    import click
+
     from tubempc.cli import cli
 
     def walk(cmd: object, path: str) -> list[tuple[str, object]]:
-        subs = getattr(cmd, "commands", {})
+        if not isinstance(cmd, click.Group):
+            return [(path, cmd)]
+        ctx = click.Context(cmd)
+        subs = {name: cmd.get_command(ctx, name) for name in cmd.list_commands(ctx)}
         return [(path, cmd)] + [p for name, sub in subs.items() for p in walk(sub, f"{path} {name}")]
 
     for path, cmd in walk(cli, "tubempc"):

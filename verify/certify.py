@@ -30,6 +30,7 @@ from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
+from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
 from verify.semantics.trajectory import check_trajectory, reported_margin
@@ -274,7 +275,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "checks_selected": list(selection.selected),
         "checks_source": selection.source,
         "not_checked": [{"name": n, "reason": r} for n, r in selection.not_checked],
-        "scenario_warnings": sc.certification_warnings(),
+        "scenario_warnings": sc.certification_warnings() + data_findings(sc, every.t_ns, every.x_m, every.y_m, t0),
         "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
