@@ -96,7 +96,7 @@ def test_a_workspace_in_degrees_of_latitude_and_longitude_is_named_as_such(tmp_p
 
 
 @pytest.mark.parametrize("command", ["validate", "certify"])
-@pytest.mark.parametrize("value", ["1e-300", "1" + "0" * 5000])
+@pytest.mark.parametrize("value", ["1e-300", "1" + "0" * 5000], ids=["tiny", "5001-digits"])
 def test_out_of_range_numbers_are_exit_3_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                           command: str, value: str) -> None:
     """mocap.rate_hz: 1e-300 overflowed the tube check's period (exit 70); an integer of more than 4,300 digits
