@@ -71,10 +71,15 @@ def test_scenario_list_and_unknown_scenario_name_lists_builtins() -> None:
 
 
 def test_quiet_and_verbose_on_every_command() -> None:
+    import click
+
     from tubempc.cli import cli
 
     def walk(cmd: object, path: str) -> list[tuple[str, object]]:
-        subs = getattr(cmd, "commands", {})
+        if not isinstance(cmd, click.Group):
+            return [(path, cmd)]
+        ctx = click.Context(cmd)
+        subs = {name: cmd.get_command(ctx, name) for name in cmd.list_commands(ctx)}
         return [(path, cmd)] + [p for name, sub in subs.items() for p in walk(sub, f"{path} {name}")]
 
     for path, cmd in walk(cli, "tubempc"):
@@ -102,3 +107,28 @@ def test_simulate_impossible_design_is_exit_3_naming_the_file(tmp_path: Path) ->
     out = run("simulate", "--scenario", str(path), "--to", "R2", "--out", str(tmp_path / "x.mcap"))
     assert out.returncode == EXIT_UNUSABLE and str(path) in out.stderr and "cannot be designed" in out.stderr
     assert out.stderr.strip().count("\n") == 0 and not (tmp_path / "x.mcap").exists()
+
+
+HEAVY = ("pandas", "matplotlib", "casadi", "cvxpy", "networkx")
+
+
+@pytest.mark.parametrize("args", [["-V"], ["--help"]])
+def test_version_and_help_import_no_heavy_module(args: list[str]) -> None:
+    """Each subcommand's module is imported when it runs: -V and --help load neither the planner nor the
+    certifier (a new user's first commands answer at once; benchmarks/bench_cli.py times them)."""
+    probe = ("import sys\nfrom tubempc.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+             f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=120,
+                         check=False)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_certify_json_imports_no_plotting_or_planning_module() -> None:
+    """certify --json writes no report: pandas and matplotlib (reports), casadi, cvxpy, networkx (planner) stay out."""
+    log = Path(__file__).resolve().parents[1] / "logs" / "demo.mcap"
+    probe = ("import sys\nfrom tubempc.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n"
+             f"    code = e.code\nprint(code, sorted(m for m in {HEAVY!r} if m in sys.modules), file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", probe, "certify", str(log), "--scenario", "nexus-sml", "--json"],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert out.stderr.strip().splitlines()[-1] == "0 []", out.stderr

@@ -195,7 +195,7 @@ def test_optional_fields_keep_the_form_and_the_hash() -> None:
     "polygon",
     [
         [[0, 0], [1, 0]],  # too few
-        [[0, 0], [1, 1], [1, 0], [0, 1]],  # bow tie (zero area)
+        [[0, 0], [1, 1], [1, 0], [0, 1]],  # bow tie (zero signed area: its edges cross)
         [[0, 0], [2, 2], [2, 0], [0, 1]],  # bow tie (edges cross)
         [[0, 0], [1, 0], [2, 0]],  # zero area
         [[0, 0], [1, 0], [1, 1], [0, 0]],  # repeated vertex

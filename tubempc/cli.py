@@ -10,25 +10,16 @@ error.
 
 from __future__ import annotations
 
+import importlib
 import sys
 import traceback
 import warnings
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import click
 
-from tubempc.commands.demo import demo
-from tubempc.commands.falsify import falsify
-from tubempc.commands.output import add_verbosity_options, say
-from tubempc.commands.plan import plan
-from tubempc.commands.regress import regress
-from tubempc.commands.simulate import simulate
+from tubempc.commands.output import add_verbosity_options
 from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
-from tubempc.mitl import parse
-from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario_text, dump_scenario, load_scenario
-from verify.command import certify, digest_command
-from verify.errors import MissingExtraError, VerifyError
-from verify.online.command import watch
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
            "cli", "main"]
@@ -40,8 +31,54 @@ EXIT_UNUSABLE = 3
 EXIT_NOT_AVAILABLE = 4
 EXIT_INTERNAL = 70
 
+#: subcommand -> (module:attribute of its click command, the one line ``tubempc --help`` shows). A command's
+#: module (and what it imports: pandas, matplotlib, casadi, rosbags...) is imported only when that command runs or
+#: its own --help is asked for, so ``tubempc -V`` and ``tubempc --help`` start at once.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "certify": ("verify.command:certify", "Certify ROS logs against a scenario and a formula."),
+    "demo": ("tubempc.commands.demo:demo", "Simulate the paper's mission and certify its log (a first run)."),
+    "digest": ("verify.command:digest_command", "Print the digest a certificate states for each log."),
+    "falsify": ("tubempc.commands.falsify:falsify", "Search the admissible perturbations of a run for the one "
+                                                    "that breaks it."),
+    "info": ("tubempc.commands.info:info", "What a log holds: topics, types, rates, gaps, clock, where the robot "
+                                           "went."),
+    "plan": ("tubempc.commands.plan:plan", "Plan a timed run of the scenario's formula on its abstraction."),
+    "regress": ("tubempc.commands.regress:regress", "Run a suite of scenarios and seeds against a baseline."),
+    "scenario": ("tubempc.commands.scenario:scenario", "Inspect, scaffold and validate scenario files."),
+    "schema": ("tubempc.commands.scenario:schema", "Print the JSON Schema of an output other programs parse."),
+    "simulate": ("tubempc.commands.simulate:simulate", "Simulate one transition of the tube MPC closed loop."),
+    "spec": ("tubempc.commands.scenario:spec", "Parse an MITL formula and print its canonical form."),
+    "watch": ("verify.online.command:watch", "Monitor a log online (a growing file) against the formula."),
+}
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+
+class LazyGroup(click.Group):
+    """A group whose subcommands are imported when used (``COMMANDS``); its --help lists them from the table."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*COMMANDS, *self.commands})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in self.commands:
+            return self.commands[cmd_name]
+        if cmd_name not in COMMANDS:
+            return None
+        module, _, attr = COMMANDS[cmd_name][0].partition(":")
+        command = getattr(importlib.import_module(module), attr)
+        if not isinstance(command, click.Command):
+            raise TypeError(f"{COMMANDS[cmd_name][0]} is not a click command")
+        add_verbosity_options(command)  # -q/--quiet and -v/--verbose on every subcommand
+        self.add_command(command, cmd_name)
+        return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, COMMANDS[name][1] if name in COMMANDS else (self.commands[name].get_short_help_str()))
+                for name in self.list_commands(ctx)]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(None, "-V", "--version", package_name="tubempc")
 @click.option("--debug", is_flag=True, help="Show full tracebacks instead of one-line errors.")
 @click.pass_context
@@ -51,101 +88,30 @@ def cli(ctx: click.Context, debug: bool) -> None:
     ctx.obj["debug"] = debug
 
 
-@cli.group()
-def scenario() -> None:
-    """Inspect and validate scenario files."""
+add_verbosity_options(cli)  # on the group; LazyGroup adds them to each subcommand it loads
 
 
-@scenario.command("list")
-def scenario_list() -> None:
-    """List the built-in scenarios (name, regions, formula); any of them is a valid --scenario value."""
-    for name in BUILTIN_SCENARIOS:
-        s = load_scenario(name)
-        click.echo(f"{name}: {len(s.regions)} regions ({len(s.unsafe_regions)} unsafe), workspace "
-                   f"{s.workspace.x[1] - s.workspace.x[0]:g} m x {s.workspace.y[1] - s.workspace.y[0]:g} m, "
-                   f"spec {s.formula}")
+def _verify_errors() -> tuple[type[BaseException], type[BaseException]] | None:
+    """(VerifyError, MissingExtraError) when the certifier was imported (else no error can be one of them)."""
+    mod: Any = sys.modules.get("verify.errors")
+    return None if mod is None else (mod.VerifyError, mod.MissingExtraError)
 
 
-@scenario.command("show")
-@click.argument("name", default="nexus-sml")
-def scenario_show(name: str) -> None:
-    """Print a built-in scenario (default: the paper's Nexus setup) or a scenario file, as YAML."""
-    if name in BUILTIN_SCENARIOS:
-        click.echo(builtin_scenario_text(name), nl=False)
-    else:
-        click.echo(dump_scenario(load_scenario(name)), nl=False)
-
-
-@scenario.command("validate")
-@click.argument("path")
-def scenario_validate(path: str) -> None:
-    """Validate a scenario file; print a summary or one line naming the problem (exit 3).
-
-    Then one line per geometry warning of the (lenient) certifier, and what keeps the (strict) planner from using
-    the scenario, if anything: both name the field."""
-    s = load_scenario(path)
-    say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
-               f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
-    for warning in s.certification_warnings():
-        say(f"{path}: warning: {warning}")
-    problems = s.planning_problems()
-    if problems:
-        field, what = problems[0]
-        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-        say(f"{path}: certification only: the planner cannot use it: {field}: {what}{more}")
-
-
-@cli.group("schema")
-def schema() -> None:
-    """Print the JSON Schema of an output other programs parse."""
-
-
-@schema.command("certificate")
-def schema_certificate() -> None:
-    """The JSON Schema of certificate.json and of `certify --json` (also docs/certificate.schema.json)."""
-    import json
-
-    from verify.certificate import certificate_schema
-
-    click.echo(json.dumps(certificate_schema(), indent=2))
-
-
-@schema.command("certify-json")
-def schema_certify_json() -> None:
-    """The JSON Schema of `certify --json`: a certificate, or a list of certificates and unusable logs."""
-    import json
-
-    from verify.certificate import certify_json_schema
-
-    click.echo(json.dumps(certify_json_schema(), indent=2))
-
-
-@cli.command("spec")
-@click.argument("text")
-def spec(text: str) -> None:
-    """Parse an MITL formula and print its canonical form (exit 3 with the column of the error)."""
-    click.echo(str(parse(text)))
-
-
-cli.add_command(certify)
-cli.add_command(digest_command)
-cli.add_command(watch)
-cli.add_command(plan)
-cli.add_command(simulate)
-cli.add_command(regress)
-cli.add_command(demo)
-cli.add_command(falsify)
-add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
+def _ours(err: BaseException) -> bool:
+    """An error raised on purpose by either package (its message is for the user)."""
+    ve = _verify_errors()
+    return isinstance(err, TubeMPCError) or (ve is not None and isinstance(err, ve[0]))
 
 
 def _exit_code(err: BaseException) -> int:
-    if isinstance(err, NotAvailableError | MissingExtraError):
+    ve = _verify_errors()
+    if isinstance(err, NotAvailableError) or (ve is not None and isinstance(err, ve[1])):
         return EXIT_NOT_AVAILABLE
     if isinstance(err, NoAcceptingRunError):
         return EXIT_FAIL
     if isinstance(err, SearchLimitError):
         return EXIT_INCONCLUSIVE
-    if isinstance(err, TubeMPCError | VerifyError):
+    if _ours(err):
         return EXIT_UNUSABLE
     return EXIT_INTERNAL
 
@@ -178,15 +144,15 @@ def main(argv: list[str] | None = None) -> NoReturn:
     except click.ClickException as err:
         err.show()
         sys.exit(EXIT_UNUSABLE if err.exit_code == 2 else err.exit_code)
-    except (TubeMPCError, VerifyError) as err:
-        if debug:
-            traceback.print_exc()
-        click.echo(f"tubempc: error: {_one_line(str(err))}", err=True)
-        sys.exit(_exit_code(err))
     except KeyboardInterrupt:
         click.echo("tubempc: interrupted", err=True)
         sys.exit(130)
     except Exception as err:
+        if _ours(err):
+            if debug:
+                traceback.print_exc()
+            click.echo(f"tubempc: error: {_one_line(str(err))}", err=True)
+            sys.exit(_exit_code(err))
         if debug:
             traceback.print_exc()
         hint = "" if debug else " (rerun with --debug for the traceback)"

@@ -14,12 +14,12 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-import pandas as pd
+import numpy.typing as npt
 
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
@@ -31,10 +31,14 @@ from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream
 from verify.outputs import write_output_file
+from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
 from verify.semantics.trajectory import check_trajectory, reported_margin
 from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
            "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
@@ -46,16 +50,53 @@ POSITION_ROUNDING_M = 1e-9
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
+Columns = dict[str, npt.NDArray[np.floating[Any]]]
+
+
 @dataclass(frozen=True, slots=True)
 class CertifyResult:
-    """The certificate (JSON-ready dict), the exit code, and tables for reports (times in seconds from time 0)."""
+    """The certificate (JSON-ready dict), the exit code, and tables for reports (times in seconds from time 0).
+
+    The tables are kept as numpy columns and become pandas DataFrames when first read (``trajectory``, ...): a
+    certification that writes no report (``certify --json``) never imports pandas."""
 
     certificate: dict[str, Any]
     exit_code: int
-    trajectory: pd.DataFrame  # t_s, x_m, y_m, theta_rad
-    nominal: pd.DataFrame | None  # t_s, x_m, y_m, theta_rad
-    inputs: pd.DataFrame | None  # t_s, u1, u2, u3
-    robustness: pd.DataFrame | None  # t_s, rho_m
+    columns: dict[str, Columns | None]  # "trajectory", "nominal", "inputs", "robustness" -> column name -> values
+    _frames: dict[str, pd.DataFrame] = field(default_factory=dict, compare=False, repr=False)
+
+    def _table(self, name: str) -> pd.DataFrame | None:
+        cols = self.columns.get(name)
+        if cols is None:
+            return None
+        if name not in self._frames:
+            import pandas as pd  # only the reports read the tables
+
+            self._frames[name] = pd.DataFrame(cols)
+        return self._frames[name]
+
+    @property
+    def trajectory(self) -> pd.DataFrame:
+        """t_s, x_m, y_m, theta_rad."""
+        table = self._table("trajectory")
+        if table is None:
+            raise KeyError("a certification result always has a trajectory table")
+        return table
+
+    @property
+    def nominal(self) -> pd.DataFrame | None:
+        """t_s, x_m, y_m, theta_rad (when the tube check ran on a nominal stream)."""
+        return self._table("nominal")
+
+    @property
+    def inputs(self) -> pd.DataFrame | None:
+        """t_s, u1, u2, u3."""
+        return self._table("inputs")
+
+    @property
+    def robustness(self) -> pd.DataFrame | None:
+        """t_s, rho_m."""
+        return self._table("robustness")
 
     @property
     def verdict(self) -> str:
@@ -275,7 +316,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "checks_selected": list(selection.selected),
         "checks_source": selection.source,
         "not_checked": [{"name": n, "reason": r} for n, r in selection.not_checked],
-        "scenario_warnings": sc.certification_warnings(),
+        "scenario_warnings": sc.certification_warnings() + data_findings(sc, every.t_ns, every.x_m, every.y_m, t0),
         "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
@@ -288,18 +329,19 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         log.data_quality.setdefault("notes", []).append(
             "the log's metadata names a different scenario_sha256 than the scenario given to the certifier")
     t_s = t_rel * 1e-9
-    trajectory = pd.DataFrame({"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad})
-    nominal_df = None
+    tables: dict[str, Columns | None] = {
+        "trajectory": {"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad},
+        "nominal": None, "inputs": None, "robustness": None}
     if log.nominal is not None and "tube" in selection:
-        nominal_df = pd.DataFrame({"t_s": (log.nominal.t_ns - t0) * 1e-9, "x_m": log.nominal.x_m,
-                                   "y_m": log.nominal.y_m, "theta_rad": log.nominal.theta_rad})
-    inputs_df = None
+        tables["nominal"] = {"t_s": (log.nominal.t_ns - t0) * 1e-9, "x_m": log.nominal.x_m,
+                             "y_m": log.nominal.y_m, "theta_rad": log.nominal.theta_rad}
     if log.cmd_t_ns is not None and log.cmd_u is not None:
-        inputs_df = pd.DataFrame({"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
-                                  "u3": log.cmd_u[:, 2]})
-    rob = pd.DataFrame({"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}) if t_rel.size else None
+        tables["inputs"] = {"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
+                            "u3": log.cmd_u[:, 2]}
+    if t_rel.size:
+        tables["robustness"] = {"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}
     typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
-    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], trajectory, nominal_df, inputs_df, rob)
+    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables)
 
 
 def _jsonable(obj: Any) -> Any:

@@ -21,7 +21,7 @@ from typing import Any, Literal, cast
 import click
 
 from verify.errors import UnusableInputError
-from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS
+from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS, MESSAGES_DIGEST
 
 __all__ = ["certify"]
 
@@ -169,18 +169,26 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
 
 @click.command("digest")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", default="nexus-sml", show_default=True,
-              help="Scenario YAML file or built-in name: its topics are the messages blake3-messages hashes.")
+@click.option("--scenario", "scenario", default=None,
+              help="Scenario YAML file or built-in name: its topics are the messages blake3-messages hashes "
+                   "(required for blake3-messages: give the scenario the certificate was made with).")
 @click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
               help="blake3-messages (the messages certification reads), blake3 / sha256 (the whole file).")
 @click.option("--salvage", is_flag=True, help="Digest the complete records of a truncated log (as certify --salvage).")
-def digest_command(logs: tuple[Path, ...], scenario: str, digest: str, salvage: bool) -> None:
+def digest_command(logs: tuple[Path, ...], scenario: str | None, digest: str, salvage: bool) -> None:
     """Print the digest a certificate states for each log (`DIGEST  ALGORITHM  LOG`), to check a certificate
-    against a log without certifying it again. Exit 3 when a log cannot be read."""
+    against a log without certifying it again. blake3-messages (the default) hashes the messages of the scenario's
+    topics, so it needs --scenario; blake3 and sha256 hash the file and need none. Exit 3 when a log cannot be read
+    or lacks the scenario's pose topic, or when blake3-messages is asked for without a scenario."""
     from verify.certify import resolve_scenario
+    from verify.errors import ScenarioInputError
     from verify.ingest.log import log_digest
 
-    sc = resolve_scenario(scenario)
+    if scenario is None and digest == MESSAGES_DIGEST:
+        raise ScenarioInputError("digest: blake3-messages hashes the messages of a scenario's topics: give "
+                                 "--scenario (the one the certificate names), or --digest blake3 or sha256 for a "
+                                 "digest of the whole file")
+    sc = resolve_scenario(scenario if scenario is not None else "nexus-sml")
     for log in logs:
         got = log_digest(log, sc, digest, salvage=salvage)
         click.echo(f"{got.hex}  {got.algorithm}  {log}")

@@ -76,7 +76,19 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
             stop_at_first: bool, shrink_budget: int | None, replay_text: str | None, workers: int | None,
             dask: str | None, out_dir: str | None) -> None:
     """Search disturbances, start poses and MoCap noise within the scenario's bounds for a run that breaks a check."""
+    import os
+    import tempfile
+
     from verify.extras import require
+
+    # hypothesis caches what it learns about the code under test in its storage folder (./.hypothesis unless
+    # HYPOTHESIS_STORAGE_DIRECTORY says otherwise): a scratch folder removed when the command ends keeps the
+    # working folder clean (docs/falsify.md: no files outside --out); the worker processes inherit it
+    if "HYPOTHESIS_STORAGE_DIRECTORY" not in os.environ:
+        ctx = click.get_current_context()
+        ctx.call_on_close(lambda: os.environ.pop("HYPOTHESIS_STORAGE_DIRECTORY", None))
+        os.environ["HYPOTHESIS_STORAGE_DIRECTORY"] = ctx.with_resource(
+            tempfile.TemporaryDirectory(prefix="tubempc-falsify-"))
 
     require("plan", *(("testing",) if method == "targeted" else ()), *(("dask",) if dask else ()),
             feature=f"tubempc falsify --method {method}")

@@ -291,9 +291,55 @@ class SignalSpec(_Frozen):
     def _topic_name(cls, v: str) -> str:
         return _check_topic(v)
 
+    @model_validator(mode="after")
+    def _ros_unit(self) -> SignalSpec:
+        problem = unit_problem(self.field, self.unit, self.value)
+        if problem:
+            raise ValueError(problem)
+        return self
+
+
+#: units ROS conventions fix (REP 103: SI units, angles in radians), by the last two parts of a field path
+_REP103_UNITS = {"angular_velocity": "rad/s", "angular": "rad/s", "linear": "m/s", "linear_acceleration": "m/s^2",
+                 "position": "m", "translation": "m"}
+_REP103_FIELDS = {"range": "m", "ranges": "m", "range_min": "m", "range_max": "m", "angle_min": "rad",
+                  "angle_max": "rad", "angle_increment": "rad"}
+_UNIT_ALIASES = {"rad/s": {"rad/s", "rads^-1", "rad*s^-1", "rad.s^-1"}, "m/s": {"m/s", "ms^-1", "m*s^-1", "m.s^-1"},
+                 "m/s^2": {"m/s^2", "m/s2", "ms^-2", "m*s^-2", "m.s^-2"}, "m": {"m"}, "rad": {"rad"}}
+_DEGREE_UNITS = {"deg": "rad", "deg/s": "rad/s", "degree": "rad", "degrees": "rad", "deg/sec": "rad/s",
+                 "degrees/s": "rad/s", "°": "rad", "°/s": "rad/s"}
+
+
+def ros_unit(field: str) -> str | None:
+    """The unit ROS conventions (REP 103) fix for a message field path (``twist.twist.angular.z``: rad/s), if any."""
+    parts = [p.split("[")[0] for p in field.split(".")]
+    if parts[-1] in _REP103_FIELDS:
+        return _REP103_FIELDS[parts[-1]]
+    if len(parts) >= 2 and parts[-1] in ("x", "y", "z"):
+        return _REP103_UNITS.get(parts[-2])
+    return None
+
+
+def unit_problem(field: str, unit: str | None, value: float) -> str | None:
+    """Why ``unit`` cannot be the unit of ``field`` (ROS messages carry REP 103's units), with the conversion."""
+    want = ros_unit(field)
+    if unit is None or want is None:
+        return None
+    given = unit.strip().replace(" ", "")
+    if given in _UNIT_ALIASES.get(want, {want}):
+        return None
+    if _DEGREE_UNITS.get(given.lower()) == want:
+        return (f"unit: {unit}: ROS messages carry {field} in {want} (REP 103); write unit: {want} and value: "
+                f"{math.radians(value):.6g} ({value:g} {unit} x pi/180)")
+    return f"unit: {unit}: ROS messages carry {field} in {want} (REP 103); give the value in {want}"
+
+
+#: the motion-capture rates accepted (Hz): periods from 1000 s down to 1 microsecond (integer nanoseconds)
+MOCAP_RATE_HZ = (1e-3, 1e6)
+
 
 class MocapSpec(_Frozen):
-    rate_hz: PositiveFloat = 100.0
+    rate_hz: Annotated[float, Field(ge=MOCAP_RATE_HZ[0], le=MOCAP_RATE_HZ[1], allow_inf_nan=False)] = 100.0
     noise_std: NonNegFloat = 0.0  # metres, optional simulated MoCap noise
 
 
@@ -365,6 +411,15 @@ class Scenario(_Frozen):
                              f"(known: {', '.join(sorted(known)) or 'none'})")
         if self.initial_region_name is not None and self.region(self.initial_region_name).unsafe:
             raise ValueError(f"initial_region: {self.initial_region_name} is unsafe")
+        x0, y0, x1, y1 = self.workspace.bounds
+        eta = self.robot.radius
+        if min(x1 - x0, y1 - y0) < 2 * eta:
+            degrees = max(abs(x0), abs(x1)) <= 180 and max(abs(y0), abs(y1)) <= 90 and max(x1 - x0, y1 - y0) < 0.05 \
+                and max(abs(x0), abs(y0)) > 1
+            hint = (": its bounds look like degrees of longitude/latitude; give the workspace in metres of a local "
+                    "frame (the frame of the pose topic: odom, map, UTM/ENU)") if degrees else ""
+            raise ValueError(f"workspace: {x1 - x0:g} m x {y1 - y0:g} m cannot contain the robot disc of radius "
+                             f"{eta:g} m{hint}")
         return self
 
     # ---- fields only the planner and the controller need ------------------------------------------------------

@@ -57,7 +57,7 @@ def polygon_problem(vertices: Sequence[Point]) -> str | None:
     if len(set(vertices)) != n:
         dup = next(p for p in vertices if vertices.count(p) > 1)
         return f"vertex {list(dup)} is repeated (give each corner once; the ring closes by itself)"
-    if signed_area(vertices) == 0.0:
+    if all(_orient(vertices[0], vertices[1], p) == 0 for p in vertices[2:]):
         return "the polygon has zero area (its vertices are collinear)"
     edges = [(vertices[i], vertices[(i + 1) % n]) for i in range(n)]
     for i in range(n):
@@ -71,8 +71,15 @@ def polygon_problem(vertices: Sequence[Point]) -> str | None:
                 continue  # adjacent through the closing edge
             c, d = edges[j]
             if _segments_meet(a, b, c, d):
-                return f"edges {i} and {j} cross or touch (the polygon is not simple)"
+                return (f"its edges cross or touch: edge {i} {_edge(a, b)} and edge {j} {_edge(c, d)} (the polygon "
+                        "is not simple; list the vertices in order around its boundary)")
+    if signed_area(vertices) == 0.0:
+        return "the polygon has zero area"
     return None
+
+
+def _edge(a: Point, b: Point) -> str:
+    return f"[{a[0]:g}, {a[1]:g}]-[{b[0]:g}, {b[1]:g}]"
 
 
 def _inside(p: Point, vertices: Sequence[Point]) -> bool:

@@ -250,13 +250,14 @@ def certify_many(paths: Iterable[str | Path], scenario: Scenario, *, spec: str |
 
 
 def summary_lines(batch: BatchResult) -> list[str]:
-    """One line per log for a terminal: ``path: verdict (failed checks with first violation times)``."""
+    """One line per log for a terminal: ``path: verdict (failed checks with first violation times)``; an unusable
+    log is ``path: unusable``: its error is printed once, as the ``tubempc: error:`` line on stderr."""
     from verify.certify import verdict_line
 
     lines = []
     for item in batch.items:
         if item.result is None:
-            lines.append(f"{item.path}: {item.verdict} ({item.error})")
+            lines.append(f"{item.path}: {item.verdict}")
             continue
         lines.append(verdict_line(item.path, item.result.certificate))
     counts = ", ".join(f"{n} {k}" for k, n in batch.counts().items() if n)

@@ -197,8 +197,12 @@ def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DI
     if algorithm not in DIGESTS:
         raise UnusableInputError(f"digest={algorithm!r}: expected one of {', '.join(DIGESTS)}")
     try:
-        got = (messages_digest(read_raw(p, wanted_topics(scenario), salvage=salvage))
-               if algorithm == MESSAGES_DIGEST else digest_path(p, algorithm))
+        if algorithm == MESSAGES_DIGEST:
+            raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
+            _pose_topic(raw, scenario, str(p))  # as certify: a log without the pose topic has nothing to digest
+            got: LogDigest | None = messages_digest(raw)
+        else:
+            got = digest_path(p, algorithm)
     except VerifyError:
         raise
     except READ_ERRORS as err:
