@@ -17,6 +17,7 @@ from typing import NoReturn
 
 import click
 
+from tubempc.commands.compare import compare
 from tubempc.commands.demo import demo
 from tubempc.commands.falsify import falsify
 from tubempc.commands.output import add_verbosity_options, say
@@ -135,6 +136,7 @@ cli.add_command(simulate)
 cli.add_command(regress)
 cli.add_command(demo)
 cli.add_command(falsify)
+cli.add_command(compare)
 add_verbosity_options(cli)  # -q/--quiet and -v/--verbose on the group and on every subcommand
 
 

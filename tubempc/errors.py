@@ -9,6 +9,7 @@ Failed *checks* are never exceptions: they are values (see ``verify``).
 from __future__ import annotations
 
 __all__ = [
+    "CompareInputError",
     "DesignError",
     "LogWriteError",
     "NoAcceptingRunError",
@@ -81,3 +82,8 @@ class LogWriteError(TubeMPCError, OSError):
 
 class NotAvailableError(TubeMPCError, NotImplementedError):
     """A subcommand whose feature has not landed yet (exit code 4)."""
+
+
+class CompareInputError(TubeMPCError, ValueError):
+    """``compare`` cannot use its input (no runs, an unusable log or certificate, bad tolerances); the message names
+    the file or option (exit 3)."""
