@@ -205,7 +205,7 @@ def load_side(text: str, scenario: Scenario, *, formula: str, spec: str | None =
 
 def pair_runs(before: Side, after: Side, *, unpaired: bool = False) -> Pairing:
     """Pair runs by key. Keys that repeat on a side, or runs without a partner, make the comparison unpaired (two
-    samples); the pairs found still carry the verdict rule (pass -> fail regresses)."""
+    samples); the pairs found still carry the verdict rule (pass -> fail regresses), except with ``unpaired``."""
     def index(side: Side) -> tuple[dict[str, Run], set[str]]:
         seen: dict[str, Run] = {}
         twice: set[str] = set()
@@ -221,8 +221,8 @@ def pair_runs(before: Side, after: Side, *, unpaired: bool = False) -> Pairing:
     pairs = tuple((b[k], a[k]) for k in common)
     b_alone = tuple(sorted(set(b) - set(common)))
     a_alone = tuple(sorted(set(a) - set(common)))
-    if unpaired:
-        return Pairing(pairs, False, b_alone, a_alone, "unpaired on request (--unpaired): two samples")
+    if unpaired:  # the user says the keys do not name the same missions: no pairs at all
+        return Pairing((), False, tuple(sorted(b)), tuple(sorted(a)), "unpaired on request (--unpaired): two samples")
     if b_twice or a_twice:
         dup = sorted(b_twice | a_twice)
         return Pairing(pairs, False, b_alone, a_alone,

@@ -76,7 +76,7 @@ class CompareSettings:
 
     @property
     def alpha(self) -> float:
-        return 1.0 - self.confidence
+        return round(1.0 - self.confidence, 12)  # 1 - 0.95 is 0.05000000000000004 in binary
 
     def tolerance(self, metric: str, family: str) -> Tolerance:
         """The metric's own tolerance, else its family's, else none (zero)."""
