@@ -169,8 +169,14 @@ def test_unusable_input_is_one_line_exit_3(capsys: pytest.CaptureFixture[str], r
     assert str(side).removesuffix("*.json") in lines[0]  # names the file or folder
 
 
-def test_bad_tolerance_option_exit_3(capsys: pytest.CaptureFixture[str], certified: dict[str, Path],
-                                     mission_scenario: Path) -> None:
+def test_bad_tolerances_exit_3_naming_the_option_or_file(capsys: pytest.CaptureFixture[str],
+                                                         certified: dict[str, Path], mission_scenario: Path,
+                                                         tmp_path: Path) -> None:
     code, _, err = run(capsys, certified["before"], certified["after"], "--scenario", mission_scenario,
                        "--tol", "min_clearance_m=lots")
     assert code == 3 and "--tol 'min_clearance_m=lots'" in err
+    typo = tmp_path / "tol.yaml"
+    typo.write_text("tolerances: {min_clearence_m: 0.05}\n", encoding="utf-8")  # a typo is not silently ignored
+    code, _, err = run(capsys, certified["before"], certified["after"], "--scenario", mission_scenario,
+                       "--tolerances", typo)
+    assert code == 3 and str(typo) in err and "'min_clearence_m' names no judged metric" in err

@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from tubempc.compare.metrics import metric_info
 from tubempc.errors import CompareInputError
 
 __all__ = ["DEFAULT_CONFIDENCE", "DEFAULT_TOLERANCES", "CompareSettings", "Tolerance", "load_settings",
@@ -104,6 +105,16 @@ def _tolerance(value: Any, where: str) -> Tolerance:
     raise CompareInputError(f"{where}: expected a number (abs) or {{abs: A, rel: R}}, got {value!r}")
 
 
+def _check_name(name: str, where: str) -> str:
+    """A tolerance must name a family or a judged numeric metric (a typo would otherwise be silently ignored)."""
+    info = metric_info(name)
+    if name in DEFAULT_TOLERANCES or (info.kind == "number" and info.direction != "neutral"):
+        return name
+    what = "verdicts have no tolerance" if info.kind == "verdict" else "names no judged metric or family"
+    raise CompareInputError(f"{where}: {name!r} {what} (families: {', '.join(DEFAULT_TOLERANCES)}; or a metric "
+                            f"such as check.tube.margin)")
+
+
 def parse_override(text: str) -> tuple[str, Tolerance]:
     """``--tol NAME=ABS`` or ``NAME=ABS+RELx`` (e.g. ``entry_s=0.5+0.02x``) -> (name, tolerance)."""
     name, sep, value = text.partition("=")
@@ -140,7 +151,7 @@ def load_settings(path: str | Path | None, *, overrides: tuple[str, ...] = (),
         if not isinstance(raw, dict):
             raise CompareInputError(f"{p}: tolerances: expected a mapping of metric or family names")
         for name, value in raw.items():
-            tolerances[str(name)] = _tolerance(value, f"{p}: tolerances.{name}")
+            tolerances[_check_name(str(name), f"{p}: tolerances")] = _tolerance(value, f"{p}: tolerances.{name}")
         if "confidence" in data:
             value = data["confidence"]
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0.5 <= value < 1:
@@ -149,7 +160,7 @@ def load_settings(path: str | Path | None, *, overrides: tuple[str, ...] = (),
         source = str(p)
     for text in overrides:
         name, tol = parse_override(text)
-        tolerances[name] = tol
+        tolerances[_check_name(name, f"--tol {text!r}")] = tol
     if confidence is not None:
         if not 0.5 <= confidence < 1:
             raise CompareInputError(f"--confidence {confidence!r}: expected a number in [0.5, 1)")
