@@ -10,6 +10,7 @@ from __future__ import annotations
 
 __all__ = [
     "CompareInputError",
+    "ControllerError",
     "DesignError",
     "LogWriteError",
     "NoAcceptingRunError",
@@ -87,3 +88,8 @@ class NotAvailableError(TubeMPCError, NotImplementedError):
 class CompareInputError(TubeMPCError, ValueError):
     """``compare`` cannot use its input (no runs, an unusable log or certificate, bad tolerances); the message names
     the file or option (exit 3)."""
+
+
+class ControllerError(TubeMPCError, ValueError):
+    """A ``--controller`` that cannot be loaded or that breaks the controller protocol (exit 3, the message names
+    it)."""
