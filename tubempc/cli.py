@@ -36,6 +36,7 @@ EXIT_INTERNAL = 70
 #: its own --help is asked for, so ``tubempc -V`` and ``tubempc --help`` start at once.
 COMMANDS: dict[str, tuple[str, str]] = {
     "certify": ("verify.command:certify", "Certify ROS logs against a scenario and a formula."),
+    "compare": ("tubempc.commands.compare:compare", "Compare runs before and after a change, metric by metric."),
     "demo": ("tubempc.commands.demo:demo", "Simulate the paper's mission and certify its log (a first run)."),
     "digest": ("verify.command:digest_command", "Print the digest a certificate states for each log."),
     "falsify": ("tubempc.commands.falsify:falsify", "Search the admissible perturbations of a run for the one "

@@ -9,6 +9,8 @@ Failed *checks* are never exceptions: they are values (see ``verify``).
 from __future__ import annotations
 
 __all__ = [
+    "CompareInputError",
+    "ControllerError",
     "DesignError",
     "LogWriteError",
     "NoAcceptingRunError",
@@ -81,3 +83,13 @@ class LogWriteError(TubeMPCError, OSError):
 
 class NotAvailableError(TubeMPCError, NotImplementedError):
     """A subcommand whose feature has not landed yet (exit code 4)."""
+
+
+class CompareInputError(TubeMPCError, ValueError):
+    """``compare`` cannot use its input (no runs, an unusable log or certificate, bad tolerances); the message names
+    the file or option (exit 3)."""
+
+
+class ControllerError(TubeMPCError, ValueError):
+    """A ``--controller`` that cannot be loaded or that breaks the controller protocol (exit 3, the message names
+    it)."""

@@ -33,7 +33,8 @@ def _z(text: str) -> tuple[float, ...]:
 @click.option("--scenario", "scenario_ref", default="nexus-sml", show_default=True,
               help="A built-in scenario name or a scenario YAML file (the claims the runs are judged against).")
 @click.option("--from", "source", default=None, help="Start region of one transition (default: initial region).")
-@click.option("--to", "target", default=None, help="Target region of one transition.")
+@click.option("--to", "target", default=None,
+              help="Target region of one transition (several, comma-separated: through each in turn).")
 @click.option("--plan", is_flag=True, help="Run the scenario's planned mission instead of one transition.")
 @click.option("--budget", type=click.IntRange(min=1), default=100, show_default=True,
               help="Simulations the search may spend before its first violation.")
@@ -70,11 +71,13 @@ def _z(text: str) -> tuple[float, ...]:
 @click.option("--dask", default=None, metavar="local|tcp://HOST:PORT", help="Run the simulations on Dask.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Output folder (default: reports/falsify-<time>).")
+@click.option("--controller", "controller", default=None, metavar="PACKAGE.MODULE:FACTORY",
+              help="Search against your own controller instead of the tube MPC (docs/controller.md).")
 def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: bool, budget: int, method: str,
             seed: int, family: str, knots: int, switches: int, bound_scale: float, fixed_start: bool,
             checks_text: str, spec: str | None, overrides: tuple[str, ...], horizon_s: float | None,
             stop_at_first: bool, shrink_budget: int | None, replay_text: str | None, workers: int | None,
-            dask: str | None, out_dir: str | None) -> None:
+            dask: str | None, out_dir: str | None, controller: str | None) -> None:
     """Search disturbances, start poses and MoCap noise within the scenario's bounds for a run that breaks a check."""
     import os
     import tempfile
@@ -113,7 +116,7 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
                          bound_scale=bound_scale, vary_start=not fixed_start,
                          checks=tuple(c.strip() for c in checks_text.split(",") if c.strip()), spec=spec,
                          overrides=overrides, horizon_s=horizon_s, stop_at_first=stop_at_first,
-                         shrink_budget=shrink_budget)
+                         shrink_budget=shrink_budget, controller=controller)
     out = Path(out_dir) if out_dir is not None else Path("reports") / f"falsify-{time.strftime('%Y%m%d-%H%M%S')}"
     if replay_text is not None:
         z = _z(replay_text)

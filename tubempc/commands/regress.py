@@ -32,9 +32,12 @@ __all__ = ["regress"]
 @click.option("--reports", is_flag=True, help="With --out: also write report.md/html per run.")
 @click.option("--force", is_flag=True, help="Replace the runs in an existing, non-empty --out folder.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: when stderr is a terminal).")
+@click.option("--controller", "controller", default=None, metavar="PACKAGE.MODULE:FACTORY",
+              help="Run your own controller instead of the tube MPC (docs/controller.md); needs --suite/--baseline.")
 def regress(*, suite_path: str | None, baseline_path: str | None, update_baseline: bool, workers: int | None,
-            dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None) -> None:
-    """Run a regression suite with the current controller and compare it with a stored baseline."""
+            dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None,
+            controller: str | None) -> None:
+    """Run a regression suite with the current controller (or --controller) and compare it with a baseline."""
     from verify.extras import require
 
     require("plan", *(("report",) if reports and out_dir else ()), *(("dask",) if dask else ()),
@@ -70,15 +73,22 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
 
         prepare_output_dir(out_dir, force=force)
     cases: list[RunCase | FalsifyCase] = [*expand_suite(loaded), *expand_falsify(loaded)]
+    if controller is not None:
+        from tubempc.control.user import checked_controller
+
+        for scenario in {id(c.scenario): c.scenario for c in cases}.values():  # fail fast: exit 3 naming it
+            checked_controller(controller, scenario)
     if update_baseline:
         progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
-        outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
+        outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress,
+                             controller=controller)
         path = write_baseline(baseline_path, loaded.suite, outcomes)
         say(f"regress: baseline written to {path} ({len(outcomes)} runs)")
         return
     baseline = read_baseline(baseline_path)  # before the runs: a missing baseline fails fast
     progress_line(f"regress: suite {loaded.suite.name!r} ({loaded.source}): {len(cases)} runs")
-    outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress)
+    outcomes = run_cases(cases, out_dir=out_dir, reports=reports, workers=workers, dask=dask, progress=progress,
+                         controller=controller)
     comparison = compare(baseline, outcomes, loaded.suite.tolerances)
     text = format_diff(comparison)
     say(text)

@@ -8,9 +8,14 @@ statistics. Exit 0 when the target was reached, 1 when it was not, 3 for unusabl
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from tubempc.commands.output import say
+
+if TYPE_CHECKING:
+    from tubempc.scenario import Scenario
 
 __all__ = ["simulate"]
 
@@ -32,9 +37,12 @@ EXIT_NOT_REACHED = 1
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=True),
               help="Output log: .mcap (ROS2), .bag (ROS1), .db3, or a directory name for a ROS2 bag.")
 @click.option("--force", is_flag=True, help="Replace an existing log at --out.")
+@click.option("--controller", "controller_spec", default=None, metavar="PACKAGE.MODULE:FACTORY",
+              help="Run your own controller (docs/controller.md, 'Your controller in the loop') instead of the tube "
+                   "MPC; --to may list several targets, comma-separated.")
 def simulate(*, scenario_path: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
-             hold_s: float | None, out_path: str, force: bool) -> None:
-    """Simulate the tube MPC from one region to another and write the robot's log."""
+             hold_s: float | None, out_path: str, force: bool, controller_spec: str | None) -> None:
+    """Simulate the tube MPC (or your --controller) from one region to another and write the robot's log."""
     from verify.extras import require
 
     require("plan", feature="tubempc simulate")
@@ -48,6 +56,11 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
 
     prepare_output_log(out_path, force=force)
     scenario = load_scenario(scenario_path)
+    if controller_spec is not None:
+        _simulate_controller(scenario, controller_spec, source=source, targets=target.split(","),
+                             disturbance=disturbance, seed=seed, mocap_noise_m=mocap_noise_m, hold_s=hold_s,
+                             out_path=out_path, force=force)
+        return
     scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
     try:
         result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
@@ -70,6 +83,34 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
                f"{sum(r.backup for r in result.solver)} backups; solve time median {np.median(times_ms):.3f} ms, "
                f"p95 {np.percentile(times_ms, 95):.3f} ms, max {np.max(times_ms):.3f} ms; iterations median "
                f"{np.median(iters):.0f}, max {np.max(iters)}")
+    say(f"log: {path}")
+    if not result.ok:
+        click.echo(f"tubempc: {result.reason}", err=True)
+        raise click.exceptions.Exit(EXIT_NOT_REACHED)
+
+
+def _simulate_controller(scenario: Scenario, spec: str, *, source: str | None, targets: list[str],
+                         disturbance: str, seed: int, mocap_noise_m: float, hold_s: float | None, out_path: str,
+                         force: bool) -> None:
+    """``--controller``: the user's controller on the kinematic plant of its input model (``tubempc.control.user``)."""
+    import numpy as np
+
+    from tubempc.control import Target
+    from tubempc.control.user import checked_controller, run_controller
+    from tubempc.rosio import write_log
+    from verify.outputs import replace_output_log
+
+    controller = checked_controller(spec, scenario)
+    result = run_controller(scenario, controller, [Target(t.strip()) for t in targets], start_region=source,
+                            disturbance=disturbance, seed=seed, t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
+    if force:
+        replace_output_log(out_path)
+    path = write_log(result, scenario, out_path, metadata={"controller": spec})
+    for arrival in result.arrivals:
+        inside = "never" if arrival.inside_s is None else f"{arrival.inside_s:.2f} s"
+        say(f"{arrival.region}: robot inside at {inside}")
+    say(f"input: max |command| (linear.x, linear.y, angular.z) = "
+        f"{np.round(np.max(np.abs(result.u_body), axis=0), 4).tolist()} ({controller.input_model})")
     say(f"log: {path}")
     if not result.ok:
         click.echo(f"tubempc: {result.reason}", err=True)

@@ -49,6 +49,7 @@ class FalsifySetup:
     t_end_s: float | None = None
     overrides: tuple[str, ...] = ()
     labels: dict[str, Any] = field(default_factory=dict)  # free-form description (run, plan) for the output
+    controller_spec: str | None = None  # a user's controller (package.module:factory) instead of the tube MPC
 
     def controller_targets(self) -> list[Target]:
         return [Target(region, depart) for region, depart in self.targets]
@@ -72,7 +73,15 @@ class Evaluation:
 
 
 def simulate(setup: FalsifySetup, cand: Candidate) -> ClosedLoopResult:
-    """The closed loop of ``cand`` with the controller's scenario (the --set overrides apply here only)."""
+    """The closed loop of ``cand`` with the controller's scenario (the --set overrides apply here only); a user's
+    controller (``controller_spec``) is made afresh for every candidate."""
+    if setup.controller_spec is not None:
+        from tubempc.control.user import checked_controller, run_controller
+
+        return run_controller(setup.controller, checked_controller(setup.controller_spec, setup.controller),
+                              setup.controller_targets(), start_region=setup.start_region, disturbance=cand.signal,
+                              seed=cand.noise_seed, t_end_s=setup.t_end_s, mocap_noise_m=cand.noise_std_m,
+                              start_pose=cand.start_pose)
     return run_closed_loop(setup.controller, setup.controller_targets(), start_region=setup.start_region,
                            disturbance=cand.signal, seed=cand.noise_seed, t_end_s=setup.t_end_s,
                            mocap_noise_m=cand.noise_std_m, start_pose=cand.start_pose)

@@ -61,6 +61,7 @@ class FalsifyRequest:
     horizon_s: float | None = None
     stop_at_first: bool = False
     shrink_budget: int | None = None
+    controller: str | None = None  # package.module:factory run instead of the tube MPC (tubempc.control.user)
 
     def __post_init__(self) -> None:
         if self.plan == (self.target is not None):
@@ -149,7 +150,8 @@ class FalsifyOutcome:
 def _resolve_run(req: FalsifyRequest, scenario: Scenario) -> tuple[str, tuple[tuple[str, float | None], ...],
                                                                  str | None, dict[str, Any]]:
     names = {r.name for r in scenario.regions}
-    for flag, region in (("--from", req.source), ("--to", req.target)):
+    wanted = [("--from", req.source), *(("--to", t) for t in (req.target or "").split(",") if req.target)]
+    for flag, region in wanted:
         if region is not None and region not in names:
             raise FalsifyError(f"{flag} {region}: no such region in scenario {scenario.name!r} (regions: "
                                f"{', '.join(sorted(names))})")
@@ -165,7 +167,9 @@ def _resolve_run(req: FalsifyRequest, scenario: Scenario) -> tuple[str, tuple[tu
     if req.target is None:
         raise FalsifyError("give either --to REGION (one transition) or --plan (the scenario's mission)")
     start = req.source or scenario.initial_region
-    return start, ((req.target, None),), req.spec if req.spec is not None else derived_spec(scenario, req.target), {}
+    regions = req.target.split(",")  # --to W,B: through W to B (the formula derived from the last)
+    return (start, tuple((t, None) for t in regions),
+            req.spec if req.spec is not None else derived_spec(scenario, regions[-1]), {})
 
 
 def prepare(req: FalsifyRequest, scenario: Scenario) -> tuple[FalsifySetup, Evaluation]:
@@ -177,8 +181,12 @@ def prepare(req: FalsifyRequest, scenario: Scenario) -> tuple[FalsifySetup, Eval
                            horizon_s=req.horizon_s or 1.0, bound_scale=req.bound_scale, vary_start=req.vary_start)
     except ValueError as err:
         raise FalsifyError(str(err)) from None
+    if req.controller is not None:
+        from tubempc.control.user import checked_controller
+
+        checked_controller(req.controller, controller)  # exit 3 naming it, before any simulation
     setup = FalsifySetup(scenario, controller, start, targets, spec, tuple(req.checks), space,
-                         overrides=tuple(req.overrides), labels=labels)
+                         overrides=tuple(req.overrides), labels=labels, controller_spec=req.controller)
     reference = evaluate(setup, (0.0,) * space.dim)
     if reference.error is not None:
         raise FalsifyError(f"the unperturbed run cannot be simulated with the controller's scenario: "
@@ -214,6 +222,8 @@ def replay_command(req: FalsifyRequest, setup: FalsifySetup, z: tuple[float, ...
         args += ["--spec", req.spec]
     for o in req.overrides:
         args += ["--set", o]
+    if req.controller is not None:
+        args += ["--controller", req.controller]
     sp = setup.space
     args += ["--family", sp.family, "--knots", str(sp.knots), "--switches", str(sp.switches)]
     if req.bound_scale != 1.0:

@@ -133,6 +133,10 @@ class SearchSpace:
         return SwitchSignal(b, times, bool(v[m] >= 0.0), values)
 
 
+#: without an MPC in the scenario (a user's controller): start heading spread and the disturbance's step
+NO_MPC_HEADING_RAD = 0.1
+NO_MPC_STEP_S = 0.1
+
 def make_space(scenario: Scenario, start_region: str, *, family: Family = "steps", knots: int = 4,
                switches: int = 3, horizon_s: float, bound_scale: float = 1.0, vary_start: bool = True
                ) -> SearchSpace:
@@ -140,10 +144,15 @@ def make_space(scenario: Scenario, start_region: str, *, family: Family = "steps
     if not (math.isfinite(bound_scale) and bound_scale > 0):
         raise ValueError(f"bound_scale={bound_scale!r} must be a positive number")
     region = scenario.region(start_region)
-    eps = scenario.mpc.eps
-    axes = tuple(eps / math.sqrt(p) for p in scenario.mpc.P)
+    if scenario.mpc_spec is not None:  # the tube MPC's terminal set, and its step
+        eps = scenario.mpc.eps
+        axes = tuple(eps / math.sqrt(p) for p in scenario.mpc.P)
+        step_s = scenario.mpc.h
+    else:  # a user's controller (no MPC): a quarter of the room the robot disc has in its region, 0.1 rad, 0.1 s
+        room = max((region.radius - scenario.robot.radius) / 4, 0.0) if region.disc_radius is not None else 0.0
+        axes, step_s = (room, room, NO_MPC_HEADING_RAD), NO_MPC_STEP_S
     return SearchSpace(family=family, knots=knots, switches=switches,
-                       bound=scenario.disturbance.bound * bound_scale, horizon_s=horizon_s, step_s=scenario.mpc.h,
+                       bound=scenario.disturbance.bound * bound_scale, horizon_s=horizon_s, step_s=step_s,
                        start_center=(region.center[0], region.center[1], scenario.initial_heading),
                        start_semi_axes=(axes[0], axes[1], axes[2]), noise_std_max_m=scenario.mocap.noise_std,
                        vary_start=vary_start)

@@ -51,6 +51,7 @@ class RunJob:
     case: RunCase | FalsifyCase
     out_dir: str | None
     reports: bool = False
+    controller: str | None = None  # ``package.module:factory`` run instead of the tube MPC (tubempc.control.user)
 
 
 def closed_loop_metrics(result: Any, scenario: Scenario) -> dict[str, Any]:
@@ -60,10 +61,12 @@ def closed_loop_metrics(result: Any, scenario: Scenario) -> dict[str, Any]:
     u_body = np.asarray(result.u_body, dtype=float)
     eta = scenario.robot.radius
     err_m = float(np.max(np.linalg.norm(x - x_hat, axis=1))) if len(x) else 0.0
+    # a controller without a nominal state (NaN) or a scenario without a tube has no tube metrics
+    tube = math.isfinite(err_m) and scenario.tube_spec is not None
     metrics: dict[str, Any] = {
         "arrived": bool(result.ok),
-        "max_tube_error_m": err_m,
-        "tube_ratio": err_m / scenario.tube_radius_m,
+        "max_tube_error_m": err_m if tube else None,
+        "tube_ratio": err_m / scenario.tube_radius_m if tube else None,
     }
     for k, arrival in enumerate(result.arrivals):
         metrics[f"t_ij_s.{k}.{arrival.region}"] = arrival.t_ij_s
@@ -75,7 +78,9 @@ def closed_loop_metrics(result: Any, scenario: Scenario) -> dict[str, Any]:
         margins = np.stack([x[:, 0] - eta - ws.x[0], ws.x[1] - eta - x[:, 0], x[:, 1] - eta - ws.y[0],
                             ws.y[1] - eta - x[:, 1]])
         metrics["workspace_margin_m"] = float(np.min(margins))
-        bounds = np.asarray(scenario.inputs.max_abs, dtype=float)
+        limits = scenario.inputs
+        bounds = np.asarray(limits.max_abs if limits.model == "holonomic" else  # (vx, vy, wz) as logged
+                            (limits.max_abs[0], limits.lateral_tolerance, limits.max_abs[1]), dtype=float)
         metrics["input_margin"] = float(np.min(bounds[None, :] - np.abs(u_body)))
     solve_ms = np.array([r.solve_time_s for r in result.solver], dtype=float) * 1e3
     metrics["solver_failures"] = sum(1 for r in result.solver if not r.success)
@@ -96,18 +101,25 @@ def certificate_metrics(certificate: dict[str, Any]) -> dict[str, Any]:
     return metrics
 
 
-def _run_in(case: RunCase, folder: Path, reports: bool) -> tuple[dict[str, Any], str]:
+def _run_in(case: RunCase, folder: Path, reports: bool, controller: str | None = None) -> tuple[dict[str, Any], str]:
     from tubempc.control.closed_loop import Target, run_closed_loop
     from tubempc.rosio import write_log
     from verify import certify_log, write_certificate  # type: ignore[attr-defined,unused-ignore]
 
     targets = [Target(region, depart) for region, depart in case.targets]
-    result = run_closed_loop(case.scenario, targets, start_region=case.start, disturbance=case.disturbance,
-                             seed=case.seed, t_end_s=case.t_end_s, mocap_noise_m=case.mocap_noise_m)
+    if controller is None:
+        result = run_closed_loop(case.scenario, targets, start_region=case.start, disturbance=case.disturbance,
+                                 seed=case.seed, t_end_s=case.t_end_s, mocap_noise_m=case.mocap_noise_m)
+    else:
+        from tubempc.control.user import checked_controller, run_controller
+
+        result = run_controller(case.scenario, checked_controller(controller, case.scenario), targets,
+                                start_region=case.start, disturbance=case.disturbance, seed=case.seed,
+                                t_end_s=case.t_end_s, mocap_noise_m=case.mocap_noise_m)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "run.mcap").unlink(missing_ok=True)  # a previous regress run into the same --out folder
-    log = write_log(result, case.scenario, folder / "run.mcap",
-                    metadata={"regress_run": case.run_id, "spec": case.spec})
+    extra = {"regress_run": case.run_id, "spec": case.spec, **({"controller": controller} if controller else {})}
+    log = write_log(result, case.scenario, folder / "run.mcap", metadata=extra)
     certified = certify_log(log, case.scenario, spec=case.spec)
     write_certificate(certified, folder)
     if reports:
@@ -151,10 +163,10 @@ def run_case(job: RunJob) -> RunOutcome:
                               None if folder is None else str(folder / "worst" / "run.mcap"))
         if job.out_dir is None:
             with tempfile.TemporaryDirectory(prefix="tubempc-regress-") as tmp:
-                metrics, _ = _run_in(case, Path(tmp), job.reports)
+                metrics, _ = _run_in(case, Path(tmp), job.reports, job.controller)
                 log_path = None
         else:
-            metrics, log_path = _run_in(case, Path(job.out_dir) / case.run_id, job.reports)
+            metrics, log_path = _run_in(case, Path(job.out_dir) / case.run_id, job.reports, job.controller)
     except (TubeMPCError, VerifyError) as err:
         return RunOutcome(case.run_id, {}, f"{err.__class__.__name__}: {err}", time.perf_counter() - start, None)
     except Exception as err:  # one broken case must not hide the others; the diff reports it
@@ -164,11 +176,13 @@ def run_case(job: RunJob) -> RunOutcome:
 
 
 def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | None = None, reports: bool = False,
-              workers: int | None = None, dask: str | None = None, progress: bool | None = None) -> list[RunOutcome]:
-    """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address)."""
+              workers: int | None = None, dask: str | None = None, progress: bool | None = None,
+              controller: str | None = None) -> list[RunOutcome]:
+    """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address).
+    ``controller``: ``package.module:factory`` runs instead of the tube MPC (``tubempc.control.user``)."""
     from verify.executor import parallel_map
 
-    jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports) for case in cases]
+    jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports, controller) for case in cases]
     preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",
                "tubempc.falsify")
     return parallel_map(run_case, jobs, workers=workers, dask=dask, progress=progress, desc="regress",
