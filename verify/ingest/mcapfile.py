@@ -41,7 +41,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, scan
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
 __all__ = ["BagMetadata", "McapLog", "McapTopic", "read_bag_metadata", "read_mcap_log", "regular_file"]
@@ -213,6 +213,7 @@ def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] 
         conns = [c for c in storage.connections if c.topic in want]
         if any(c.msgtype == _SCHEMALESS for c in conns):
             return None
+        one_type_per_topic(((c.topic, c.msgtype) for c in conns), path=str(file))
         got = read_mcap_storage(storage, conns) if conns else {}
         if got is None:
             return None
@@ -288,6 +289,8 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
     for cid in sorted(channel_ids - set(found.channels)):
         raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
                            f"declares", path=shown)
+    one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
+                        if ch.topic in want and ch.schema_id in found.schemas), path=shown)
     topics: dict[str, McapTopic] = {}
     columns: dict[str, tuple[list[int], list[bytes]]] = {}
     for cid, ch in sorted(found.channels.items()):
