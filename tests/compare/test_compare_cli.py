@@ -180,3 +180,34 @@ def test_bad_tolerances_exit_3_naming_the_option_or_file(capsys: pytest.CaptureF
     code, _, err = run(capsys, certified["before"], certified["after"], "--scenario", mission_scenario,
                        "--tolerances", typo)
     assert code == 3 and str(typo) in err and "'min_clearence_m' names no judged metric" in err
+
+
+def test_pairing_by_pattern_or_certificate_field(capsys: pytest.CaptureFixture[str], recorded: dict[str, Path],
+                                                 mission_scenario: Path, tmp_path: Path,
+                                                 write_runs: WriteRuns) -> None:
+    # the same five missions recorded again under other names (and the same seeds)
+    write_runs(tmp_path / "after", range(5), names=[f"tuesday-mission{k}" for k in range(5)])
+    certs = {}
+    for side, logs in (("before", [recorded["before"] / f"mission{k}.mcap" for k in range(5)]),
+                       ("after", [tmp_path / "after"])):
+        certs[side] = tmp_path / f"{side}-certs"
+        with pytest.raises(SystemExit):
+            main(["certify", *(str(p) for p in logs), "--scenario", str(mission_scenario), "--out",
+                  str(certs[side]), "--no-report", "--workers", "1", "--no-progress", "-q"])
+    capsys.readouterr()
+
+    def compare(*extra: str) -> CompareReport:
+        _, out, _ = run(capsys, certs["before"], certs["after"], "--scenario", mission_scenario, "--json", *extra)
+        return CompareReport.model_validate_json(out)
+
+    by_name = compare()
+    assert not by_name.paired and "have no partner" in by_name.pairing
+    by_pattern = compare("--pair-pattern", r"mission\d")
+    assert by_pattern.paired and by_pattern.pairing == "5 runs paired by key"
+    by_seed = compare("--pair-by", "generator.seed")
+    assert by_seed.paired
+    # the same seeds are the same runs: every paired difference is exactly zero
+    assert all(m.difference == 0 for m in by_seed.metrics if m.difference is not None)
+    code, _, err = run(capsys, certs["before"], certs["after"], "--scenario", mission_scenario,
+                       "--pair-by", "generator.nothing")
+    assert code == 3 and "has no field 'nothing'" in err
