@@ -70,8 +70,9 @@ def test_path_moved_3cm_towards_an_obstacle_exits_1_naming_clearance(
                 if c.find("failure") is not None}
     assert {"check.obstacle_clearance.margin", "min_clearance_m"} <= failures
     page = (out_dir / "compare.html").read_text(encoding="utf-8")
-    notable = [m for m in by_name.values() if m.status not in {"ok", "not_judged"}]
-    assert page.count("data:image/png;base64,") == len(notable)  # one plot per regressed or notable metric
+    notable = [m for m in by_name.values() if m.status in {"regressed", "improved"}
+               or (m.status == "cannot_tell" and abs(m.worse_by or 0) > (m.tolerance or 0))]
+    assert page.count("data:image/png;base64,") == len(notable) >= 2  # one plot per regressed or notable metric
 
 
 def test_four_runs_a_side_small_shift_cannot_tell_exits_2(capsys: pytest.CaptureFixture[str],
