@@ -147,6 +147,7 @@ def test_tolerances_beside_the_scenario_and_on_the_command_line(capsys: pytest.C
     ("empty", "folder holds no"),
     ("bad-cert", "not a JSON certificate"),
     ("other-scenario", "certified against another scenario"),
+    ("unusable-log", "cannot be certified"),
 ])
 def test_unusable_input_is_one_line_exit_3(capsys: pytest.CaptureFixture[str], recorded: dict[str, Path],  # noqa: PLR0917
                                            certified: dict[str, Path], mission_scenario: Path, tmp_path: Path,
@@ -158,6 +159,9 @@ def test_unusable_input_is_one_line_exit_3(capsys: pytest.CaptureFixture[str], r
         side.mkdir()
         (side / "run.json").write_text("{not json", encoding="utf-8")
         side = side / "*.json"
+    elif case == "unusable-log":
+        side.mkdir()
+        shutil.copy(Path(__file__).resolve().parents[2] / "logs" / "truncated.bag", side / "cut.bag")
     elif case == "other-scenario":
         with pytest.raises(SystemExit):
             main(["certify", str(recorded["before"] / "mission0.mcap"), "--scenario", "nexus-sml", "--spec",
