@@ -70,8 +70,9 @@ def test_path_moved_3cm_towards_an_obstacle_exits_1_naming_clearance(
                 if c.find("failure") is not None}
     assert {"check.obstacle_clearance.margin", "min_clearance_m"} <= failures
     page = (out_dir / "compare.html").read_text(encoding="utf-8")
-    notable = [m for m in by_name.values() if m.status not in {"ok", "not_judged"}]
-    assert page.count("data:image/png;base64,") == len(notable)  # one plot per regressed or notable metric
+    notable = [m for m in by_name.values() if m.status in {"regressed", "improved"}
+               or (m.status == "cannot_tell" and abs(m.worse_by or 0) > (m.tolerance or 0))]
+    assert page.count("data:image/png;base64,") == len(notable) >= 2  # one plot per regressed or notable metric
 
 
 def test_four_runs_a_side_small_shift_cannot_tell_exits_2(capsys: pytest.CaptureFixture[str],
@@ -146,6 +147,7 @@ def test_tolerances_beside_the_scenario_and_on_the_command_line(capsys: pytest.C
     ("empty", "folder holds no"),
     ("bad-cert", "not a JSON certificate"),
     ("other-scenario", "certified against another scenario"),
+    ("unusable-log", "cannot be certified"),
 ])
 def test_unusable_input_is_one_line_exit_3(capsys: pytest.CaptureFixture[str], recorded: dict[str, Path],  # noqa: PLR0917
                                            certified: dict[str, Path], mission_scenario: Path, tmp_path: Path,
@@ -157,6 +159,9 @@ def test_unusable_input_is_one_line_exit_3(capsys: pytest.CaptureFixture[str], r
         side.mkdir()
         (side / "run.json").write_text("{not json", encoding="utf-8")
         side = side / "*.json"
+    elif case == "unusable-log":
+        side.mkdir()
+        shutil.copy(Path(__file__).resolve().parents[2] / "logs" / "truncated.bag", side / "cut.bag")
     elif case == "other-scenario":
         with pytest.raises(SystemExit):
             main(["certify", str(recorded["before"] / "mission0.mcap"), "--scenario", "nexus-sml", "--spec",
@@ -180,3 +185,34 @@ def test_bad_tolerances_exit_3_naming_the_option_or_file(capsys: pytest.CaptureF
     code, _, err = run(capsys, certified["before"], certified["after"], "--scenario", mission_scenario,
                        "--tolerances", typo)
     assert code == 3 and str(typo) in err and "'min_clearence_m' names no judged metric" in err
+
+
+def test_pairing_by_pattern_or_certificate_field(capsys: pytest.CaptureFixture[str], recorded: dict[str, Path],
+                                                 mission_scenario: Path, tmp_path: Path,
+                                                 write_runs: WriteRuns) -> None:
+    # the same five missions recorded again under other names (and the same seeds)
+    write_runs(tmp_path / "after", range(5), names=[f"tuesday-mission{k}" for k in range(5)])
+    certs = {}
+    for side, logs in (("before", [recorded["before"] / f"mission{k}.mcap" for k in range(5)]),
+                       ("after", [tmp_path / "after"])):
+        certs[side] = tmp_path / f"{side}-certs"
+        with pytest.raises(SystemExit):
+            main(["certify", *(str(p) for p in logs), "--scenario", str(mission_scenario), "--out",
+                  str(certs[side]), "--no-report", "--workers", "1", "--no-progress", "-q"])
+    capsys.readouterr()
+
+    def compare(*extra: str) -> CompareReport:
+        _, out, _ = run(capsys, certs["before"], certs["after"], "--scenario", mission_scenario, "--json", *extra)
+        return CompareReport.model_validate_json(out)
+
+    by_name = compare()
+    assert not by_name.paired and "have no partner" in by_name.pairing
+    by_pattern = compare("--pair-pattern", r"mission\d")
+    assert by_pattern.paired and by_pattern.pairing == "5 runs paired by key"
+    by_seed = compare("--pair-by", "generator.seed")
+    assert by_seed.paired
+    # the same seeds are the same runs: every paired difference is exactly zero
+    assert all(m.difference == 0 for m in by_seed.metrics if m.difference is not None)
+    code, _, err = run(capsys, certs["before"], certs["after"], "--scenario", mission_scenario,
+                       "--pair-by", "generator.nothing")
+    assert code == 3 and "has no field 'nothing'" in err

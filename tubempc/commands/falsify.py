@@ -142,9 +142,13 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
     ref = data["reference"]
     say(f"unperturbed run: margin {ref['margin']:.9g} ({ref['check']}), {ref['duration_s']:.1f} s")
     shrink = f" + {data['shrink_simulations']} shrinking" if data["shrink_simulations"] else ""
+    timing = data["timing"]
+    per = (f"; median {timing['simulation_s_median']:.3f} s per simulation + {timing['judge_s_median']:.3f} s to "
+           "judge it" if timing["simulation_s_median"] is not None else "")
     say(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
-               f"{data['timing']['elapsed_s']:.1f} s; median {data['timing']['simulation_s_median']:.3f} s per "
-               f"simulation + {data['timing']['judge_s_median']:.3f} s to judge it")
+        f"{timing['elapsed_s']:.1f} s{per}")
+    if data["verdict"] == "fail" and ref["check"] is not None and ref["margin"] < 0:
+        say(f"VIOLATION in the unperturbed run (z = 0): margin {ref['margin']:.9g} ({ref['check']})")
     worst = data["worst"]
     if worst is not None:
         first = data["first_violation_sim"]

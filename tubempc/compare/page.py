@@ -1,10 +1,10 @@
 """A ``CompareOutcome`` -> ``compare.html``: the outcome, one before/after distribution plot per regressed or notable
 metric (matplotlib, embedded as PNG), and the table of every metric.
 
-input: the outcome -> output: one self-contained HTML page (``write_page``). Notable: regressed, cannot tell,
-improved. Numbers: a box per side with every run as a dot (paired runs joined by a line), the tolerance drawn as a
-band around the before median on the worse side; verdicts: runs per verdict on each side. Every string that comes
-from a file name or a certificate is escaped.
+input: the outcome -> output: one self-contained HTML page (``write_page``). Notable: regressed, improved, or
+cannot tell with a median change beyond the tolerance. Numbers: a box per side with every run as a dot (paired runs
+joined by a line), the tolerance drawn as a band around the before median on the worse side; verdicts: runs per
+verdict on each side. Every string that comes from a file name or a certificate is escaped.
 """
 
 from __future__ import annotations
@@ -23,6 +23,15 @@ _COLOURS = {"regressed": "#d62728", "cannot_tell": "#ff7f0e", "improved": "#2ca0
             "not_judged": "#999"}
 _NOTABLE: tuple[Status, ...] = ("regressed", "cannot_tell", "improved")
 _VERDICTS = ("pass", "inconclusive", "fail")
+
+
+def _notable(m: MetricResult) -> bool:
+    """Regressed, improved, or undecided with a median change beyond the tolerance (or without a number)."""
+    if m.status in ("regressed", "improved"):
+        return True
+    if m.status != "cannot_tell":
+        return False
+    return m.worse_by is None or m.tolerance is None or abs(m.worse_by) > m.tolerance
 
 
 def _figure(m: MetricResult) -> str:
@@ -65,9 +74,9 @@ def _figure(m: MetricResult) -> str:
                 ax.axhspan(min(m.before.median, edge), max(m.before.median, edge), color="#2ca02c", alpha=0.12,
                            label=f"tolerance {m.tolerance:.3g}")
                 ax.legend(loc="best", fontsize=8)
-            ax.set_ylabel(m.unit or "value")
+            ax.set_ylabel(m.unit if m.unit and len(m.unit) <= 12 else "value")
             ax.grid(True, axis="y", alpha=0.3)
-        ax.set_title(m.name, fontsize=10)
+        ax.set_title(m.name if not m.unit or len(m.unit) <= 12 else f"{m.name} [{m.unit}]", fontsize=9)
         fig.tight_layout()
         buf = io.BytesIO()
         fig.savefig(buf, format="png")
@@ -101,7 +110,7 @@ def page_html(outcome: CompareOutcome) -> str:
     o = outcome
     colour = {0: "#2ca02c", 1: "#d62728", 2: "#ff7f0e"}[o.exit_code]
     sections = []
-    for m in (m for status in _NOTABLE for m in o.by_status(status)):
+    for m in (m for status in _NOTABLE for m in o.by_status(status) if _notable(m)):
         lines = "<br>".join(_e(line.strip()) for line in describe(m))
         sections.append(f"<section><h3 style=\"color:{_COLOURS[m.status]}\">{_e(m.status.replace('_', ' '))}: "
                         f"{_e(m.name)}</h3><p>{lines}</p><img alt=\"{_e(m.name)}: before and after\" "
@@ -121,8 +130,9 @@ def page_html(outcome: CompareOutcome) -> str:
             f"{_e(o.after.label)} ({len(o.after.runs)} {_e(o.after.kind)}). {_e(o.pairing.note)}. Confidence "
             f"{o.settings.confidence:g}; tolerances: {_e(o.settings.source)}. {len(o.metrics)} metrics: "
             f"{_e(counts)}.</p>"
-            + ("<h2>Regressed and notable metrics</h2>" + "".join(sections) if sections else
-               "<p>No metric regressed, changed beyond its tolerance, or is undecided.</p>")
+            + ("<h2>Regressed and notable metrics</h2><p>Regressed, improved, and undecided metrics whose median "
+               "moved beyond the tolerance; the others are in the table below.</p>" + "".join(sections)
+               if sections else "<p>No metric regressed, improved, or moved beyond its tolerance.</p>")
             + f"<h2>Every metric</h2><table>{head}{''.join(_row(m) for m in ordered)}</table></body></html>\n")
 
 

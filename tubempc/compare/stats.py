@@ -176,7 +176,8 @@ def _judge_numeric(name: str, info: MetricInfo, unit: str, sample: _Sample, *, p
         p_within = _mannwhitney(a - tol, b, "less")
         p_better = _mannwhitney(a, b, "less")
         exact_same = tol == 0 and bool(np.all(a == b[0]) and np.all(b == b[0]))
-    base = replace(base, difference=sign * worse_by, worse_by=worse_by, tolerance=tol, test=test, p_worse=p_worse,
+    worse_by += 0.0  # no "-0" in the output
+    base = replace(base, difference=sign * worse_by + 0.0, worse_by=worse_by, tolerance=tol, test=test, p_worse=p_worse,
                    p_within=p_within, runs_worse=lost)
     conf = f"{settings.confidence:g}"
     shift = (f"worse by {_fmt(worse_by)}" if worse_by > 0 else f"better by {_fmt(-worse_by)}" if worse_by < 0
@@ -281,7 +282,12 @@ def compare_metrics(pairing: Pairing, before: Mapping[str, Mapping[str, MetricVa
         sample = _Sample({k: v.number for k, m in before.items() if (v := m.get(name)) and v.number is not None},
                          {k: v.number for k, m in after.items() if (v := m.get(name)) and v.number is not None})
         out.append(_judge_numeric(name, info, info.unit or unit, sample, pairing=pairing, settings=settings))
-    return tuple(sorted(out, key=lambda r: (STATUS_ORDER.index(r.status), r.name)))
+    return tuple(sorted(out, key=lambda r: (STATUS_ORDER.index(r.status), not _beyond(r), r.name)))
+
+
+def _beyond(r: MetricResult) -> bool:
+    """Changed by more than the tolerance (listed first within its status)."""
+    return r.worse_by is not None and r.tolerance is not None and abs(r.worse_by) > r.tolerance
 
 
 def verdict_name(rank: float) -> str:

@@ -84,7 +84,8 @@ class FalsifyOutcome:
 
     @property
     def verdict(self) -> str:
-        evs = (*self.result.evaluations, *self.result.shrink_evaluations)
+        # the unperturbed run (z = 0) is a point of the search space too: a controller that fails it fails
+        evs = (self.reference, *self.result.evaluations, *self.result.shrink_evaluations)
         if any(e.violated for e in evs):
             return "fail"
         if any(e.inconclusive for e in evs):

@@ -131,14 +131,16 @@ def _run_in(case: RunCase, folder: Path, reports: bool, controller: str | None =
     return metrics, str(log)
 
 
-def falsify_metrics(case: FalsifyCase, out_dir: Path | None) -> dict[str, Any]:
-    """Run one falsification case (inline); its metrics. With ``out_dir``: falsify.json and the worst case there."""
+def falsify_metrics(case: FalsifyCase, out_dir: Path | None, controller: str | None = None) -> dict[str, Any]:
+    """Run one falsification case (inline); its metrics. With ``out_dir``: falsify.json and the worst case there.
+    ``controller``: a user's controller searched instead of the tube MPC."""
     from tubempc.falsify import FalsifyRequest, run_falsify, write_outcome
 
     f = case.spec
     req = FalsifyRequest(scenario_ref=case.scenario_ref, source=f.start, target=f.target, plan=f.plan,
                          method=f.method, budget=f.budget, seed=f.seed, family=f.family, knots=f.knots,
-                         switches=f.switches, bound_scale=f.bound_scale, vary_start=not f.fixed_start)
+                         switches=f.switches, bound_scale=f.bound_scale, vary_start=not f.fixed_start,
+                         controller=controller)
     outcome = run_falsify(req, case.scenario, workers=1)
     if out_dir is not None:
         outcome = write_outcome(outcome, out_dir)
@@ -158,7 +160,7 @@ def run_case(job: RunJob) -> RunOutcome:
     try:
         if isinstance(case, FalsifyCase):
             folder = None if job.out_dir is None else Path(job.out_dir) / case.run_id
-            metrics = falsify_metrics(case, folder)
+            metrics = falsify_metrics(case, folder, job.controller)
             return RunOutcome(case.run_id, metrics, None, time.perf_counter() - start,
                               None if folder is None else str(folder / "worst" / "run.mcap"))
         if job.out_dir is None:
