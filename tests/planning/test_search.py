@@ -237,7 +237,7 @@ def test_exact_search_is_optimal_where_the_first_attempt_is_late() -> None:
 
 
 @pytest.mark.parametrize(("text", "first_attempt_cost", "cost"), [
-    ("G[2,2] p", Fraction(4), Fraction(2)),  # the first attempt's lasso enters its repeating part late
+    ("G[2,2] p", Fraction(5, 2), Fraction(2)),  # the first attempt's lasso enters its repeating part late
     ("G(2,inf) p", None, Fraction(5, 2)),  # the first attempt (with its pruning) finds nothing
 ])
 def test_observed_exact_search_beats_the_first_attempt(text: str, first_attempt_cost: Fraction | None,
@@ -250,3 +250,27 @@ def test_observed_exact_search_beats_the_first_attempt(text: str, first_attempt_
     fast = _search(WTS, compile_formula(parse(text), found.tick_s), "A", wait=True, silent=False, prune=True,
                    max_states=10_000)
     assert (None if fast is None else _cost(fast[0])) == first_attempt_cost
+
+
+# the built-in scenario's safe regions and Algorithm 1 transition times (seconds), mission_1 in R1, mission_2 in R3
+NEXUS_LABELS = {"R1": ("mission_1",), "R2": (), "R3": ("mission_2",), "R4": (), "R5": ()}
+NEXUS_WEIGHTS = {
+    ("R1", "R2"): "19.9", ("R1", "R3"): "16.7", ("R1", "R4"): "30.7", ("R1", "R5"): "22.5",
+    ("R2", "R3"): "13", ("R2", "R4"): "37.2", ("R2", "R5"): "32.5", ("R3", "R4"): "13.4",
+    ("R3", "R5"): "14.9", ("R4", "R5"): "21.1"}
+NEXUS = make_wts(NEXUS_LABELS, {**{k: Fraction(v) for k, v in NEXUS_WEIGHTS.items()},
+                                **{(b, a): Fraction(v) for (a, b), v in NEXUS_WEIGHTS.items()}}, initial="R1")
+
+
+def test_aimed_observed_dwell_is_not_pruned_by_its_own_origin() -> None:
+    # R1 at 0 asks for mission_2 in [10, 20] (R3 at 16.7); F[50,60] mission_1 needs a dwell position in R3 at 33.3
+    # that makes R1 arrive at exactly 50. The first attempt used to prune that dwell as "dominated" by its own
+    # origin (the origin dwelling until 33.3 is that very state) and found a lasso entering at 54.1; the exact
+    # search then had to explore every observed dwell pattern below 54.1 s (tick 0.05 s) and ran out of states.
+    # Found, the run meets the lower bound (the F window's lower end) and is proved optimal at once.
+    f = parse("G(mission_1 -> F[10,20] mission_2) & F[50,60] mission_1")
+    found = find_run(NEXUS, f, dwell="observed", max_states=20_000)
+    assert holds(f, found.run, NEXUS_LABELS), found.run
+    assert found.run.loop_start is not None and found.run.times[found.run.loop_start] == 50
+    assert found.method == "first attempt, proved optimal by the exact search"
+    assert ("R3", Fraction(333, 10)) in set(zip(found.run.regions, found.run.times, strict=True))

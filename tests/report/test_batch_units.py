@@ -156,3 +156,39 @@ def test_a_worker_that_dies_twice_is_exit_70_and_the_batch_goes_on() -> None:
 
     item = _worker_died(_Job("x.bag", "x", None, None, "auto", False))  # type: ignore[arg-type]
     assert item.exit_code == 70 and item.verdict == "error" and "died twice" in (item.error or "")
+
+
+def test_certificates_only_are_written_in_this_process(tmp_path: Path, scenario: Scenario,
+                                                       make_result: Callable[..., Any],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without reports no pool (nor a second Dask cluster) is started: shipping every result with its frames to
+    one cost more than writing its certificate here."""
+    monkeypatch.setattr(batch_run, "_certify_function", lambda: _fake_certifier(make_result))
+    monkeypatch.setattr(batch_output, "_write_certificate",
+                        lambda result, out: (out / "certificate.json").write_text(json.dumps(result.certificate)))
+
+    def no_pool(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError("write_batch started an executor to write certificates only")
+
+    monkeypatch.setattr(batch_output, "parallel_map", no_pool)
+    for name in ("pass_a.mcap", "pass_b.mcap"):
+        (tmp_path / name).write_bytes(b"")
+    batch = certify_many([tmp_path / "pass_a.mcap", tmp_path / "pass_b.mcap"], scenario, workers=1, progress=False)
+    files = write_batch(batch, tmp_path / "out", reports=False, workers=2, dask="local")
+    assert (tmp_path / "out" / "pass_a.mcap" / "certificate.json").is_file()
+    assert (tmp_path / "out" / "pass_b.mcap" / "certificate.json").is_file()
+    assert files["junit.xml"].is_file()
+
+
+def test_process_server_builds_the_first_call_caches() -> None:
+    """The batch's process server preloads ``verify.batch.warm``: the MITL parser and both type stores are built
+    before the workers fork, not in each worker's first log."""
+    import subprocess
+    import sys
+
+    assert "verify.batch.warm" in batch_run._PRELOAD
+    code = ("import verify.batch.warm; from tubempc.mitl.parser import _parser; "
+            "from verify.ingest.decode import typestore; "
+            "print(_parser.cache_info().currsize, typestore.cache_info().currsize)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["1", "2"]

@@ -211,6 +211,7 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
         prod.best[sid] = (0, 0)
         heapq.heappush(heap, (0, 0, sid))
     buckets: dict[tuple[int, tuple[int, ...]], list[int]] = {}
+    aimed: set[int] = set()  # observed dwell positions aimed at landing the next arrival on a window end
     stop_at: int | None = None
     expanded = 0
     nb = len(aut.buchi)
@@ -222,11 +223,12 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
             break
         prod.settled[sid] = True
         r, obl = prod.region[sid], prod.obl[sid]
-        if prune and _dominated(aut, prod, buckets, sid=sid, t=t, cls=cls[r], silent=silent):
+        if prune and _dominated(aut, prod, buckets, sid=sid, t=t, cls=cls[r], silent=silent, aimed=sid in aimed):
             prod.pruned[sid] = True
             continue
         expanded += 1
         succs: list[tuple[int, State, int, int, str, int]] = []  # (region, state, delta, travel, kind, wait)
+        targeted: set[int] = set()
         far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
         for j, w in adj[r]:
             for o2 in aut.step(obl, w, cls[j]):
@@ -253,7 +255,8 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                 if stop_at is None:
                     stop_at = t
         elif wait:
-            delays = aut.event_delays(obl, cls[r]) | aut.targeted_delays(obl, arrivals[r])
+            targeted = aut.targeted_delays(obl, arrivals[r])
+            delays = aut.event_delays(obl, cls[r]) | targeted
             for d in sorted(delays):
                 for o2 in aut.step(obl, d, cls[r]):
                     succs.append((r, o2, d, 0, DWELL, 0))
@@ -262,6 +265,8 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
         for j, o2, d, moved, kind, waited in succs:
             v, _ = prod.get(j, o2)
             prod.edges[sid].append((v, d, kind, waited))
+            if kind == DWELL and d in targeted:
+                aimed.add(v)
             if kind == STAY:
                 continue
             cand = (t + d, travel + moved)
@@ -283,7 +288,12 @@ def _stay_ticks(aut: TimedAutomaton) -> int:
 
 
 def _dominated(aut: TimedAutomaton, prod: Product, buckets: dict[tuple[int, tuple[int, ...]], list[int]], *,
-               sid: int, t: int, cls: int, silent: bool) -> bool:
+               sid: int, t: int, cls: int, silent: bool, aimed: bool = False) -> bool:
+    """Whether state ``sid`` (popped at ``t``) is dominated by an earlier state of its region that can wait until
+    ``t`` and be no harder. An ``aimed`` dwell position (``targeted_delays``: it lands the next arrival on a window
+    end) is not pruned by its own origin: the origin's dwell to ``t`` *is* this state, and pruning it would lose the
+    aimed arrival (``G(m1 -> F[10,20] m2) & F[50,60] m1`` on the built-in scenario: the dwell in R3 that makes R1
+    arrive at 50 s)."""
     r, obl = prod.region[sid], prod.obl[sid]
     key = (r, tuple(sorted({nid for nid, _ in obl})))
     bucket = buckets.setdefault(key, [])
@@ -296,7 +306,7 @@ def _dominated(aut: TimedAutomaton, prod: Product, buckets: dict[tuple[int, tupl
             # the earlier state waits until t (silently, or with one dwell position) and is then no harder
             later = (aut.age(prod.obl[other], t - t_other),) if silent else aut.step(prod.obl[other], t - t_other,
                                                                                      cls)
-            if any(aut.weaker(o, obl) for o in later):
+            if any(aut.weaker(o, obl) for o in later if not (aimed and o == obl)):
                 return True
     bucket.append(sid)
     return False

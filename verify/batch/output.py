@@ -102,7 +102,8 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
                 junit_inconclusive: InconclusiveAs = "failure") -> dict[str, Path]:
     """Write ``<out_dir>/<log>/`` (certificate.json + reports, or error.txt) and the summaries.
 
-    The per-log folders are written in parallel like ``certify_many`` (figures take about 2 s per log).
+    With ``reports``, the per-log folders are written in parallel like ``certify_many`` (figures take about 2 s per
+    log); certificates alone are written in this process (``workers`` and ``dask`` are then unused).
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
@@ -114,8 +115,13 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     out = prepare_output_dir(out_dir, force=True, inputs=[item.path for item in batch.items])
     jobs = [_WriteJob(item, batch.scenario, str(out / item.name), reports, junit_inconclusive)
             for item in batch.items]
-    suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports",
-                          preload=_PRELOAD)
+    if reports:
+        suites = parallel_map(_write_item, jobs, workers=workers, dask=dask, progress=progress, desc="reports",
+                              preload=_PRELOAD)
+    else:
+        # certificates only: a few milliseconds of JSON per log, written here; shipping every result (with its
+        # trajectory frames) to a pool, or starting a second Dask cluster, costs more than the writing
+        suites = [_write_item(job) for job in jobs]
     rows = batch.rows()
     columns = list(rows[0]) if rows else ["log", "folder", "verdict", "exit_code"]
     table = io.StringIO(newline="")

@@ -28,7 +28,8 @@ EXIT_INTERNAL = 70
 _SEVERITY = {0: 0, 2: 1, 1: 2, 3: 3, 70: 4}
 _VERDICT_OF_CODE = {0: "pass", 1: "fail", 2: "inconclusive", 3: "unusable", 70: "error"}
 
-_PRELOAD = ("verify.batch",)  # the process server imports the certifier once for all workers
+# the process server imports the certifier and builds its first-call caches once for all workers
+_PRELOAD = ("verify.batch", "verify.batch.warm")
 
 
 def worst_exit_code(codes: Iterable[int]) -> int:
