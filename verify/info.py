@@ -168,7 +168,7 @@ def _topic_info(topic: str, msgtype: str, log_ns: IntArray, stamp_ns: IntArray |
     dropouts = 0
     if t.shape[0] >= 2:
         dt = np.diff(t)
-        order = np.argsort(dt, kind="stable")[::-1][:_GAPS_SHOWN]
+        order = np.argsort(-dt, kind="stable")[:_GAPS_SHOWN]  # the largest first; equal gaps: the earliest first
         base = int(t[0]) if use_header else start_ns
         gaps = tuple(Gap(round((int(t[i]) - base) * 1e-9, 6), round(int(dt[i]) * 1e-9, 6)) for i in order)
         if period > 0:
@@ -348,27 +348,38 @@ def _num(v: float | None, fmt: str = ".3f") -> str:
 
 
 def info_lines(info: LogInfo) -> Iterator[str]:
-    """The text of ``tubempc info``: the log, one line per topic, one per pose-like stream."""
+    """The text of ``tubempc info``: the log, its clock, each topic (two or three lines), each pose-like stream and
+    each command topic."""
     span = (info.end_s or 0.0) - (info.start_s or 0.0)
-    yield (f"{info.path}: {info.format} log, {len(info.topics)} topics, {span:.3f} s of log time "
-           f"({_num(info.start_s)} .. {_num(info.end_s)}), clock: {info.log_clock} ({info.clock_note})")
+    n = len(info.topics)
+    yield (f"{info.path}: {info.format} log, {n} topic{'s' if n != 1 else ''}, {span:.3f} s of log time "
+           f"({_num(info.start_s)} .. {_num(info.end_s)})")
+    yield f"clock: {info.log_clock} ({info.clock_note})"
+    yield "topics:"
     for t in info.topics:
-        hdr = (f", header {_num(t.header_first_s)} .. {_num(t.header_last_s)}" if t.header_first_s is not None
-               else ", no header stamp")
+        rate = (f"{_num(t.rate_hz, '.2f')} Hz (median period {_num(t.median_period_s, '.4f')} s on {t.time} time)"
+                if t.rate_hz is not None else "no rate (fewer than two messages)")
+        drop = (f"{t.dropouts} dropout{'s' if t.dropouts != 1 else ''} (gaps > {DROPOUT_FACTOR:g} periods)"
+                if t.dropouts else "no dropouts")
+        yield f"  {t.topic}  {t.msgtype}  {t.count} msgs, {rate}, {drop}"
+        if t.largest_gaps:
+            yield "    largest gaps: " + ", ".join(f"{g.gap_s:.3f} s after {g.after_s:.3f} s" for g in t.largest_gaps)
+        hdr = (f"header time {_num(t.header_first_s)} .. {_num(t.header_last_s)}" if t.header_first_s is not None
+               else "no header stamp")
         unset = f", {t.unset_stamps} unset stamps" if t.unset_stamps else ""
-        rate = (f"{_num(t.rate_hz, '.2f')} Hz (median period {_num(t.median_period_s, '.4f')} s, {t.time} time)"
-                if t.rate_hz is not None else "rate -")
-        gaps = ", ".join(f"{g.gap_s:.3f} s after {g.after_s:.3f} s" for g in t.largest_gaps)
-        drop = f"; {t.dropouts} dropouts > {DROPOUT_FACTOR:g} periods" if t.dropouts else ""
-        yield (f"  {t.topic}  {t.msgtype}  {t.count} msgs, {rate}{drop}; largest gaps: {gaps or '-'}; "
-               f"log {_num(t.log_first_s)} .. {_num(t.log_last_s)}{hdr}{unset}; clock {t.clock or '-'}")
+        yield f"    log time {_num(t.log_first_s)} .. {_num(t.log_last_s)}; {hdr}{unset}; clock {t.clock or '-'}"
+    if info.poses:
+        yield "pose-like streams:"
     for pi in info.poses:
-        name = pi.topic + (f" child {pi.child_frame}" if pi.child_frame else "")
+        name = pi.topic + (f" child frame {pi.child_frame}" if pi.child_frame else "")
         bad = f", {pi.non_finite} non-finite" if pi.non_finite else ""
-        yield (f"  pose {name} ({pi.msgtype}, {pi.samples} samples{bad}): x {pi.x_min_m:.3f} .. {pi.x_max_m:.3f} m, "
-               f"y {pi.y_min_m:.3f} .. {pi.y_max_m:.3f} m; speed p50 {_num(pi.speed_p50_mps)} p90 "
-               f"{_num(pi.speed_p90_mps)} p99 {_num(pi.speed_p99_mps)} max {_num(pi.speed_max_mps)} m/s")
+        yield (f"  {name} ({pi.msgtype}, {pi.samples} samples{bad}): x {pi.x_min_m:.3f} .. {pi.x_max_m:.3f} m, "
+               f"y {pi.y_min_m:.3f} .. {pi.y_max_m:.3f} m")
+        yield (f"    speed between samples: p50 {_num(pi.speed_p50_mps)}, p90 {_num(pi.speed_p90_mps)}, p99 "
+               f"{_num(pi.speed_p99_mps)}, max {_num(pi.speed_max_mps)} m/s")
+    if info.commands:
+        yield "command topics:"
     for c in info.commands:
         bad = f", {c.non_finite} non-finite" if c.non_finite else ""
-        yield (f"  commands {c.topic} ({c.msgtype}, {c.samples} samples{bad}): |linear.x| <= {c.max_abs_linear_x:.3f}"
-               f" m/s, |linear.y| <= {c.max_abs_linear_y:.3f} m/s, |angular.z| <= {c.max_abs_angular_z:.3f} rad/s")
+        yield (f"  {c.topic} ({c.msgtype}, {c.samples} samples{bad}): |linear.x| <= {c.max_abs_linear_x:.3f} m/s, "
+               f"|linear.y| <= {c.max_abs_linear_y:.3f} m/s, |angular.z| <= {c.max_abs_angular_z:.3f} rad/s")
