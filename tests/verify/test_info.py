@@ -85,3 +85,13 @@ def test_an_unreadable_log_is_one_error_naming_it(tmp_path: Path) -> None:
     bad.write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 100)
     with pytest.raises(LogReadError, match=str(bad)):
         log_info(bad)
+
+
+def test_a_truncated_log_names_salvage_and_salvage_describes_what_remains() -> None:
+    log = Path(__file__).resolve().parents[2] / "logs" / "truncated.bag"
+    with pytest.raises(LogReadError, match="--salvage"):
+        log_info(log)
+    info = log_info(log, salvage=True)
+    assert info.partial and info.notes and info.notes[0].startswith("salvaged: truncated.bag: stopped at")
+    pose = next(t for t in info.topics if t.topic == "/qualisys/nexus/pose")
+    assert pose.count > 0 and pose.time == "header" and any(p.topic == pose.topic for p in info.poses)
