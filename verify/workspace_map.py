@@ -332,6 +332,28 @@ def _px_per_m(fig: Figure, ax: Axes) -> float:
     return float(box.width / (x1 - x0)) if x1 > x0 else 1.0
 
 
+#: room kept between the y axis' label and the figure's left edge (inches)
+_LEFT_MARGIN_IN = 0.08
+
+
+def _keep_left_labels_inside(fig: Figure, ax: Axes, cax: Axes) -> None:
+    """Move the map (and the colour bar under it) right until the y tick labels and the y label fit inside the
+    figure: a wide workspace fills the map's box, whose fixed left edge leaves too little room for "-1000"."""
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    fig_w_px = fig.get_figwidth() * fig.dpi
+    for _ in range(3):  # the tick labels can change with the axes' size: settle in a few steps
+        box = ax.yaxis.get_tightbbox(renderer)
+        if box is None:
+            return
+        short = _LEFT_MARGIN_IN * fig.dpi - float(box.x0)
+        if short <= 0.5:
+            return
+        shift = short / fig_w_px
+        for a in (ax, cax):
+            x0, y0, w, h = a.get_position(original=True).bounds
+            a.set_position((x0 + shift, y0, w - shift, h))
+
+
 def _letter(i: int) -> str:
     return chr(ord("A") + i)
 
@@ -375,6 +397,9 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
     ax.set_ylim(ws.y[0] - pad, ws.y[1] + pad)
     ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    _keep_left_labels_inside(fig, ax, cax)  # before the labels are placed: they are placed for the final axes
     px_per_m = _px_per_m(fig, ax)
     pt_per_px = 72.0 / fig.dpi
     _draw_small_region_markers(ax, scenario, px_per_m)
@@ -432,8 +457,6 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
                          prefer_out=_point_boxes(ax, path, 3.0))
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
     ax.set_title("Workspace, trajectory and timed run")
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
     for k, (v, pos) in enumerate(zooms):
