@@ -140,9 +140,7 @@ def test_validate_with_log_lists_every_problem_with_the_log(husky: Path, tmp_pat
     out = run("scenario", "validate", scenario, "--log", husky)
     assert out.returncode == EXIT_UNUSABLE and out.stderr.count("\n") == 1
     assert "topics.cmd_vel: /imu/data is a sensor_msgs/msg/Imu" in out.stderr
-    scenario.write_text(scenario.read_text().replace("  cmd_vel: /imu/data\n", ""))
-    out = run("scenario", "validate", scenario, "--log", husky)
-    assert out.returncode == EXIT_UNUSABLE and "signals.spin.field" in out.stderr and "'q'" in out.stderr
+    assert "signals.spin.field" in out.stderr and "'q'" in out.stderr
 
 
 def test_data_outside_the_workspace_is_named_by_validate_and_in_the_certificate(husky: Path, tmp_path: Path
