@@ -103,7 +103,8 @@ def test_info_describes_topics_rates_dropout_clock_and_where_the_robot_went(husk
     assert math.isclose(pose["y_max_m"], 5.0, abs_tol=1e-6)
     assert math.isclose(pose["speed_max_mps"], 0.8, rel_tol=1e-6)
     text = run("info", husky)
-    assert text.returncode == 0 and "clock: simulated" in text.stdout and "1 dropouts" in text.stdout
+    assert text.returncode == 0 and "clock: simulated" in text.stdout
+    assert "1 dropout (gaps > 1.5 periods)" in text.stdout
 
 
 def test_a_certificate_in_five_commands(husky: Path, tmp_path: Path) -> None:
@@ -139,9 +140,7 @@ def test_validate_with_log_lists_every_problem_with_the_log(husky: Path, tmp_pat
     out = run("scenario", "validate", scenario, "--log", husky)
     assert out.returncode == EXIT_UNUSABLE and out.stderr.count("\n") == 1
     assert "topics.cmd_vel: /imu/data is a sensor_msgs/msg/Imu" in out.stderr
-    scenario.write_text(scenario.read_text().replace("  cmd_vel: /imu/data\n", ""))
-    out = run("scenario", "validate", scenario, "--log", husky)
-    assert out.returncode == EXIT_UNUSABLE and "signals.spin.field" in out.stderr and "'q'" in out.stderr
+    assert "signals.spin.field" in out.stderr and "'q'" in out.stderr
 
 
 def test_data_outside_the_workspace_is_named_by_validate_and_in_the_certificate(husky: Path, tmp_path: Path

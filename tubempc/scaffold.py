@@ -24,6 +24,8 @@ _MARGIN_MIN_M = 1.0  # ... and at least this (more than the placeholder radius)
 _SPEED_FACTOR = 1.25  # the speed bound and input box: the largest value seen, times this
 _SIDEWAYS_MPS = 1e-3  # commands never above this sideways: a differential drive (unicycle)
 _TF_CHILD_PREFERENCE = ("base_link", "base_footprint")
+#: pose-like topics whose name says they are not the measured pose (a plan, a goal, an MPC's nominal state)
+_NOT_MEASURED = ("nominal", "goal", "target", "reference", "setpoint", "plan", "desired", "cmd", "waypoint")
 
 
 def _pose_name(p: PoseInfo) -> str:
@@ -33,7 +35,7 @@ def _pose_name(p: PoseInfo) -> str:
 def choose_pose(info: LogInfo, pose_topic: str | None) -> PoseInfo:
     """The pose stream the scenario names: ``pose_topic`` (``/tf#base_link`` for a child frame), else the first
     PoseStamped, else Odometry, else a /tf child frame (``base_link`` or ``base_footprint`` first); most samples
-    first within a kind."""
+    first within a kind; a topic whose name says it is a plan, goal or nominal state comes after the others."""
     if not info.poses:
         types = ", ".join(f"{t.topic} ({t.msgtype})" for t in info.topics) or "no topics"
         raise ScenarioError(f"no pose-like topic (PoseStamped, Odometry, /tf) with a finite position; the log has: "
@@ -47,9 +49,10 @@ def choose_pose(info: LogInfo, pose_topic: str | None) -> PoseInfo:
                             source=info.path)
     rank = {"geometry_msgs/msg/PoseStamped": 0, "nav_msgs/msg/Odometry": 1}
 
-    def key(p: PoseInfo) -> tuple[int, int, int]:
+    def key(p: PoseInfo) -> tuple[bool, int, int, int]:
         preferred = 0 if p.child_frame in _TF_CHILD_PREFERENCE else 1
-        return rank.get(p.msgtype, 2), preferred, -p.samples
+        planned = any(word in p.topic.lower() for word in _NOT_MEASURED)
+        return planned, rank.get(p.msgtype, 2), preferred, -p.samples
 
     return min(info.poses, key=key)
 
@@ -117,6 +120,9 @@ def scenario_text(info: LogInfo, *, pose_topic: str | None = None, name: str | N
             "  model: unicycle",
             f"  max_abs: [{speed}, 1.0]",
         ]
+    others = [_pose_name(p) for p in info.poses if p is not pose]
+    if others:
+        lines.append(f"# other pose-like streams in the log: {', '.join(others)} (`scenario init --pose-topic`)")
     lines.append("topics:")
     lines.append(f"  pose: {pose.topic}")
     if pose.child_frame is not None:

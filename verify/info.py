@@ -14,6 +14,7 @@ its bytes. Rates and gaps use the header stamps when every message of the topic 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import struct
@@ -32,6 +33,7 @@ from verify.ingest.fields import median_period_ns
 from verify.ingest.quality import DROPOUT_FACTOR, NEAR_1970_NS, clean_order
 from verify.ingest.raw import RawTopic, detect_format, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
+from verify.ingest.salvage import walk_mcap, walk_ros1
 
 __all__ = ["INFO_VERSION", "CommandInfo", "LogInfo", "PoseInfo", "TopicInfo", "info_dict", "info_lines", "log_info"]
 
@@ -114,6 +116,8 @@ class LogInfo:
     topics: tuple[TopicInfo, ...]
     poses: tuple[PoseInfo, ...]
     commands: tuple[CommandInfo, ...]
+    partial: bool = False  # read by a salvage walk (--salvage): what complete records remain
+    notes: tuple[str, ...] = ()
 
 
 def _clock(first_ns: int | None) -> str | None:
@@ -128,12 +132,11 @@ def _has_header(msgdef_text: str, msgtype: str, ros1: bool) -> bool:
     if text:
         first = text.splitlines()[0]
         return _HEADER_FIRST.match(first) is not None
-    store = typestore(ros1)
-    fields = store.fields_by_type.get(msgtype) if hasattr(store, "fields_by_type") else None
-    if not fields:
+    fields = typestore(ros1).fielddefs.get(msgtype)  # no definition in the log: the standard type's
+    if not fields or not fields[1]:
         return False
-    kind = fields[0][1]
-    return "Header" in str(kind)
+    first_type = fields[1][0][1][1]
+    return str(first_type) in ("std_msgs/msg/Header", "std_msgs/Header")
 
 
 def _stamp_ns(payload: bytes | memoryview, ros1: bool) -> int | None:
@@ -168,7 +171,7 @@ def _topic_info(topic: str, msgtype: str, log_ns: IntArray, stamp_ns: IntArray |
     dropouts = 0
     if t.shape[0] >= 2:
         dt = np.diff(t)
-        order = np.argsort(dt, kind="stable")[::-1][:_GAPS_SHOWN]
+        order = np.argsort(-dt, kind="stable")[:_GAPS_SHOWN]  # the largest first; equal gaps: the earliest first
         base = int(t[0]) if use_header else start_ns
         gaps = tuple(Gap(round((int(t[i]) - base) * 1e-9, 6), round(int(dt[i]) * 1e-9, 6)) for i in order)
         if period > 0:
@@ -230,14 +233,19 @@ def _decoded(path: Path, topics: dict[str, str]
     if not wanted:
         return [], [], {}
     raw = read_raw(path, wanted)
+    return _decoded_topics(raw.topics, raw.ros1)
+
+
+def _decoded_topics(raw_topics: dict[str, RawTopic], ros1: bool
+                    ) -> tuple[list[PoseInfo], list[CommandInfo], dict[str, tuple[IntArray, IntArray | None]]]:
     out: list[PoseInfo] = []
     commands: list[CommandInfo] = []
     times: dict[str, tuple[IntArray, IntArray | None]] = {}
-    for topic in sorted(raw.topics):
-        rt = raw.topics[topic]
+    for topic in sorted(raw_topics):
+        rt = raw_topics[topic]
         log_ns = np.asarray(rt.log_ns, dtype=np.int64)
         if rt.msgtype in COMMAND_TYPES:
-            tw = decode_twist(rt, raw.ros1)
+            tw = decode_twist(rt, ros1)
             times[topic] = (tw.log_ns, tw.stamp_ns)
             ok = np.isfinite(tw.u).all(axis=1)
             top = np.abs(tw.u[ok]).max(axis=0) if ok.any() else np.zeros(3)
@@ -246,12 +254,12 @@ def _decoded(path: Path, topics: dict[str, str]
             continue
         if rt.msgtype == TF:
             times[topic] = (log_ns, None)
-            for child, (stamp_ns, x_m, y_m) in _tf_poses(rt, raw.ros1).items():
+            for child, (stamp_ns, x_m, y_m) in _tf_poses(rt, ros1).items():
                 info = _pose_info(topic, rt.msgtype, child, stamp_ns=stamp_ns, x=x_m, y=y_m)
                 if info is not None:
                     out.append(info)
             continue
-        cols = decode_pose(rt, raw.ros1)
+        cols = decode_pose(rt, ros1)
         times[topic] = (cols.log_ns, cols.stamp_ns)
         info = _pose_info(topic, rt.msgtype, None, stamp_ns=cols.stamp_ns, x=cols.x_m, y=cols.y_m)
         if info is not None:
@@ -289,8 +297,9 @@ def _stream(path: Path, fmt: str, skip: set[str] | None) -> tuple[dict[str, str]
     return types, times
 
 
-def log_info(path: str | Path) -> LogInfo:
-    """Read the log at ``path`` and describe it; a damaged log is one ``LogReadError`` naming the file."""
+def log_info(path: str | Path, *, salvage: bool = False) -> LogInfo:
+    """Read the log at ``path`` and describe it; a damaged log is one ``LogReadError`` naming the file.
+    ``salvage``: walk the complete records of a truncated or unindexed ROS1 or MCAP log instead (``partial``)."""
     p = Path(path)
     if not p.exists():
         raise LogReadError("no such file or directory", path=str(p))
@@ -298,17 +307,64 @@ def log_info(path: str | Path) -> LogInfo:
         raise LogReadError("not a regular file or a bag folder", path=str(p))
     fmt = detect_format(p)
     try:
+        if salvage:
+            return _salvaged(p, fmt)
         types, _ = _stream(p, fmt, skip=None)
         return _describe(p, fmt, types)
     except VerifyError:
         raise
     except READ_ERRORS as err:
-        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}", path=str(p)) from err
+        hint = "" if salvage or fmt == "sqlite3" else \
+            " (if the recorder was killed, `info --salvage` describes the complete records)"
+        raise LogReadError(f"unreadable {fmt} log: {in_words(err)}{hint}", path=str(p)) from err
+
+
+def _salvaged(p: Path, fmt: str) -> LogInfo:
+    """One walk over the complete records (``verify.ingest.salvage``): times of every message, payloads of the
+    pose and command topics only."""
+    if fmt == "sqlite3":
+        raise LogReadError("--salvage reads ROS1 and MCAP logs only", path=str(p))
+    files = sorted(f for f in p.iterdir() if f.suffix == ".mcap") if p.is_dir() else [p]
+    ros1 = fmt == "ros1"
+    types: dict[str, str] = {}
+    times: dict[str, _Times] = {}
+    kept: dict[str, RawTopic] = {}
+    header: dict[str, bool] = {}
+    stops: list[str] = []
+    for file in files:
+        walk = walk_ros1(file) if ros1 else walk_mcap(file)
+        for m in walk.messages:
+            if m.topic not in types:
+                types[m.topic] = m.msgtype
+                times[m.topic] = _Times()
+                header[m.topic] = _has_header("", m.msgtype, ros1)
+                if m.msgtype in POSE_TYPES | COMMAND_TYPES:
+                    kept[m.topic] = RawTopic(m.topic, m.msgtype, m.has_definition, [], [])
+            slot = times[m.topic]
+            slot.log.append(m.log_ns)
+            if header[m.topic]:
+                stamp = _stamp_ns(m.payload, ros1)
+                slot.stamp.append(-1 if stamp is None else stamp)
+            if m.topic in kept:
+                rt = kept[m.topic]
+                rt.log_ns.append(m.log_ns)  # type: ignore[union-attr]
+                rt.payloads.append(m.payload)  # type: ignore[union-attr]
+        stops.append(f"{file.name}: {walk.stop_reason()}")
+    poses, commands, pose_times = _decoded_topics(kept, ros1)
+    streamed = {t: slot for t, slot in times.items() if t not in pose_times}
+    info = _assemble(p, fmt, types, poses, commands, pose_times, streamed)
+    return dataclasses.replace(info, partial=True, notes=tuple(f"salvaged: {s}" for s in stops))
 
 
 def _describe(p: Path, fmt: str, types: dict[str, str]) -> LogInfo:
     poses, commands, pose_times = _decoded(p, types)
     _, streamed = _stream(p, fmt, skip=set(pose_times))
+    return _assemble(p, fmt, types, poses, commands, pose_times, streamed)
+
+
+def _assemble(p: Path, fmt: str, types: dict[str, str], poses: list[PoseInfo],  # noqa: PLR0917
+              commands: list[CommandInfo], pose_times: dict[str, tuple[IntArray, IntArray | None]],
+              streamed: dict[str, _Times]) -> LogInfo:
     columns: dict[str, tuple[str, IntArray, IntArray | None]] = {}
     for topic, (log_ns, stamp_ns) in pose_times.items():
         columns[topic] = (types[topic], log_ns, stamp_ns)
@@ -348,27 +404,41 @@ def _num(v: float | None, fmt: str = ".3f") -> str:
 
 
 def info_lines(info: LogInfo) -> Iterator[str]:
-    """The text of ``tubempc info``: the log, one line per topic, one per pose-like stream."""
+    """The text of ``tubempc info``: the log, its clock, each topic (two or three lines), each pose-like stream and
+    each command topic."""
     span = (info.end_s or 0.0) - (info.start_s or 0.0)
-    yield (f"{info.path}: {info.format} log, {len(info.topics)} topics, {span:.3f} s of log time "
-           f"({_num(info.start_s)} .. {_num(info.end_s)}), clock: {info.log_clock} ({info.clock_note})")
+    n = len(info.topics)
+    partial = " (salvaged: the complete records only)" if info.partial else ""
+    yield (f"{info.path}: {info.format} log, {n} topic{'s' if n != 1 else ''}, {span:.3f} s of log time "
+           f"({_num(info.start_s)} .. {_num(info.end_s)}){partial}")
+    yield f"clock: {info.log_clock} ({info.clock_note})"
+    for note in info.notes:
+        yield f"note: {note}"
+    yield "topics:"
     for t in info.topics:
-        hdr = (f", header {_num(t.header_first_s)} .. {_num(t.header_last_s)}" if t.header_first_s is not None
-               else ", no header stamp")
+        rate = (f"{_num(t.rate_hz, '.2f')} Hz (median period {_num(t.median_period_s, '.4f')} s on {t.time} time)"
+                if t.rate_hz is not None else "no rate (fewer than two messages)")
+        drop = (f"{t.dropouts} dropout{'s' if t.dropouts != 1 else ''} (gaps > {DROPOUT_FACTOR:g} periods)"
+                if t.dropouts else "no dropouts")
+        yield f"  {t.topic}  {t.msgtype}  {t.count} msgs, {rate}, {drop}"
+        if t.largest_gaps:
+            yield "    largest gaps: " + ", ".join(f"{g.gap_s:.3f} s after {g.after_s:.3f} s" for g in t.largest_gaps)
+        hdr = (f"header time {_num(t.header_first_s)} .. {_num(t.header_last_s)}" if t.header_first_s is not None
+               else "no header stamp")
         unset = f", {t.unset_stamps} unset stamps" if t.unset_stamps else ""
-        rate = (f"{_num(t.rate_hz, '.2f')} Hz (median period {_num(t.median_period_s, '.4f')} s, {t.time} time)"
-                if t.rate_hz is not None else "rate -")
-        gaps = ", ".join(f"{g.gap_s:.3f} s after {g.after_s:.3f} s" for g in t.largest_gaps)
-        drop = f"; {t.dropouts} dropouts > {DROPOUT_FACTOR:g} periods" if t.dropouts else ""
-        yield (f"  {t.topic}  {t.msgtype}  {t.count} msgs, {rate}{drop}; largest gaps: {gaps or '-'}; "
-               f"log {_num(t.log_first_s)} .. {_num(t.log_last_s)}{hdr}{unset}; clock {t.clock or '-'}")
+        yield f"    log time {_num(t.log_first_s)} .. {_num(t.log_last_s)}; {hdr}{unset}; clock {t.clock or '-'}"
+    if info.poses:
+        yield "pose-like streams:"
     for pi in info.poses:
-        name = pi.topic + (f" child {pi.child_frame}" if pi.child_frame else "")
+        name = pi.topic + (f" child frame {pi.child_frame}" if pi.child_frame else "")
         bad = f", {pi.non_finite} non-finite" if pi.non_finite else ""
-        yield (f"  pose {name} ({pi.msgtype}, {pi.samples} samples{bad}): x {pi.x_min_m:.3f} .. {pi.x_max_m:.3f} m, "
-               f"y {pi.y_min_m:.3f} .. {pi.y_max_m:.3f} m; speed p50 {_num(pi.speed_p50_mps)} p90 "
-               f"{_num(pi.speed_p90_mps)} p99 {_num(pi.speed_p99_mps)} max {_num(pi.speed_max_mps)} m/s")
+        yield (f"  {name} ({pi.msgtype}, {pi.samples} samples{bad}): x {pi.x_min_m:.3f} .. {pi.x_max_m:.3f} m, "
+               f"y {pi.y_min_m:.3f} .. {pi.y_max_m:.3f} m")
+        yield (f"    speed between samples: p50 {_num(pi.speed_p50_mps)}, p90 {_num(pi.speed_p90_mps)}, p99 "
+               f"{_num(pi.speed_p99_mps)}, max {_num(pi.speed_max_mps)} m/s")
+    if info.commands:
+        yield "command topics:"
     for c in info.commands:
         bad = f", {c.non_finite} non-finite" if c.non_finite else ""
-        yield (f"  commands {c.topic} ({c.msgtype}, {c.samples} samples{bad}): |linear.x| <= {c.max_abs_linear_x:.3f}"
-               f" m/s, |linear.y| <= {c.max_abs_linear_y:.3f} m/s, |angular.z| <= {c.max_abs_angular_z:.3f} rad/s")
+        yield (f"  {c.topic} ({c.msgtype}, {c.samples} samples{bad}): |linear.x| <= {c.max_abs_linear_x:.3f} m/s, "
+               f"|linear.y| <= {c.max_abs_linear_y:.3f} m/s, |angular.z| <= {c.max_abs_angular_z:.3f} rad/s")

@@ -64,8 +64,8 @@ def _topic_problems(sc: Scenario, available: dict[str, str]) -> list[str]:
     return out
 
 
-def _signal_problems(sc: Scenario, path: Path) -> list[str]:
-    topics = {s.topic for s in sc.signals.values()}
+def _signal_problems(sc: Scenario, path: Path, available: dict[str, str]) -> list[str]:
+    topics = {s.topic for s in sc.signals.values()} & set(available)
     if not topics:
         return []
     raw = read_raw(path, topics)
@@ -88,10 +88,7 @@ def scenario_problems(sc: Scenario, path: str | Path) -> list[str]:
     """Every reason the scenario cannot be used to certify the log at ``path`` (empty: it can)."""
     p = Path(path)
     available = read_raw(p, []).available
-    problems = _topic_problems(sc, available)
-    if not problems:
-        problems += _signal_problems(sc, p)
-    return problems
+    return _topic_problems(sc, available) + _signal_problems(sc, p, available)
 
 
 def data_findings(sc: Scenario, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, time0_ns: int) -> list[str]:

@@ -332,6 +332,28 @@ def _px_per_m(fig: Figure, ax: Axes) -> float:
     return float(box.width / (x1 - x0)) if x1 > x0 else 1.0
 
 
+#: room kept between the y axis' label and the figure's left edge (inches)
+_LEFT_MARGIN_IN = 0.08
+
+
+def _keep_left_labels_inside(fig: Figure, ax: Axes, cax: Axes) -> None:
+    """Move the map (and the colour bar under it) right until the y tick labels and the y label fit inside the
+    figure: a wide workspace fills the map's box, whose fixed left edge leaves too little room for "-1000"."""
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    fig_w_px = fig.get_figwidth() * fig.dpi
+    for _ in range(3):  # the tick labels can change with the axes' size: settle in a few steps
+        box = ax.yaxis.get_tightbbox(renderer)
+        if box is None:
+            return
+        short = _LEFT_MARGIN_IN * fig.dpi - float(box.x0)
+        if short <= 0.5:
+            return
+        shift = short / fig_w_px
+        for a in (ax, cax):
+            x0, y0, w, h = a.get_position(original=True).bounds
+            a.set_position((x0 + shift, y0, w - shift, h))
+
+
 def _letter(i: int) -> str:
     return chr(ord("A") + i)
 
@@ -375,6 +397,9 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     ax.set_xlim(ws.x[0] - pad, ws.x[1] + pad)
     ax.set_ylim(ws.y[0] - pad, ws.y[1] + pad)
     ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    _keep_left_labels_inside(fig, ax, cax)  # before the labels are placed: they are placed for the final axes
     px_per_m = _px_per_m(fig, ax)
     pt_per_px = 72.0 / fig.dpi
     _draw_small_region_markers(ax, scenario, px_per_m)
@@ -397,8 +422,9 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
                                  _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
         if last is not None:
             ax.plot(*last, "s", ms=6, mfc="black", mec="black", zorder=6, label="end")
+            # kept off the robot's disc at the end, as the start label is (it covered the disc)
             labels.append(_Label(ax.annotate(f"end, t = {t[-1]:.2f} s", last, xytext=(0, 0), textcoords="offset points",
-                                             fontsize=8), _ring(5.0 * pt_per_px)))
+                                             fontsize=8), _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
         for i, entry in enumerate(certificate.timed_run):
             pos = _position_at(trajectory, entry.time)
             if pos is None:
@@ -432,8 +458,6 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
                          prefer_out=_point_boxes(ax, path, 3.0))
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
     ax.set_title("Workspace, trajectory and timed run")
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
     for k, (v, pos) in enumerate(zooms):
@@ -455,6 +479,7 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
                 nominal: pd.DataFrame | None) -> None:
     """Panel ``zoom.index`` of the row under the map: the neighbourhood of one violation, boxed on the map."""
     k, v, pos, half_m = zoom.index, zoom.violation, zoom.pos, zoom.half_m
+    centre = _inside_limits(main, pos, half_m)  # the box stays inside the map's frame; the panel shows the box
     width = 0.86 / zoom.count
     fig_h_in = fig.get_figheight()
     ax = fig.add_axes((0.07 + k * width, 0.35 / fig_h_in, width - 0.05, 2.2 / fig_h_in))
@@ -462,25 +487,34 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
     _draw_nominal(ax, nominal, tube_radius_or_nan(scenario), with_legend=False)
     if trajectory is not None:
         t = trajectory["t_s"].to_numpy(dtype=float)
-        near = (np.abs(trajectory["x_m"].to_numpy(dtype=float) - pos[0]) <= 2 * half_m) & (
-            np.abs(trajectory["y_m"].to_numpy(dtype=float) - pos[1]) <= 2 * half_m)
+        near = (np.abs(trajectory["x_m"].to_numpy(dtype=float) - centre[0]) <= 2 * half_m) & (
+            np.abs(trajectory["y_m"].to_numpy(dtype=float) - centre[1]) <= 2 * half_m)
         part = trajectory[near]
         if len(part) > 1:
             _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0)
     for region in scenario.regions:
         (cx, cy), _ = _anchor(region)
-        if abs(cx - pos[0]) < half_m and abs(cy - pos[1]) < half_m:
+        if abs(cx - centre[0]) < half_m and abs(cy - centre[1]) < half_m:
             ax.text(cx, cy, region.name, ha="center", va="center", fontsize=7,
                     clip_on=True)
     ax.add_patch(Circle(pos, scenario.robot.radius, fill=False, ec=_FAIL_COLOUR, lw=1.2, zorder=6))
     ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=9, mec="white", mew=0.8, zorder=7)
-    ax.set_xlim(pos[0] - half_m, pos[0] + half_m)
-    ax.set_ylim(pos[1] - half_m, pos[1] + half_m)
+    ax.set_xlim(centre[0] - half_m, centre[0] + half_m)
+    ax.set_ylim(centre[1] - half_m, centre[1] + half_m)
     ax.set_aspect("equal")
     ax.tick_params(labelsize=7)
     ax.set_title(f"[{_letter(k)}] t = {v.t_s:.2f} s (robot disc in red)", fontsize=8)
-    main.add_patch(Rectangle((pos[0] - half_m, pos[1] - half_m), 2 * half_m, 2 * half_m, fill=False,
+    main.add_patch(Rectangle((centre[0] - half_m, centre[1] - half_m), 2 * half_m, 2 * half_m, fill=False,
                              ec=_FAIL_COLOUR, lw=1.0, ls="--", zorder=8))
+
+
+def _inside_limits(ax: Axes, pos: tuple[float, float], half_m: float) -> tuple[float, float]:
+    """The centre nearest ``pos`` of a square of half-side ``half_m`` inside the axes' limits (``pos`` itself when
+    the square fits around it; the limits' centre on an axis shorter than the square)."""
+    out = []
+    for p, (lo, hi) in ((pos[0], ax.get_xlim()), (pos[1], ax.get_ylim())):
+        out.append((lo + hi) / 2 if hi - lo <= 2 * half_m else min(max(p, lo + half_m), hi - half_m))
+    return out[0], out[1]
 
 
 def workspace_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
