@@ -30,6 +30,7 @@ __all__ = [
     "CHUNK_FIXED",
     "MAGIC",
     "MESSAGE_HEAD",
+    "RECORD_HEAD",
     "ChannelRecord",
     "CutError",
     "MalformedError",

@@ -45,14 +45,16 @@ from verify.ingest.records import (
     record_size_at,
     retain_freed_memory,
 )
+from verify.ingest.ros1records import MAGIC, Op
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
-_MAGIC = b"#ROSBAG V2.0\n"
-_OP_MSG, _OP_BAG, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
+_MAGIC = MAGIC
+_OP_MSG, _OP_BAG, _OP_INDEX = Op.MESSAGE_DATA, Op.BAG_HEADER, Op.INDEX_DATA
+_OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = Op.CHUNK, Op.CHUNK_INFO, Op.CONNECTION
 _PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
 _INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
