@@ -45,7 +45,7 @@ from verify.ingest.records import (
     record_size_at,
     retain_freed_memory,
 )
-from verify.ingest.ros1records import MAGIC, Op
+from verify.ingest.ros1records import MAGIC, MalformedError, Op, header_fields
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -109,22 +109,11 @@ class _UnusualError(Exception):
 
 
 def _fields(raw: bytes | memoryview) -> dict[str, bytes]:
-    out: dict[str, bytes] = {}
-    pos = 0
-    size = len(raw)
-    while pos < size:
-        if pos + 4 > size:
-            raise _UnusualError("cut header field")
-        (flen,) = struct.unpack_from("<I", raw, pos)
-        if pos + 4 + flen > size:
-            raise _UnusualError("cut header field")
-        item = bytes(raw[pos + 4 : pos + 4 + flen])
-        name, eq, value = item.partition(b"=")
-        if not eq:
-            raise _UnusualError("header field without '='")
-        out[name.decode("ascii", "replace")] = value
-        pos += 4 + flen
-    return out
+    """A record header's fields (the record layer's ``header_fields``); a malformed header is unusual here."""
+    try:
+        return header_fields(raw)
+    except MalformedError as err:
+        raise _UnusualError(str(err)) from None
 
 
 class _File:
