@@ -60,8 +60,8 @@ __all__ = ["TopicMessages", "gather", "read_mcap_storage"]
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
-_OP_MESSAGE = Op.MESSAGE
-_OP_MESSAGE_INDEX = Op.MESSAGE_INDEX
+_OP_MESSAGE = int(Op.MESSAGE)
+_OP_MESSAGE_INDEX = int(Op.MESSAGE_INDEX)
 _MSG_HEAD = MESSAGE_HEAD  # channel u16, sequence u32, log time u64, publish time u64
 _CHUNK_CRC_AT = RECORD_HEAD + 24  # a chunk record's CRC: after its opcode, length and three u64 fields
 _CHUNK_DATA_AT = RECORD_HEAD + CHUNK_FIXED + 4 + 8  # its records: after the compression string's length and theirs

@@ -53,8 +53,8 @@ U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
 _MAGIC = MAGIC
-_OP_MSG, _OP_BAG, _OP_INDEX = Op.MESSAGE_DATA, Op.BAG_HEADER, Op.INDEX_DATA
-_OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = Op.CHUNK, Op.CHUNK_INFO, Op.CONNECTION
+_OP_MSG, _OP_BAG, _OP_INDEX = int(Op.MESSAGE_DATA), int(Op.BAG_HEADER), int(Op.INDEX_DATA)
+_OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = int(Op.CHUNK), int(Op.CHUNK_INFO), int(Op.CONNECTION)
 _PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
 _INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
