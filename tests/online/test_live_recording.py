@@ -6,6 +6,8 @@ of the violating sample reaching the file, and watching never stops while the fi
 
 from __future__ import annotations
 
+import shutil
+import sqlite3
 import struct
 import threading
 import time
@@ -15,9 +17,15 @@ import numpy as np
 import pytest
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import Reader as Reader2
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
 from tubempc.scenario import builtin_scenario
+from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
+from verify.ingest.mcaprecords import Scan, record_messages
+from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.ros1records import MAGIC, Op, record_at
 from verify.online import Decision, OnlineMonitor
 from verify.online.watch import watch_log
@@ -135,4 +143,123 @@ def test_watch_follows_a_bag_as_rosbag_record_writes_it(tmp_path: Path, camera: 
     # the violating sample (or the one just before it) reached the file at ``written``
     written = next(w for w, t in pose_writes if (t - t0) / 1e9 >= decision.first_violation_s - 0.011)
     assert when - written < 1.0, f"reported {when - written:.2f} s after the sample reached the file"
-    assert written - pose_writes[0][0] > 1.0  # the recording was under way, not read after the fact
+    assert when < rec.written[-1][0] - 1.0  # reported while the recording was under way
+
+
+def _ros2(dst: Path, plugin: StoragePlugin) -> Path:
+    """tube_breach.mcap (the tube is left during a 24 s run) as a ROS2 bag folder with ``plugin`` storage; MCAP in
+    chunks of about 16 KiB (a chunk every ~0.4 s of the run)."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader2(LOGS / "tube_breach.mcap") as r, Writer2(dst, version=9, storage_plugin=plugin) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store) for c in r.connections}
+        written = 0
+        for c, t, data in r.messages():
+            w.write(conns[c.id], t, data)
+            written += len(data)
+            if plugin == StoragePlugin.MCAP and written > 16 * 1024:
+                w.storage.close_chunk()  # type: ignore[union-attr]
+                written = 0
+    return dst
+
+
+class SqliteRecord(threading.Thread):
+    """Inserts the rows of a closed sqlite3 bag into ``live`` (same schema, no rows) one by one at the run's pace,
+    each committed, then writes metadata.yaml (the recorder's last act)."""
+
+    def __init__(self, closed: Path, live: Path) -> None:
+        super().__init__(daemon=True)
+        self.closed, self.live = closed, live
+        self.written: list[tuple[float, int, int]] = []  # (monotonic time, topic id, log time)
+
+    def run(self) -> None:
+        (db,) = self.closed.glob("*.db3")
+        with sqlite3.connect(db) as src:
+            rows = src.execute("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id").fetchall()
+        src.close()
+        con = sqlite3.connect(self.live / db.name)
+        con.execute("PRAGMA synchronous = OFF")  # as rosbag2's default sqlite3 preset writes
+        start, first_ns = time.monotonic(), rows[0][2]
+        for mid, tid, t_ns, data in rows:
+            delay = start + (t_ns - first_ns) / 1e9 / SPEED - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            con.execute("INSERT INTO messages (id, topic_id, timestamp, data) VALUES (?, ?, ?, ?)",
+                        (mid, tid, t_ns, data))
+            con.commit()
+            self.written.append((time.monotonic(), tid, t_ns))
+        con.close()
+        shutil.copyfile(self.closed / "metadata.yaml", self.live / "metadata.yaml")
+
+
+class McapRecord(threading.Thread):
+    """Appends the top-level records of a closed MCAP file as a recorder writes them: each chunk when its last
+    message is due, the summary and footer at the end."""
+
+    def __init__(self, closed: Path, live: Path) -> None:
+        super().__init__(daemon=True)
+        self.closed, self.live = closed, live
+        self.written: list[tuple[float, int, int]] = []  # (monotonic time, channel, log time) per message
+
+    def run(self) -> None:
+        data = self.closed.read_bytes()
+        start, first_ns = time.monotonic(), None
+        with self.live.open("wb") as fh:
+            fh.write(data[: len(MCAP_MAGIC)])
+            for op, rec, nxt in mcap_walk(data, len(MCAP_MAGIC), len(data) - len(MCAP_MAGIC)):
+                msgs = record_messages(op, rec, Scan({}, {}), check_crc=False)
+                if msgs:
+                    first_ns = msgs[0].log_ns if first_ns is None else first_ns
+                    delay = start + (max(m.log_ns for m in msgs) - first_ns) / 1e9 / SPEED - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                fh.write(data[nxt - len(rec) - 9 : nxt])
+                fh.flush()
+                now = time.monotonic()
+                self.written += [(now, m.channel_id, m.log_ns) for m in msgs]
+            fh.write(data[-len(MCAP_MAGIC) :])
+        (self.live.parent / "metadata.yaml").write_bytes((self.closed.parent / "metadata.yaml").read_bytes())
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_watch_follows_a_ros2_bag_as_it_is_recorded(tmp_path: Path, storage: str) -> None:
+    """sqlite3: a tube violation within 1 s of its sample's row being committed; MCAP: within 1 s of the chunk
+    holding it being written (the latency of one chunk is the recorder's, docs/online.md)."""
+    plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
+    closed = _ros2(tmp_path / "closed", plugin)
+    live = tmp_path / "live"
+    live.mkdir()
+    rec: SqliteRecord | McapRecord
+    if storage == "sqlite3":
+        (db,) = closed.glob("*.db3")
+        shutil.copyfile(db, live / db.name)
+        with sqlite3.connect(live / db.name) as con:
+            con.execute("DELETE FROM messages")
+        con.close()
+        rec = SqliteRecord(closed, live)
+    else:
+        (mcap,) = closed.glob("*.mcap")
+        rec = McapRecord(mcap, live / mcap.name)
+    with Reader2(closed) as r:
+        pose_topic = next(c for c in r.connections if c.topic == POSE)
+    seen: list[tuple[float, Decision]] = []
+    rec.start()
+    res = watch_log(live, OnlineMonitor(builtin_scenario()), follow=True, idle_timeout_s=2.0,
+                    on_decision=lambda d: seen.append((time.monotonic(), d)))
+    rec.join()
+    assert res.finished and res.stop_reason == "the recorder closed the log", res.stop_reason
+    when, decision = next((w, d) for w, d in seen if d.name == "tube")
+    assert decision.verdict == "fail" and decision.first_violation_s is not None
+    pose_id = pose_topic.id if storage == "mcap" else _sqlite_topic_id(live, POSE)
+    pose_writes = [(w, t) for w, c, t in rec.written if c == pose_id]
+    t0 = pose_writes[0][1]
+    written = next(w for w, t in pose_writes if (t - t0) / 1e9 >= decision.first_violation_s - 0.011)
+    assert when - written < 1.0, f"reported {when - written:.2f} s after the sample reached the file"
+    assert when < rec.written[-1][0] - 1.0  # reported while the recording was under way
+
+
+def _sqlite_topic_id(folder: Path, topic: str) -> int:
+    (db,) = folder.glob("*.db3")
+    with sqlite3.connect(db) as con:
+        (tid,) = con.execute("SELECT id FROM topics WHERE name = ?", (topic,)).fetchone()
+    con.close()
+    return int(tid)

@@ -1,6 +1,7 @@
-"""Our MCAP and sqlite3 message readers return exactly what rosbags' readers return (order, log times, payloads), on
-bag directories and bare files, uncompressed / zstd / lz4 MCAP chunks, out-of-order log times with ties, frame ids
-of different lengths, several topics; and they decline (rosbags reads the file as before) on damaged files."""
+"""Our fast MCAP and sqlite3 message readers return exactly what the plain path returns (MCAP: the record scan,
+``verify.ingest.mcapfile``; sqlite3: rosbags' reader) -- order, log times, payloads -- on bag directories and bare
+files, uncompressed / zstd / lz4 MCAP chunks, out-of-order log times with ties, frame ids of different lengths,
+several topics; and they decline (the plain path reads the file and reports the damage) on damaged files."""
 
 from __future__ import annotations
 

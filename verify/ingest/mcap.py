@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import os
 import struct
-import sys
 import zlib
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass
@@ -44,6 +43,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
+from verify.ingest.mcaprecords import CHUNK_FIXED, MESSAGE_HEAD, RECORD_HEAD, Op, zstd
 from verify.ingest.records import (
     MCAP,
     WORKERS,
@@ -55,19 +55,16 @@ from verify.ingest.records import (
     retain_freed_memory,
 )
 
-if sys.version_info >= (3, 14):
-    from compression import zstd
-else:
-    from backports import zstd  # a rosbags dependency
-
-__all__ = ["TopicMessages", "gather", "read_mcap_storage", "zstd"]
+__all__ = ["TopicMessages", "gather", "read_mcap_storage"]
 
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
-_OP_MESSAGE = 0x05
-_OP_MESSAGE_INDEX = 0x07
-_MSG_HEAD = 22  # channel u16, sequence u32, log time u64, publish time u64
+_OP_MESSAGE = int(Op.MESSAGE)
+_OP_MESSAGE_INDEX = int(Op.MESSAGE_INDEX)
+_MSG_HEAD = MESSAGE_HEAD  # channel u16, sequence u32, log time u64, publish time u64
+_CHUNK_CRC_AT = RECORD_HEAD + 24  # a chunk record's CRC: after its opcode, length and three u64 fields
+_CHUNK_DATA_AT = RECORD_HEAD + CHUNK_FIXED + 4 + 8  # its records: after the compression string's length and theirs
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,8 +167,8 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     usize = int(chunk.uncompressed_size)
     if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted)) is not None:
         return sparse  # only its wanted records read
-    (crc,) = struct.unpack("<I", _pread(fd, size, start + 9 + 24, 4))
-    at, csize = start + 9 + 40 + len(chunk.compression), int(chunk.compressed_size)
+    (crc,) = struct.unpack("<I", _pread(fd, size, start + _CHUNK_CRC_AT, 4))
+    at, csize = start + _CHUNK_DATA_AT + len(chunk.compression), int(chunk.compressed_size)
     if at + csize > size:
         raise _UnusualError("read past the end of the file")
     # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer, then decompressed
@@ -222,7 +219,7 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             if lo + n > size:
                 return None
             region = os.pread(fd, n, lo)
-            base = int(chunk.chunk_start_offset) + 9 + 40
+            base = int(chunk.chunk_start_offset) + _CHUNK_DATA_AT
             limit = base + int(chunk.uncompressed_size)
             for cid in mine:
                 got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)

@@ -40,7 +40,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
-from verify.ingest.mcaprecords import CutError, MalformedError, Scan, scan
+from verify.ingest.mcaprecords import FOOTER_RECORD, MAGIC, CutError, MalformedError, Op, Scan, scan
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
@@ -202,6 +202,8 @@ _ROSBAGS_OPEN_ERRORS: tuple[type[BaseException], ...] = (
 def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] | None:
     """The wanted topics through rosbags' summary and our chunk reader, when the summary describes the whole file
     (module docstring); None otherwise."""
+    if not _has_summary(file):
+        return None  # rosbags would scan the whole file to find what the scan finds anyway
     storage = McapReader(file)
     try:
         storage.open()
@@ -233,6 +235,24 @@ def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] 
         return McapLog(topics, available), counts
     finally:
         storage.close()
+
+
+def _has_summary(file: Path) -> bool:
+    """Whether the footer (the file's last record before its closing magic) points to a summary section."""
+    tail = FOOTER_RECORD + len(MAGIC)
+    try:
+        with file.open("rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size < len(MAGIC) + tail:
+                return False
+            fh.seek(size - tail)
+            footer = fh.read(tail)
+    except OSError:
+        return False
+    if footer[0] != Op.FOOTER or footer[-len(MAGIC) :] != MAGIC:
+        return False
+    (summary_start,) = struct.unpack_from("<Q", footer, 9)
+    return bool(summary_start)
 
 
 def _summary_is_complete(storage: McapReader) -> bool:

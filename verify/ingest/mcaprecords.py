@@ -28,8 +28,10 @@ else:
 
 __all__ = [
     "CHUNK_FIXED",
+    "FOOTER_RECORD",
     "MAGIC",
     "MESSAGE_HEAD",
+    "RECORD_HEAD",
     "ChannelRecord",
     "CutError",
     "MalformedError",
@@ -54,6 +56,8 @@ __all__ = [
 MAGIC = b"\x89MCAP0\r\n"
 #: a record: opcode u8, content length u64, content
 RECORD_HEAD = 9
+#: the footer record: opcode, length, summary start u64, summary offset start u64, summary crc u32
+FOOTER_RECORD = RECORD_HEAD + 8 + 8 + 4
 #: message content: channel id u16, sequence u32, log time u64, publish time u64, then the payload
 MESSAGE_HEAD = 22
 #: chunk content before its compression string: start time u64, end time u64, uncompressed size u64, crc u32

@@ -46,14 +46,16 @@ from verify.ingest.records import (
     record_size_at,
     retain_freed_memory,
 )
+from verify.ingest.ros1records import MAGIC, MalformedError, Op, header_fields
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
 U8Array = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
-_MAGIC = b"#ROSBAG V2.0\n"
-_OP_MSG, _OP_BAG, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
+_MAGIC = MAGIC
+_OP_MSG, _OP_BAG, _OP_INDEX = int(Op.MESSAGE_DATA), int(Op.BAG_HEADER), int(Op.INDEX_DATA)
+_OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = int(Op.CHUNK), int(Op.CHUNK_INFO), int(Op.CONNECTION)
 _PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
 _INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
@@ -108,22 +110,11 @@ class _UnusualError(Exception):
 
 
 def _fields(raw: bytes | memoryview) -> dict[str, bytes]:
-    out: dict[str, bytes] = {}
-    pos = 0
-    size = len(raw)
-    while pos < size:
-        if pos + 4 > size:
-            raise _UnusualError("cut header field")
-        (flen,) = struct.unpack_from("<I", raw, pos)
-        if pos + 4 + flen > size:
-            raise _UnusualError("cut header field")
-        item = bytes(raw[pos + 4 : pos + 4 + flen])
-        name, eq, value = item.partition(b"=")
-        if not eq:
-            raise _UnusualError("header field without '='")
-        out[name.decode("ascii", "replace")] = value
-        pos += 4 + flen
-    return out
+    """A record header's fields (the record layer's ``header_fields``); a malformed header is unusual here."""
+    try:
+        return header_fields(raw)
+    except MalformedError as err:
+        raise _UnusualError(str(err)) from None
 
 
 class _File:

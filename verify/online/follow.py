@@ -240,20 +240,18 @@ class FolderFollower:
         return [m for f in self.files.values() for m in f.rest()]
 
 
-def log_bytes(path: Path) -> int:
-    """How many bytes the log holds now: a file's size, or the sum over a bag folder's files (storage, a sqlite3
-    ``-wal`` journal, metadata.yaml); what the idle timer watches, so that a recorder filling a chunk that cannot
-    be read yet (MCAP, a compressed ROS1 chunk) still counts as writing."""
+def log_bytes(path: Path) -> tuple[int, int]:
+    """How the log stands now: its bytes and latest modification time (ns) -- a file's, or summed (latest) over a
+    bag folder's files (storage, a sqlite3 ``-wal`` journal, metadata.yaml). What the idle timer watches: a recorder
+    filling a chunk that cannot be read yet (MCAP, a compressed ROS1 chunk) or committing rows into the free pages
+    of a sqlite3 database still counts as writing."""
     try:
-        if not path.is_dir():
-            total = path.stat().st_size
-            for journal in (path.with_name(path.name + "-wal"),):
-                if journal.is_file():
-                    total += journal.stat().st_size
-            return total
-        return sum(f.stat().st_size for f in path.iterdir() if f.is_file())
+        files = [f for f in path.iterdir() if f.is_file()] if path.is_dir() else [
+            f for f in (path, path.with_name(path.name + "-wal")) if f.is_file()]
+        stats = [f.stat() for f in files]
     except OSError:
-        return -1  # vanished or unreadable meanwhile: the next poll says what is wrong
+        return (-1, -1)  # vanished or unreadable meanwhile: the next poll says what is wrong
+    return (sum(st.st_size for st in stats), max((st.st_mtime_ns for st in stats), default=0))
 
 
 def open_follower(path: Path) -> McapFollower | Ros1Follower | SqliteFollower | FolderFollower:

@@ -248,7 +248,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
             count += len(msgs)
             feeder.feed(msgs)
             report(monitor.update())
-        if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes
+        if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes (and mtime)
             last_bytes, last_growth = now_bytes, time.monotonic()
         if follower.finished:
             reason = "the recorder closed the log"
