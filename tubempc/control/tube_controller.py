@@ -57,6 +57,7 @@ class TubeMPC:
         self._model_arg = model
         self._closed_form_arg = closed_form_nominal
         self.tube_radius_m: float | None = None
+        self.period_s: float | None = None  # mpc.h after reset: the loop's decision period
         self.records: list[SolverRecord] = []
         self.entered_terminal_s: dict[int, float] = {}
         self._ready = False
@@ -73,6 +74,7 @@ class TubeMPC:
         self._closed_form = model.linear_world if self._closed_form_arg is None else self._closed_form_arg
         self._plan = plan
         self._per_step, self._dt = per_step, dt
+        self.period_s = h
         self._n_stages = scenario.mpc.steps
         self._reach = self._n_stages * h * tube.max_planar_speed_mps + 0.2
         self._step_m = tube.max_planar_speed_mps * h
