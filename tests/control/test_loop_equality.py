@@ -66,3 +66,17 @@ def test_a_different_run_is_caught() -> None:
     old = run_closed_loop_reference(SCENARIO, [Target("R2")], disturbance="random", seed=1, t_end_s=3.0)
     with pytest.raises(AssertionError):
         _assert_same_run(new, old)
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.001])
+def test_the_one_loop_gives_the_previous_loops_trajectory_under_a_switching_signal(noise_m: float) -> None:
+    """The falsifier's signal: the outward push on every other interval (decided per MPC step), values between."""
+    from tubempc.falsify.signals import SwitchSignal
+
+    bound = SCENARIO.disturbance.bound
+    values = np.array([[0.0, 0.0, 0.0], [0.6, -0.5, 0.1], [0.0, 0.0, 0.0], [-0.3, 0.9, 0.0]]) * bound
+    signal = SwitchSignal(bound=bound, switch_s=(4.0, 9.0, 15.0), first_outward=True, values=values)
+    new = run_closed_loop(SCENARIO, [Target("R2")], disturbance=signal, seed=7, mocap_noise_m=noise_m, t_end_s=20.0)
+    old = run_closed_loop_reference(SCENARIO, [Target("R2")], disturbance=signal, seed=7, mocap_noise_m=noise_m,
+                                    t_end_s=20.0)
+    _assert_same_run(new, old)

@@ -244,7 +244,7 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
             raise InvalidArgumentError(f"disturbance bound={dist.bound!r} must be a finite non-negative number")
     # the linear world model's nominal in closed form, except under the outward push with noise (RK4 blocks)
     closed_form = model.linear_world and not (dist.may_be_worst and mocap_noise_m > 0)
-    controller = TubeMPC(model, closed_form_nominal=closed_form)
+    controller = TubeMPC(model, tube=tube, closed_form_nominal=closed_form)
     start = scenario.region(source)
     pose = (start.center[0], start.center[1], scenario.initial_heading) if start_pose is None else tuple(start_pose)
     result = drive(scenario, controller, targets, source=source, start=pose, dist=dist, rng=rng, seed=seed,

@@ -46,15 +46,18 @@ __all__ = ["TubeMPC", "tube_mpc"]
 class TubeMPC:
     """The warm-started nominal MPC plus the ancillary law, stepped at the MoCap rate (see the module docstring).
 
-    ``model``: the dynamics (default: the scenario's). ``closed_form_nominal``: compute the nominal over an MPC
+    ``model``: the dynamics (default: the scenario's); ``tube``: its design for the scenario (default: designed in
+    ``reset``). ``closed_form_nominal``: compute the nominal over an MPC
     step in closed form (default: for the linear world model; ``run_closed_loop`` uses the RK4 block instead when
     the world model runs with the ``worst`` disturbance and MoCap noise).
     """
 
     input_model: InputModel = "holonomic"
 
-    def __init__(self, model: DynamicsModel | None = None, *, closed_form_nominal: bool | None = None) -> None:
+    def __init__(self, model: DynamicsModel | None = None, *, tube: TubeDesign | None = None,
+                 closed_form_nominal: bool | None = None) -> None:
         self._model_arg = model
+        self._tube_arg = tube
         self._closed_form_arg = closed_form_nominal
         self.tube_radius_m: float | None = None
         self.period_s: float | None = None  # mpc.h after reset: the loop's decision period
@@ -64,7 +67,7 @@ class TubeMPC:
 
     def reset(self, scenario: Scenario, plan: ControllerPlan) -> None:
         model = self._model_arg or model_for(scenario)
-        tube = design_tube(scenario, model)
+        tube = self._tube_arg or design_tube(scenario, model)
         h, dt = scenario.mpc.h, 1.0 / scenario.mocap.rate_hz
         per_step = round(h / dt)
         if per_step < 1 or abs(per_step * dt - h) > 1e-9:
