@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tubempc.control.closed_loop import _world_block
 from tubempc.control.disturbance import make_disturbance
+from tubempc.control.reference_loop import _world_block
 
 
 @pytest.mark.parametrize("kind", ["random", "worst", "sine", "bias"])
@@ -47,7 +47,8 @@ def test_block_matches_per_sample_recursion(kind: str) -> None:
 @pytest.mark.parametrize("kind", ["random", "worst", "sine"])
 def test_casadi_block_matches_the_closed_form_on_the_world_model(kind: str) -> None:
     from tubempc.control import world_model
-    from tubempc.control.closed_loop import _block_function, _casadi_block
+    from tubempc.control.closed_loop import _block_function
+    from tubempc.control.reference_loop import _casadi_block
 
     m, dt, sigma, bound = 10, 0.01, 2.0, 0.02
     a = 1.0 - sigma * dt

@@ -16,13 +16,21 @@ The protocol (``Controller``), called at the MoCap rate:
   nominal topic, so that the certifier's tube check can judge the claim; without it the nominal topic is NaN and
   the tube check cannot pass).
 
-The plant is kinematic: holonomic ``p' = R(theta) (vx, vy), theta' = wz``; unicycle ``p' = v (cos theta,
-sin theta), theta' = w``; plus the scenario's disturbance ``delta`` (``|delta| <= disturbance.bound``, on x, y and
-theta), integrated with 4 RK4 substeps per MoCap sample, the command held over the sample. The disturbance models
-are the tube MPC's; ``worst`` pushes towards the nearest unsafe region (the tube MPC's worst case pushes along the
-tube error, which a controller without a nominal state does not have). A target is reached when the robot disc is
-inside its region (real state); the reference moves to the next target once the hold time has passed.
-Commands are applied as given: a controller that exceeds the input box is a violation the certifier finds.
+The loop is ``tubempc.control.loop.drive``, the one the tube MPC runs in too (``TubeMPC`` implements this
+protocol, with the optional ``period_s`` and ``arrived(t_s, reference)``). For a user's controller the plant is
+kinematic: holonomic ``p' = R(theta) (vx, vy), theta' = wz``; unicycle ``p' = v (cos theta, sin theta),
+theta' = w``; plus the scenario's disturbance ``delta`` (``|delta| <= disturbance.bound``, on x, y and theta),
+integrated with 4 RK4 substeps per MoCap sample, the command held over the sample. The disturbance models are the
+tube MPC's; ``worst`` pushes towards the nearest unsafe region (the tube MPC's worst case pushes along the tube
+error, which a controller without a nominal state does not have). A target is reached when the robot disc is
+inside its region (real state) and, if the controller has ``arrived``, that says so too; the reference moves to
+the next target once the hold time has passed. Commands are applied as given: a controller that exceeds the input
+box is a violation the certifier finds.
+
+Optional members the loop uses: ``tube_radius_m``, ``nominal()``, ``period_s`` (the decision period, a whole
+number of MoCap samples: references switch, the disturbance's ``worst_at`` is decided and the noise and
+disturbance are drawn at its multiples; default one sample), ``arrived(t_s, reference) -> bool`` (the controller's
+own arrival condition, asked at each period start before ``step``).
 """
 
 from __future__ import annotations
@@ -35,7 +43,7 @@ from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
-from tubempc.control.closed_loop import Arrival, ClosedLoopResult, Target
+from tubempc.control.closed_loop import ClosedLoopResult, Target
 from tubempc.control.disturbance import DisturbanceLike, InvalidArgumentError, make_disturbance
 from tubempc.errors import ControllerError
 from tubempc.scenario import Scenario
@@ -73,7 +81,7 @@ class Controller(Protocol):
 
     def reset(self, scenario: Scenario, plan: ControllerPlan) -> None: ...
 
-    def step(self, t_s: float, state: np.ndarray, reference: Reference) -> Sequence[float]: ...
+    def step(self, t_s: float, state: np.ndarray, reference: Reference) -> Sequence[float] | np.ndarray: ...
 
 
 def load_controller(spec: str) -> Controller:
@@ -114,7 +122,7 @@ def _command(raw: Any, model: InputModel, t_s: float) -> np.ndarray:
     except (TypeError, ValueError):
         raise ControllerError(f"step() at t={t_s:.2f} s returned {raw!r}, not numbers") from None
     size = 3 if model == "holonomic" else 2
-    if values.size != size or not np.all(np.isfinite(values)):
+    if values.size != size or not all(map(math.isfinite, values.tolist())):
         raise ControllerError(f"step() at t={t_s:.2f} s returned {values.tolist()}: a {model} command is "
                               f"{size} finite numbers")
     return values if model == "holonomic" else np.array([values[0], 0.0, values[1]])
@@ -169,76 +177,12 @@ def run_controller(scenario: Scenario, controller: Controller, targets: Sequence
     for name in [source, *(t.region for t in targets)]:
         if name not in names:
             raise InvalidArgumentError(f"region={name!r} is not in scenario {scenario.name!r}")
+    from tubempc.control.loop import Plant, drive
+
     rng = np.random.default_rng(seed)
     dist: DisturbanceLike = (make_disturbance(disturbance, scenario.disturbance.bound, rng)
                              if isinstance(disturbance, str) else disturbance)
-    dt = 1.0 / scenario.mocap.rate_hz
     start = scenario.region(source)
-    x = np.array([start.center[0], start.center[1], scenario.initial_heading] if start_pose is None
-                 else [float(v) for v in start_pose], dtype=float)
-    refs = tuple(_reference(scenario, k, t) for k, t in enumerate(targets))
-    controller.reset(scenario, ControllerPlan(source, (float(x[0]), float(x[1]), float(x[2])), refs))
-    speed = scenario.max_speed_mps
-    if t_end_s is None:
-        budget, prev = 0.0, start.center
-        for tg in targets:
-            c = scenario.region(tg.region).center
-            budget += 3.0 * math.dist(prev, c) / speed + 30.0
-            prev = c
-        t_max = max(budget, max((tg.depart_after_s or 0.0) for tg in targets) + 30.0)
-    else:
-        t_max = t_end_s
-    n_max = math.floor(t_max / dt + 1e-9) + 1
-    t_arr = np.round(np.arange(n_max) * dt, 9)
-    xs, xms, xhs = np.zeros((n_max, 3)), np.zeros((n_max, 3)), np.full((n_max, 3), np.nan)
-    ub, uw = np.zeros((n_max, 3)), np.zeros((n_max, 3))
-    nominal = getattr(controller, "nominal", None)
-    eta = scenario.robot.radius
-    k, departed, inside_at, done = 0, 0.0, None, False
-    arrivals: list[Arrival] = []
-    worst = dist.may_be_worst
-    n = n_max
-    for i in range(n_max):
-        t = float(t_arr[i])
-        ref = refs[k]
-        if inside_at is None and math.hypot(x[0] - ref.center_xy[0], x[1] - ref.center_xy[1]) + eta <= ref.radius_m:
-            inside_at = t
-        if not done and inside_at is not None and (ref.depart_after_s is None or t >= ref.depart_after_s - 1e-9):
-            last = k + 1 == len(refs)
-            done = last
-            arrivals.append(Arrival(ref.region, departed, round(inside_at - departed, 9), inside_at, inside_at,
-                                    None if last else t))
-            if last and t_end_s is None:
-                n = i + 1
-            if not last:
-                k, departed, inside_at = k + 1, t, None
-                ref = refs[k]
-        measured = x.copy()
-        if mocap_noise_m > 0:
-            measured[:2] += rng.normal(scale=mocap_noise_m, size=2)
-        u = _command(controller.step(t, measured.copy(), ref), controller.input_model, t)
-        xs[i], xms[i], ub[i] = x, measured, u
-        if callable(nominal):
-            xhs[i] = np.asarray(nominal(), dtype=float).ravel()[:3]
-        if worst and dist.worst_at(t):
-            delta = dist.bound * _towards_nearest_obstacle(scenario, x, np.asarray(dist.direction, dtype=float))
-        else:
-            delta = np.asarray(dist.batch(np.array([t]))[0], dtype=float)
-        uw[i] = _velocity(x, u, np.zeros(3))
-        if n == i + 1:
-            break
-        x = _rk4(x, u, delta, dt)
-    if len(arrivals) < len(refs) or (arrivals and arrivals[-1].region != refs[-1].region):
-        pending = refs[len(arrivals)] if len(arrivals) < len(refs) else refs[-1]
-        arrivals.append(Arrival(pending.region, departed, None if inside_at is None else
-                                round(inside_at - departed, 9), inside_at, inside_at, None))
-    ok = len(arrivals) == len(refs) and all(a.inside_s is not None for a in arrivals)
-    reason = None if ok else next(f"target {a.region} (#{j + 1}) not reached by t={t_arr[n - 1]:.2f} s"
-                                  for j, a in enumerate(arrivals) if a.inside_s is None)
-    claimed = getattr(controller, "tube_radius_m", None)
-    return ClosedLoopResult(
-        t_s=t_arr[:n].copy(), x=xs[:n].copy(), x_measured=xms[:n].copy(), x_hat=xhs[:n].copy(),
-        u_world=uw[:n].copy(), u_body=ub[:n].copy(), solver=(), arrivals=tuple(arrivals), targets=tuple(targets),
-        start_region=source, tube_radius_m=float(claimed) if isinstance(claimed, int | float) else 0.0, sigma=0.0,
-        seed=seed, disturbance=dist.kind, disturbance_params=dist.params, mocap_noise_m=mocap_noise_m, ok=ok,
-        reason=reason)
+    x = (start.center[0], start.center[1], scenario.initial_heading) if start_pose is None else tuple(start_pose)
+    return drive(scenario, controller, targets, source=source, start=x, dist=dist, rng=rng, seed=seed,
+                 t_end_s=t_end_s, mocap_noise_m=mocap_noise_m, plant=Plant(), budget_speed_mps=scenario.max_speed_mps)
