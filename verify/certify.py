@@ -215,7 +215,8 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
 
     names = [r.name for r in sc.regions]
     run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
-                                        {r.name: list(r.labels) for r in sc.regions})
+                                        {r.name: list(r.labels) for r in sc.regions},
+                                        known=np.isfinite(pose.x_m) & np.isfinite(pose.y_m))
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
     entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,

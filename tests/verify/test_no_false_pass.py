@@ -353,3 +353,53 @@ def test_one_topic_with_two_types_is_exit_3_naming_both(tmp_path: Path, capsys: 
             code, out, err = run([*argv, "--scenario", str(scenario), "--spec", SPEC], capsys)
             assert code == 3, (fast, argv, out, err)
             one_line_error(err, "/odom", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry")
+
+
+# ---- findings 6 and 7: an unknown sample in the timed run; a command with one unknown component ----------------------
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+@pytest.mark.parametrize("fault", ["conflicting duplicate", "NaN position"])
+def test_an_unknown_sample_is_unknown_in_the_timed_run(tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str,
+                                                       fault: str) -> None:
+    """The robot stays in R1; at t = 2 s its one sample in R3 (mission_2) is unknown: a second message with the same
+    stamp elsewhere, or a NaN position. ``F[0,5] mission_2`` is undecided in both semantics, never failed."""
+    run0 = FUZZ.base_run(violating=False)
+    k = 20
+    r3 = FUZZ.SCENARIO.region("R3").center
+    if fault == "NaN position":
+        run0.xy[k] = (float("nan"), r3[1])
+    else:
+        run0.xy[k] = r3
+        run0.topics = ("nominal", "cmd_vel", "solver", "metadata")
+        stamp = int(run0.stamp_ns[k])
+        run0.extra = [(int(t), FUZZ.SCENARIO.topics.pose, FUZZ.POSE, _pose_stamped(int(s), float(x), float(y)))
+                      for t, s, (x, y) in zip(run0.t_ns, run0.stamp_ns, run0.xy, strict=True)]
+        r1 = FUZZ.SCENARIO.region("R1").center
+        run0.extra.append((int(run0.t_ns[k]) + 1_000_000, FUZZ.SCENARIO.topics.pose, FUZZ.POSE,
+                           _pose_stamped(stamp, r1[0], r1[1])))
+    log = FUZZ.write_run(run0, tmp_path / f"unknown{FUZZ.SUFFIX[fmt]}", fmt)
+    for command in ("certify", "watch"):
+        code, out, err = run([command, str(log), "--scenario", "nexus-sml", "--spec", "F[0,5] mission_2",
+                              "--checks", "spec", "--json"] if command == "certify" else
+                             [command, str(log), "--scenario", "nexus-sml", "--spec", "F[0,5] mission_2",
+                              "--checks", "spec"], capsys)
+        assert code == 2, (command, out, err)
+        if command == "certify":
+            import json
+
+            checks = {c["name"]: c["verdict"] for c in json.loads(out)["checks"]}
+            assert checks == {"spec_trajectory": "inconclusive", "spec_timed_run": "inconclusive"}, checks
+
+
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_a_known_component_over_its_bound_fails_beside_a_nan_one(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str],
+                                                                 fmt: str) -> None:
+    run0 = FUZZ.base_run(violating=False)
+    run0.cmd[50] = (5.0, 0.0, float("nan"))  # linear.x 5 m/s against 0.2; angular.z unknown
+    log = FUZZ.write_run(run0, tmp_path / f"cmd{FUZZ.SUFFIX[fmt]}", fmt)
+    for command in ("certify", "watch"):
+        code, out, err = run([command, str(log), "--scenario", "nexus-sml", "--checks", "input_box"], capsys)
+        assert code == 1, (command, out, err)
+    run0.cmd[50] = (0.1, 0.0, float("nan"))  # only the unknown component: undecided
+    log = FUZZ.write_run(run0, tmp_path / f"cmd2{FUZZ.SUFFIX[fmt]}", fmt)
+    assert run(["certify", str(log), "--scenario", "nexus-sml", "--checks", "input_box"], capsys)[0] == 2
