@@ -247,7 +247,9 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     if "obstacle_clearance" in selection:
         checks.append(check_clearance(every.t_ns, every.x_m, every.y_m, sc))
     entries = [_check_entry(c, t0) for c in checks]
-    verdict, why = _overall(entries, log.partial, log.stream_problems)
+    problems = {k: v for k, v in log.stream_problems.items()  # a signal's problem counts where the formula uses it
+                if not k.startswith("signal ") or k.removeprefix("signal ") in streams}
+    verdict, why = _overall(entries, log.partial, problems)
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,

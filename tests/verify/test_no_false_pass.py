@@ -403,3 +403,37 @@ def test_a_known_component_over_its_bound_fails_beside_a_nan_one(tmp_path: Path,
     run0.cmd[50] = (0.1, 0.0, float("nan"))  # only the unknown component: undecided
     log = FUZZ.write_run(run0, tmp_path / f"cmd2{FUZZ.SUFFIX[fmt]}", fmt)
     assert run(["certify", str(log), "--scenario", "nexus-sml", "--checks", "input_box"], capsys)[0] == 2
+
+
+# ---- finding 5: signal data outside the pose's span -------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_a_signal_violation_after_the_pose_stream_ends_is_never_a_pass(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str],
+                                                                        fmt: str) -> None:
+    """The pose stops at 9.9 s, the temperature runs to 30 s and reads 95 degC at 20 s: not judged (the run is the
+    pose's span), stated, and no pass; without the hot reading the late messages are only stated."""
+    import json
+
+    for hot in (True, False):
+        run0 = FUZZ.base_run(violating=False)
+        run0.extra = FUZZ.temperature_stream(run0)
+        if hot:
+            at = int(run0.t_ns[200]) - 2_000_000
+            run0.extra.append((at, FUZZ.TEMP_TOPIC, FUZZ.TEMPERATURE, FUZZ.temperature(at, 95.0)))
+        run0.topics = ("metadata",)
+        run0.extra += [(int(t), FUZZ.SCENARIO.topics.pose, FUZZ.POSE, _pose_stamped(int(t), float(x), float(y)))
+                       for t, (x, y) in zip(run0.t_ns[:100], run0.xy[:100], strict=True)]
+        log = FUZZ.write_run(run0, tmp_path / f"span{hot}{FUZZ.SUFFIX[fmt]}", fmt)
+        scenario = tmp_path / "signal.yaml"
+        scenario.write_text(FUZZ.signal_scenario_text())
+        code, out, err = run(["certify", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC, "--json",
+                              "--checks", "spec"], capsys)
+        cert = json.loads(out)
+        assert code == (2 if hot else 0), (hot, err)
+        assert cert["data_quality"]["signals"]["motor_ok"]["outside_pose_span"] >= 200
+        assert any("outside the pose's span" in n for n in cert["data_quality"]["notes"])
+        if hot:
+            assert "outside the pose's span violate" in cert["verdict_reason"]
+        code, out, err = run(["watch", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
+                              "--time-base", "auto", "--checks", "spec"], capsys)
+        assert code == (2 if hot else 0), (hot, out, err)
