@@ -437,3 +437,28 @@ def test_a_signal_violation_after_the_pose_stream_ends_is_never_a_pass(tmp_path:
         code, out, err = run(["watch", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
                               "--time-base", "auto", "--checks", "spec"], capsys)
         assert code == (2 if hot else 0), (hot, out, err)
+
+
+# ---- finding 15: memory bounded by the log, not by the formula's window -------------------------------------------
+def test_huge_windows_are_sized_by_the_log(seed_logs: dict[tuple[str, bool], Path],
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    import tracemalloc
+
+    import numpy as np
+
+    from verify.monitor.grid import sliding_clipped
+
+    x = np.random.default_rng(3).normal(size=1000)
+    for width in (999, 1000, 5000, 10**12):
+        assert np.array_equal(sliding_clipped(x, width, np.minimum, np.inf), np.minimum.accumulate(x[::-1])[::-1])
+    tracemalloc.start()
+    try:
+        for spec, want in (("G[0,99999999999] !obs_1", 2), ("G[0,10000000] !(obs_1 | obs_2)", 2),
+                           ("F[0,99999999999] obs_1", 2), ("F[99999999999,99999999999] obs_1", 2)):
+            code, _, err = run(["certify", str(seed_logs["mcap", False]), "--scenario", "nexus-sml", "--spec", spec,
+                                "--checks", "spec"], capsys)
+            assert code == want, (spec, err)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 300 * 2**20, peak  # a 30 s log at 10 Hz; the window of 1e11 s asked 14.6 TiB before
