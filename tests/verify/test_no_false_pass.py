@@ -462,3 +462,31 @@ def test_huge_windows_are_sized_by_the_log(seed_logs: dict[tuple[str, bool], Pat
     finally:
         tracemalloc.stop()
     assert peak < 300 * 2**20, peak  # a 30 s log at 10 Hz; the window of 1e11 s asked 14.6 TiB before
+
+
+# ---- finding 8: certify and watch under one time rule ----------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+@pytest.mark.parametrize("fault", ["late pose in an obstacle", "three zero stamps"])
+def test_certify_and_watch_agree_on_stamp_faults(tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str,
+                                                 fault: str) -> None:
+    run0 = FUZZ.base_run(violating=False)
+    run0.topics = ("nominal", "cmd_vel", "solver", "metadata")
+    msgs = [(int(t), int(s), float(x), float(y)) for t, s, (x, y) in zip(run0.t_ns, run0.stamp_ns, run0.xy,
+                                                                          strict=True)]
+    if fault == "three zero stamps":
+        for k in (40, 120, 200):
+            msgs[k] = (msgs[k][0], 0, msgs[k][2], msgs[k][3])
+        want = 0
+    else:  # stamped at 5 s inside obstacle 1, delivered at 25 s
+        obs = FUZZ.SCENARIO.unsafe_regions[0].center
+        msgs.append((int(run0.t_ns[250]) + 1_000_000, int(run0.stamp_ns[50]) + 1_000_000, obs[0], obs[1]))
+        want = 1
+    run0.extra = [(t, FUZZ.SCENARIO.topics.pose, FUZZ.POSE, _pose_stamped(s, x, y)) for t, s, x, y in msgs]
+    log = FUZZ.write_run(run0, tmp_path / f"stamps{FUZZ.SUFFIX[fmt]}", fmt)
+    for base in ("header", "auto"):
+        codes = []
+        for command in ("certify", "watch"):
+            code, out, err = run([command, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--checks", "spec",
+                                  "--time-base", base], capsys)
+            codes.append(code)
+        assert codes == [want, want], (base, codes)
