@@ -966,8 +966,20 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
                     cls, detail = "path_disagreement", f"fast vs plain: {why}"
                 elif "--out" not in plain:
                     watched = watch_argv(plain)
-                    why = disagreement(res, run_cli(watched, timeout_s))
-                    if why is not None:
+                    seen = run_cli(watched, timeout_s)
+                    if res.code == 3 and seen.code in (0, 1, 2):
+                        # watch reads records as they complete, without the index certify checks the file
+                        # against: a log certify refuses as damaged can still be judged (counted, not a verdict
+                        # disagreement; listed with -v)
+                        report.counts["watch_judged_refused"] += 1
+                        if verbose:
+                            print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
+                                  file=sys.stderr)
+                    elif seen.code == 2 and "not closed by its recorder" in seen.stderr and res.code in (0, 2):
+                        # a bare .db3 has no metadata.yaml that says the recorder closed it: watch judges it as
+                        # --salvage does (partial, never a pass); counted, not a disagreement
+                        report.counts["watch_partial"] += 1
+                    elif (why := disagreement(res, seen)) is not None:
                         cls, detail = "watch_disagreement", f"certify vs watch: {why} [{' '.join(watched)}]"
         report.cases += 1
         report.counts[cls] += 1
@@ -1008,6 +1020,8 @@ def main() -> None:
         print(f"{count:6d}  {key}")
     print("cases per family and format: " + ", ".join(f"{k}={v}" for k, v in sorted(report.per_format.items())))
     print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
+    print(f"watch judged a log certify refused (exit 3): {report.counts['watch_judged_refused']}; watch judged a "
+          f"log as not closed by its recorder (partial) where certify passed: {report.counts['watch_partial']}")
     print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")
     print(report.last_line)
 
