@@ -486,7 +486,42 @@ def test_certify_and_watch_agree_on_stamp_faults(tmp_path: Path, capsys: pytest.
     for base in ("header", "auto"):
         codes = []
         for command in ("certify", "watch"):
-            code, out, err = run([command, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--checks", "spec",
+            code, _out, _err = run([command, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--checks", "spec",
                                   "--time-base", base], capsys)
             codes.append(code)
         assert codes == [want, want], (base, codes)
+
+
+# ---- the speed bound checked against the data -------------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_a_step_faster_than_the_speed_bound_is_never_bridged_with_the_bound(tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str],
+                                                                            fmt: str) -> None:
+    """The robot waits beside obstacle 1 and, between two samples 0.1 s apart, appears on its other side (1.8 m:
+    18 m/s against the scenario's bound). The straight line crosses the obstacle: the gap is judged with the step
+    the data shows (undecided), never with the contradicted bound (which would pass)."""
+    import numpy as np
+
+    run0 = FUZZ.base_run(violating=False)
+    cx, cy = FUZZ.SCENARIO.region("R6").center
+    half = run0.t_ns.size // 2
+    run0.xy[:half] = (cx - 0.9, cy)
+    run0.xy[half:] = (cx + 0.9, cy)
+    assert 10 * FUZZ.SCENARIO.max_speed_mps * 0.1 < 1.8
+    log = FUZZ.write_run(run0, tmp_path / f"jump{FUZZ.SUFFIX[fmt]}", fmt)
+    argv = ["--scenario", "nexus-sml", "--spec", "G[0,inf) !obs_1", "--checks", "spec"]
+    assert _trajectory_verdict(log, argv, capsys) == "inconclusive"
+    code, out, err = run(["watch", str(log), *argv], capsys)
+    assert code == 2, (out, err)
+    run0.xy[half:] = (cx - 0.9, cy + 0.02)  # a small step within the bound: judged with the bound, a pass
+    assert np.all(np.isfinite(run0.xy))
+    log = FUZZ.write_run(run0, tmp_path / f"still{FUZZ.SUFFIX[fmt]}", fmt)
+    assert _trajectory_verdict(log, argv, capsys) == "pass"
+
+
+def _trajectory_verdict(log: Path, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    import json
+
+    _, out, _ = run(["certify", str(log), *argv, "--json"], capsys)
+    verdicts = {c["name"]: c["verdict"] for c in json.loads(out)["checks"]}
+    return str(verdicts["spec_trajectory"])
