@@ -975,7 +975,7 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
                         if verbose:
                             print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
                                   file=sys.stderr)
-                    elif seen.code == 2 and "not closed by its recorder" in seen.stderr and res.code in (0, 2):
+                    elif seen.code == 2 and "not closed by its recorder" in seen.stdout + seen.stderr and res.code == 0:
                         # a bare .db3 has no metadata.yaml that says the recorder closed it: watch judges it as
                         # --salvage does (partial, never a pass); counted, not a disagreement
                         report.counts["watch_partial"] += 1
