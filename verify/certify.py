@@ -29,7 +29,7 @@ from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
-from verify.ingest.fields import SignalStream
+from verify.ingest.fields import SignalStream, outside_span
 from verify.outputs import write_output_file
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
@@ -227,6 +227,13 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
+    outside = [f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's span, so "
+               f"they are not judged and the run cannot pass" for k, v in sorted(streams.items())
+               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None] if pose.t_ns.size else []
+    if outside:  # as the online monitor's doubt: the formula's checks cannot pass
+        doubt = "; ".join(outside)
+        spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": doubt})
+                               if c.verdict == "pass" else c for c in (spec_traj, spec_run))
     checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
     tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)

@@ -358,10 +358,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         if count:
             quality["notes"].append(f"signal {name} ({stream.spec.topic}): {count} message(s) outside the pose's span "
                                     "(the run) are not judged")
-        if at_ns is not None:
-            problems[f"signal {name}"] = (f"{violating} message(s) of signal {name} outside the pose's span violate "
-                                          f"its predicate (the first at {(at_ns - t0) * 1e-9:.3f} s): the run is "
-                                          f"the pose's span, so they are not judged and the run cannot pass")
+        if at_ns is not None:  # judged in verify.certify (the formula's checks cannot pass where it uses the signal)
+            signal_quality[name]["outside_pose_span_violating"] = violating
     clocks = clock_report(pose_topic, clock_streams, offsets_s)
     quality["clocks"] = clocks
     quality["notes"].extend(clocks["findings"])
