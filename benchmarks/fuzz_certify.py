@@ -65,6 +65,7 @@ CAMERA = "/camera/image_raw"  # the unread topic of the "-cam" and compressed fo
 POSE = "geometry_msgs/msg/PoseStamped"
 TWIST = "geometry_msgs/msg/Twist"
 STRING = "std_msgs/msg/String"
+ODOMETRY = "nav_msgs/msg/Odometry"
 
 
 class Hang(BaseException):
@@ -646,9 +647,205 @@ def path_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Pat
     return Case("paths", kind, argv, truth, inputs, require)
 
 
+
+def _exit3(res: Outcome) -> str | None:
+    return None if res.code == 3 else f"expected exit 3, got {res.code}"
+
+
+STAMP_FAULTS = ("zero", "near_1970", "negative", "late", "duplicate_conflict")
+
+
+def _stamp_fault(rng: random.Random, kind: str, log_ns: int) -> int:
+    if kind == "zero":
+        return 0
+    if kind == "near_1970":
+        return rng.choice([1, 10**9, 86_400 * 10**9])
+    if kind == "negative":
+        return -rng.choice([1, 5 * 10**9])
+    return log_ns - rng.choice([30, 300]) * 10**9  # "late": delivered long after its stamp
+
+
+def stream_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Stamp faults on every stream (not only the pose): a second publisher on the signal topic (unset, 1970,
+    negative or late stamps, or duplicates of good stamps with other values) reports a violating value held at the
+    pose samples for 1 s; a faulty TwistStamped-free command stream is not needed (Twist has no stamp), so the nominal
+    gets the same stamp faults. The signal violation must never pass, on any time base."""
+    fmt = rng.choice(FORMATS[:4])
+    kind = rng.choice(STAMP_FAULTS)
+    run = base_run(violating=False)
+    run.extra = temperature_stream(run)
+    start = rng.randrange(20, 250)
+    count = rng.choice([1, 3, 10, 20])
+    for k in range(start, min(start + count, run.t_ns.size)):
+        log_ns = int(run.t_ns[k]) - 2_000_000  # after the good message, before the pose sample: held there
+        stamp = (int(run.t_ns[k]) - 5_000_000) if kind == "duplicate_conflict" else _stamp_fault(rng, kind, log_ns)
+        run.extra.append((log_ns, TEMP_TOPIC, TEMPERATURE, temperature(stamp, 95.0)))
+    path = write_run(run, work / f"signal_{kind}{SUFFIX[fmt]}", fmt)
+    scenario = work / "signal.yaml"
+    scenario.write_text(signal_scenario_text())
+    argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok",
+            "--time-base", rng.choice(["auto", "header", "log"])]
+    return Case("streams", f"{fmt}:{kind}", argv, "violating", [path, scenario])
+
+
+def _pose_builder(msgtype: str, stamp_ns: int, x: float, y: float) -> Callable[[Any, bool], Any]:
+    def build(ty: Any, ros1: bool) -> Any:
+        sec, nsec = divmod(stamp_ns, 10**9)
+        header = ty["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}),
+                                           stamp=ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+                                           frame_id="odom")
+        pose = ty["geometry_msgs/msg/Pose"](position=ty["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                                            orientation=ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0,
+                                                                                          w=1.0))
+        if msgtype == POSE:
+            return ty[POSE](header=header, pose=pose)
+        v3 = ty["geometry_msgs/msg/Vector3"]
+        twist = ty["geometry_msgs/msg/Twist"](linear=v3(x=0.0, y=0.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0))
+        return ty[ODOMETRY](header=header, child_frame_id="base_link",
+                            pose=ty["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+                            twist=ty["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
+    return build
+
+
+def types_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Two message types on one topic: PoseStamped message(s) among the robot's Odometry on the pose topic (the
+    robot drives through an obstacle). Exit 3 naming both types, on both paths."""
+    fmt = rng.choice(FORMATS[:4])
+    run = base_run(violating=True)
+    run.topics = ("metadata",)
+    where = rng.choice(["first", "middle", "last"])
+    k = {"first": 0, "middle": run.t_ns.size // 2, "last": run.t_ns.size - 1}[where]
+    others = [k] if rng.random() < 0.7 else list(range(k, min(k + 5, run.t_ns.size)))
+    run.extra = [(int(t), "/odom", POSE if i in others else ODOMETRY,
+                  _pose_builder(POSE if i in others else ODOMETRY, int(t), float(x), float(y)))
+                 for i, (t, (x, y)) in enumerate(zip(run.t_ns, run.xy, strict=True))]
+    path = write_run(run, work / f"types{SUFFIX[fmt]}", fmt)
+    scenario = work / "odom.yaml"
+    scenario.write_text(builtin_scenario_text("nexus-sml").replace(
+        "topics: {pose: /qualisys/nexus/pose, cmd_vel: /nexus/cmd_vel, nominal: /nexus/nominal_pose}",
+        "topics: {pose: /odom}"))
+
+    def names_both(res: Outcome) -> str | None:
+        if res.code != 3 or POSE not in res.stderr or ODOMETRY not in res.stderr:
+            return f"two types on one topic: exit {res.code} {res.stderr.strip()[:200]!r}"
+        return None
+
+    argv = ["certify", str(path), "--scenario", str(scenario), "--spec", SPEC]
+    return Case("types", f"{fmt}:{where}", argv, "violating", [path, scenario], names_both)
+
+
+LIMIT_VALUES = ["0", "1e-9", "-0.5", "4e9", "-4e9", "4.000001e9", "7.6e9", "9.3e9", "1e12", "1e300", "-1e300",
+                "nan", "inf", "-inf", "1e-320"]
+
+
+def limits_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Option and scenario values at and past their limits: clock offsets (option and scenario), signal rates.
+    A value out of range is exit 3 naming the option or field; a value in range is judged (the violation stays)."""
+    fmt = rng.choice(FORMATS[:4])
+    run = base_run(violating=False)
+    run.extra = temperature_stream(run)
+    for k in range(100, 110):  # the violation: 95 degC held at ten pose samples (good stamps)
+        run.extra.append((int(run.t_ns[k]) - 2_000_000, TEMP_TOPIC, TEMPERATURE,
+                          temperature(int(run.t_ns[k]) - 2_000_000, 95.0)))
+    path = write_run(run, work / f"limits{SUFFIX[fmt]}", fmt)
+    scenario = work / "limits.yaml"
+    where = rng.choice(["option", "scenario", "rate", "unknown_topic"])
+    value = rng.choice(LIMIT_VALUES)
+    argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok"]
+    text = signal_scenario_text()
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    in_range = math.isfinite(number) and abs(number) <= 4e9
+    if where == "option":
+        argv += ["--clock-offset", f"{TEMP_TOPIC}={value}"]
+    elif where == "scenario":
+        text += f"clock_offsets: {{{TEMP_TOPIC}: {value if math.isfinite(number) else '.nan'}}}\n"
+    elif where == "rate":
+        value = rng.choice(["1e-300", "1e-7", "1e-6", "10", "1e9", "1e10", "1e300"])
+        number = float(value)
+        in_range = 1e-6 <= number <= 1e9
+        text = signal_scenario_text(number)
+    else:
+        argv += ["--clock-offset", "/motor/temperatur=0.02"]
+        in_range = False
+    scenario.write_text(text)
+
+    def outcome(res: Outcome) -> str | None:
+        if not in_range and res.code != 3:
+            return f"{where}={value} out of range: exit {res.code}"
+        if not in_range and where != "rate" and "clock" not in res.stderr:
+            return f"{where}={value}: the error does not name the option or field: {res.stderr.strip()[:200]!r}"
+        if in_range and res.code == 3:
+            return f"{where}={value} in range: exit 3 {res.stderr.strip()[:200]!r}"
+        return None
+
+    truth = "violating" if where not in {"option", "scenario"} or abs(number) < 1 else "any"
+    return Case("limits", f"{where}:{value}", argv, truth, [path, scenario], outcome)
+
+
+def outputs_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Symlinks and special files in the output folder (``--force``): never written through, never replaced."""
+    fmt = rng.choice(FORMATS[:4])
+    log = _copy(seeds[fmt, rng.random() < 0.5], work / seeds[fmt, False].name)
+    out = work / "out"
+    out.mkdir()
+    name = rng.choice(["report.html", "certificate.json", "report.md", "junit.xml", "figures"])
+    kind = rng.choice(["symlink_to_log", "symlink_dangling", "fifo", "folder", "hardlink_to_log"])
+    target = _storage(log)
+    if kind == "symlink_to_log":
+        (out / name).symlink_to(target)
+    elif kind == "symlink_dangling":
+        (out / name).symlink_to(work / "nowhere")
+    elif kind == "fifo":
+        os.mkfifo(out / name)
+    elif kind == "folder":
+        (out / name).mkdir()
+    elif name != "figures":
+        os.link(target, out / name)
+    else:
+        (out / name).mkdir()
+    argv = ["certify", str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--out", str(out), "--force"]
+
+    def outcome(res: Outcome) -> str | None:
+        harmless = kind == "hardlink_to_log" or (kind == "folder" and name == "figures")
+        if not harmless and res.code != 3:
+            return f"{kind} {name} in the output folder: exit {res.code}"
+        return None
+
+    return Case("outputs", f"{kind}:{name}", argv, "any", [log], outcome)
+
+
+def span_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Signal data outside the pose's span: the pose stream stops early (or starts late) while the signal goes on
+    and violates there. The run is the pose's span; a violation outside it is not judged, so the run cannot pass."""
+    fmt = rng.choice(FORMATS[:4])
+    run = base_run(violating=False)
+    n = run.t_ns.size
+    run.extra = temperature_stream(run)
+    cut = rng.randrange(20, n - 20)
+    after = rng.random() < 0.7
+    run.topics = ("nominal", "cmd_vel", "solver", "metadata")
+    keep = range(cut) if after else range(cut, n)
+    run.extra += [(int(run.t_ns[i]), SCENARIO.topics.pose, POSE,
+                   _pose_builder(POSE, int(run.stamp_ns[i]), float(run.xy[i, 0]), float(run.xy[i, 1])))
+                  for i in keep]
+    k = rng.randrange(cut + 2, n) if after else rng.randrange(0, cut - 2)
+    run.extra.append((int(run.t_ns[k]) - 2_000_000, TEMP_TOPIC, TEMPERATURE,
+                      temperature(int(run.t_ns[k]) - 2_000_000, 95.0)))
+    path = write_run(run, work / f"span{SUFFIX[fmt]}", fmt)
+    scenario = work / "signal.yaml"
+    scenario.write_text(signal_scenario_text())
+    argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok"]
+    return Case("span", "after" if after else "before", argv, "undecidable", [path, scenario])
+
+
 FAMILIES: list[tuple[str, float, Callable[[random.Random, dict[tuple[str, bool], Path], Path], Case]]] = [
-    ("bytes", 0.55, byte_case), ("content", 0.2, content_case), ("formula", 0.1, formula_case),
-    ("scenario", 0.1, scenario_case), ("paths", 0.05, path_case)]
+    ("bytes", 0.4, byte_case), ("content", 0.15, content_case), ("formula", 0.07, formula_case),
+    ("scenario", 0.07, scenario_case), ("paths", 0.04, path_case), ("streams", 0.08, stream_case),
+    ("types", 0.05, types_case), ("limits", 0.06, limits_case), ("outputs", 0.04, outputs_case),
+    ("span", 0.04, span_case)]
 
 
 @contextlib.contextmanager
@@ -682,11 +879,59 @@ class Report:
     @property
     def last_line(self) -> str:
         return (f"cases={self.cases} crashes={self.counts['crash']} hangs={self.counts['hang']} "
-                f"false_pass={self.counts['false_pass']}")
+                f"false_pass={self.counts['false_pass']} path_disagreements={self.counts['path_disagreement']} "
+                f"watch_disagreements={self.counts['watch_disagreement']}")
+
+
+def _certify_argv(argv: list[str]) -> list[str] | None:
+    """The argv without ``--debug`` when it runs ``certify`` on one log, else None."""
+    rest = [a for a in argv if a != "--debug"]
+    return rest if rest and rest[0] == "certify" else None
+
+
+def other_path(argv: list[str], timeout_s: float) -> Outcome:
+    """The same command on the other ingest path (``TUBEMPC_FAST_INGEST`` flipped)."""
+    from verify.ingest.raw import FAST_INGEST_ENV, fast_ingest
+
+    before = os.environ.get(FAST_INGEST_ENV)
+    os.environ[FAST_INGEST_ENV] = "0" if fast_ingest() else "1"
+    try:
+        return run_cli(argv, timeout_s)
+    finally:
+        if before is None:
+            del os.environ[FAST_INGEST_ENV]
+        else:
+            os.environ[FAST_INGEST_ENV] = before
+
+
+def watch_argv(argv: list[str]) -> list[str]:
+    """``tubempc watch`` on the same log, scenario, formula, time base and checks as a certify argv."""
+    out = ["watch", argv[1]]
+    keep = {"--scenario", "--spec", "--time-base", "--checks"}
+    for k, a in enumerate(argv[2:-1], start=2):
+        if a in keep:
+            out += [a, argv[k + 1]]
+    if "--time-base" not in out:
+        out += ["--time-base", "auto"]  # certify's default (watch's is header)
+    return out
+
+
+def disagreement(first: Outcome, second: Outcome) -> str | None:
+    """Two runs that must agree: a crash of the second, two different verdicts, or a pass where the other did not."""
+    if second.error is not None or second.code not in (0, 1, 2, 3):
+        return f"crashed: {second.error or second.code} {second.stderr.strip()[-200:]!r}"
+    if first.code in (0, 1, 2) and second.code in (0, 1, 2) and first.code != second.code:
+        return f"exit {first.code} vs {second.code}"
+    if (first.code == 0) != (second.code == 0) and 3 not in (first.code, second.code):
+        return f"exit {first.code} vs {second.code}"
+    if (first.code == 0 and second.code == 3) or (first.code == 3 and second.code == 0):
+        return f"exit {first.code} vs {second.code}: {(first.stderr or second.stderr).strip()[:200]!r}"
+    return None
 
 
 def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, verbose: bool = False,
-                 families: tuple[str, ...] | None = None, only: int | None = None) -> Report:
+                 families: tuple[str, ...] | None = None, only: int | None = None,
+                 minutes: float | None = None) -> Report:
     """Run ``cases`` cases drawn from ``random.Random(seed)``; returns the counts (see the module docstring).
 
     ``only``: replay case number ``only`` of that campaign alone (its files are kept under ``root/case``)."""
@@ -698,7 +943,12 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
     chosen = [f for f in FAMILIES if families is None or f[0] in families]
     weights = [w for _, w, _ in chosen]
     report = Report()
+    deadline = None if minutes is None else time.monotonic() + 60.0 * minutes
     for i in range(cases):
+        if deadline is not None and time.monotonic() > deadline:
+            break  # the time budget is spent: the report covers the cases run
+        if verbose and i and i % 100 == 0:
+            print(f"progress: {report.last_line}", file=sys.stderr, flush=True)
         _, _, make = rng.choices(chosen, weights)[0]
         case_rng = random.Random(rng.getrandbits(64))
         if only is not None and i != only:
@@ -709,6 +959,28 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
             res = run_cli(case.argv, timeout_s)
             after = _snapshot(case.inputs)
             cls, detail = classify(case, res, before, after)
+            plain = _certify_argv(case.argv)
+            if cls == "ok" and plain is not None:  # fast vs plain ingest, then certify vs watch, on every case
+                why = disagreement(res, other_path(case.argv, timeout_s))
+                if why is not None:
+                    cls, detail = "path_disagreement", f"fast vs plain: {why}"
+                elif "--out" not in plain:
+                    watched = watch_argv(plain)
+                    seen = run_cli(watched, timeout_s)
+                    if res.code == 3 and seen.code in (0, 1, 2):
+                        # watch reads records as they complete, without the index certify checks the file
+                        # against: a log certify refuses as damaged can still be judged (counted, not a verdict
+                        # disagreement; listed with -v)
+                        report.counts["watch_judged_refused"] += 1
+                        if verbose:
+                            print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
+                                  file=sys.stderr)
+                    elif seen.code == 2 and "not closed by its recorder" in seen.stdout + seen.stderr and res.code == 0:
+                        # a bare .db3 has no metadata.yaml that says the recorder closed it: watch judges it as
+                        # --salvage does (partial, never a pass); counted, not a disagreement
+                        report.counts["watch_partial"] += 1
+                    elif (why := disagreement(res, seen)) is not None:
+                        cls, detail = "watch_disagreement", f"certify vs watch: {why} [{' '.join(watched)}]"
         report.cases += 1
         report.counts[cls] += 1
         report.exit_codes[f"{case.family}:{res.code}"] += 1
@@ -734,19 +1006,22 @@ def main() -> None:
                     ", ".join(f[0] for f in FAMILIES))
     ap.add_argument("-v", "--verbose", action="store_true", help="print each failing case as it happens")
     ap.add_argument("--only", type=int, default=None, help="replay this case number alone (files kept)")
+    ap.add_argument("--minutes", type=float, default=None, help="stop drawing cases after this many minutes")
     args = ap.parse_args()
     root = args.dir or Path(tempfile.mkdtemp(prefix="fuzz_certify_"))
     root.mkdir(parents=True, exist_ok=True)
     fams = tuple(args.families.split(",")) if args.families else None
     start = time.perf_counter()
     report = run_campaign(args.cases, args.seed, root=root, timeout_s=args.timeout, verbose=args.verbose,
-                          families=fams, only=args.only)
+                          families=fams, only=args.only, minutes=args.minutes)
     for line in report.failures[:60]:
         print(line)
     for key, count in sorted(report.by_kind.items()):
         print(f"{count:6d}  {key}")
     print("cases per family and format: " + ", ".join(f"{k}={v}" for k, v in sorted(report.per_format.items())))
     print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
+    print(f"watch judged a log certify refused (exit 3): {report.counts['watch_judged_refused']}; watch judged a "
+          f"log as not closed by its recorder (partial) where certify passed: {report.counts['watch_partial']}")
     print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")
     print(report.last_line)
 

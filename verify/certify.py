@@ -29,7 +29,7 @@ from verify.errors import ScenarioInputError, SpecError
 from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
-from verify.ingest.fields import SignalStream
+from verify.ingest.fields import SignalStream, outside_span
 from verify.outputs import write_output_file
 from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
@@ -256,7 +256,8 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
 
     names = [r.name for r in sc.regions]
     run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
-                                        {r.name: list(r.labels) for r in sc.regions})
+                                        {r.name: list(r.labels) for r in sc.regions},
+                                        known=np.isfinite(pose.x_m) & np.isfinite(pose.y_m))
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
     entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,
@@ -267,6 +268,13 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         {"semantics": "timed run (paper, Definition 3; pointwise)",
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
+    outside = [f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's span, so "
+               f"they are not judged and the run cannot pass" for k, v in sorted(streams.items())
+               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None] if pose.t_ns.size else []
+    if outside:  # as the online monitor's doubt: the formula's checks cannot pass
+        doubt = "; ".join(outside)
+        spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": doubt})
+                               if c.verdict == "pass" else c for c in (spec_traj, spec_run))
     checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
     tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
@@ -287,7 +295,9 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     if "obstacle_clearance" in selection:
         checks.append(check_clearance(every.t_ns, every.x_m, every.y_m, sc))
     entries = [_check_entry(c, t0) for c in checks]
-    verdict, why = _overall(entries, log.partial, log.stream_problems)
+    problems = {k: v for k, v in log.stream_problems.items()  # a signal's problem counts where the formula uses it
+                if not k.startswith("signal ") or k.removeprefix("signal ") in streams}
+    verdict, why = _overall(entries, log.partial, problems)
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,

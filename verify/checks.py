@@ -146,7 +146,10 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
     if t_ns is None or u is None or t_ns.size == 0:
         return CheckResult("input_box", "inconclusive", None, None, {**details, "reason": "no cmd_vel logged"})
     per = bounds[None, :] + INPUT_TOLERANCE - np.abs(u[:, cols])
-    margin = np.min(per, axis=1)
+    unknown = np.isnan(per)
+    # a command's margin is its worst known component: one unknown (NaN) component never hides a known violation
+    margin = np.min(np.where(unknown, np.inf, per), axis=1)
+    margin[unknown.all(axis=1)] = np.nan
     with np.errstate(all="ignore"):
         worst = np.nanmin(per, axis=0) if np.isfinite(per).any() else np.full(3, np.nan)
     details["component_margins"] = {n: (float(m) if np.isfinite(m) else None) for n, m in zip(names, worst,
@@ -154,10 +157,10 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))
-        comp = int(np.argmin(per[k]))
+        comp = int(np.argmin(np.where(unknown[k], np.inf, per[k])))
         return CheckResult("input_box", "fail", _finite_min(margin), int(t_ns[k]),
                            {**details, "component": names[comp], "value": float(u[k, cols[comp]])})
-    if np.isnan(margin).any():
+    if unknown.any():
         return CheckResult("input_box", "inconclusive", _finite_min(margin), None,
-                           {**details, "reason": f"{int(np.isnan(margin).sum())} NaN input(s)"})
+                           {**details, "reason": f"{int(unknown.any(axis=1).sum())} command(s) with a NaN component"})
     return CheckResult("input_box", "pass", _finite_min(margin), None, details)

@@ -20,8 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.scenario import SignalSpec
-from verify.ingest.fields import SignalStream
+from verify.ingest.fields import SignalStream, signal_margin
 
 __all__ = ["SignalBounds", "signal_bounds", "signal_margin", "signal_summary", "values_at"]
 
@@ -35,12 +34,6 @@ class SignalBounds:
     point_hi: FloatArray
     gap_lo: FloatArray
     gap_hi: FloatArray
-
-
-def signal_margin(spec: SignalSpec, value: FloatArray) -> FloatArray:
-    if spec.op in (">", ">="):
-        return value - spec.value
-    return spec.value - value
 
 
 def values_at(stream: SignalStream, t_ns: IntArray) -> tuple[FloatArray, FloatArray]:

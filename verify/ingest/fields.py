@@ -33,7 +33,7 @@ from verify.ingest.raw import RawLog, RawTopic, fast_ingest
 from verify.ingest.timebase import TimeBase, judged_samples, stream_time_base
 
 __all__ = ["HOLD_FOREVER_NS", "RATE_HZ_RANGE", "FieldSamples", "SignalStream", "decode_field", "median_period_ns",
-           "parse_field_path", "read_signals", "signal_period_ns"]
+           "outside_span", "parse_field_path", "read_signals", "signal_margin", "signal_period_ns"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -73,6 +73,22 @@ class SignalStream:
         if self.follows_pose:
             return HOLD_FOREVER_NS
         return int(DROPOUT_FACTOR * self.period_ns)
+
+
+def signal_margin(spec: SignalSpec, value: FloatArray) -> FloatArray:
+    """The atom's margin in the field's unit: ``value - threshold`` for ``>``/``>=``, ``threshold - value`` else."""
+    if spec.op in (">", ">="):
+        return value - spec.value
+    return spec.value - value
+
+
+def outside_span(stream: SignalStream, first_ns: int, last_ns: int) -> tuple[int, int, int | None]:
+    """Messages of ``stream`` before ``first_ns`` or after ``last_ns`` (the pose's span, the run): how many, how many
+    of them violate the atom's predicate, and the time of the first violating one (None: none)."""
+    out = (stream.t_ns < first_ns) | (stream.t_ns > last_ns)
+    bad = out & (signal_margin(stream.spec, stream.value) < 0)
+    where = np.flatnonzero(bad)
+    return int(np.count_nonzero(out)), int(where.size), (int(stream.t_ns[where[0]]) if where.size else None)
 
 
 def parse_field_path(path: str) -> list[str | int]:

@@ -33,7 +33,7 @@ from verify.ingest.digest import (
     messages_digest,
     start_digest,
 )
-from verify.ingest.fields import SignalStream, read_signals
+from verify.ingest.fields import SignalStream, outside_span, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, check_bag_folder, read_raw, special_file_kind
 from verify.ingest.readerrors import READ_ERRORS, in_words
@@ -353,6 +353,15 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                 quality["notes"].append(f"signal {name} ({sq['topic']}): {sq['note']}")
             if "problem" in sq:
                 problems[f"signal {name}"] = sq["problem"]
+    first_ns, last_ns = int(pose.t_ns[0]), int(pose.t_ns[-1])
+    for name, stream in signals.items():
+        count, violating, at_ns = outside_span(stream, first_ns, last_ns)
+        signal_quality[name]["outside_pose_span"] = count
+        if count:
+            quality["notes"].append(f"signal {name} ({stream.spec.topic}): {count} message(s) outside the pose's span "
+                                    "(the run) are not judged")
+        if at_ns is not None:  # judged in verify.certify (the formula's checks cannot pass where it uses the signal)
+            signal_quality[name]["outside_pose_span_violating"] = violating
     clocks = clock_report(pose_topic, clock_streams, offsets_s)
     quality["clocks"] = clocks
     quality["notes"].extend(clocks["findings"])

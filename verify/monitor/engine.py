@@ -119,14 +119,20 @@ def verdict_of(lo: float, hi: float) -> str:
 _NS = 10**9
 
 
+#: interval bounds are capped here (ns, about 146 years): every log is shorter, so a window reaching further is the
+#: same window, and times plus offsets stay inside int64 (a bound of 1e11 s overflowed)
+MAX_OFFSET_NS = 2**62
+
+
 def bounds_ns(interval: Interval) -> tuple[int, int | None]:
-    """Integer-ns offsets ``[lo, hi]`` (closed) such that ``t + d`` (ns) is in ``t + interval``; hi None: unbounded."""
+    """Integer-ns offsets ``[lo, hi]`` (closed) such that ``t + d`` (ns) is in ``t + interval``; hi None: unbounded.
+    Both are capped at ``MAX_OFFSET_NS``."""
     lo = Fraction(interval.lo) * _NS
-    lo_ns = math.ceil(lo) if interval.lo_closed else math.floor(lo) + 1
+    lo_ns = min(math.ceil(lo) if interval.lo_closed else math.floor(lo) + 1, MAX_OFFSET_NS)
     if interval.hi is None:
         return lo_ns, None
     hi = Fraction(interval.hi) * _NS
-    hi_ns = math.floor(hi) if interval.hi_closed else math.ceil(hi) - 1
+    hi_ns = min(math.floor(hi) if interval.hi_closed else math.ceil(hi) - 1, MAX_OFFSET_NS)
     return lo_ns, hi_ns
 
 

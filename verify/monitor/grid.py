@@ -173,6 +173,7 @@ def sliding_clipped(x: FloatArray, width: int, op: np.ufunc, identity: float, *,
     n = x.shape[0]
     if width <= 1 or n == 0:
         return x
+    width = min(width, n)  # every window is clipped at the end: a wider one is x[k:], so memory follows the log
     if block > 0 or width <= _DOUBLING_MAX_WIDTH:
         return _sliding_doubling(x, width, op, block or max(_DOUBLING_BLOCK, 4 * width))
     m = -(-(n + width - 1) // width)

@@ -48,7 +48,7 @@ from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
-from verify.semantics.timed_run import check_timed_run, parse_spec
+from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run, parse_spec
 from verify.semantics.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
@@ -451,7 +451,8 @@ class OnlineMonitor:
         g_hi[np.isnan(g_hi)] = np.inf
         # the timed run's entries (paper, Definition 3): where the containing region changes
         # (verify.semantics.timed_run.timed_run_of_sets): a new entry where the set of containing regions changes
-        inside = self._containment(x[k0:], y[k0:])
+        unknown = ~(np.isfinite(x[k0:]) & np.isfinite(y[k0:]))  # an entry of its own, every label unknown
+        inside = np.vstack((self._containment(x[k0:], y[k0:]) & ~unknown, unknown[None, :]))
         before = np.concatenate((inside[:, :1] if self._prev_set is None else self._prev_set, inside[:, :-1]), axis=1)
         changed = np.any(inside != before, axis=0)
         if self._prev_set is None:
@@ -509,7 +510,8 @@ class OnlineMonitor:
                     continue
                 holds = np.array([name in self._entry_labels[m] for m in members], dtype=bool)
                 v1 = np.where(holds, 1.0, -1.0)
-                run.atoms[name].push(v1, v1.copy(), t_e)
+                unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
+                run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
         run.track.tick(conv)
         run.evaluation.step()
         # per-sample checks on every sample: workspace, obstacle clearance, tube
@@ -566,7 +568,10 @@ class OnlineMonitor:
 
     def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
         """A timed-run entry's name (its regions joined with ``+``); its labels (their union) are kept by name."""
-        rows = np.flatnonzero(column)
+        if column[-1]:  # the last row: the sample's position is unknown
+            self._entry_labels.setdefault(UNKNOWN_ENTRY, frozenset())
+            return UNKNOWN_ENTRY
+        rows = np.flatnonzero(column[:-1])
         name = "+".join(self.scenario.regions[int(k)].name for k in rows)
         if name not in self._entry_labels:
             self._entry_labels[name] = frozenset(lab for k in rows for lab in self._labels[int(k)])
@@ -738,6 +743,9 @@ class OnlineMonitor:
             if feed.late:
                 why.append(f"{feed.late} message(s) of signal {name} arrived after the pose samples at or after "
                            f"their time were judged (more than the lag bound late, or out of order)")
+            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
+                why.append(f"messages of signal {name} outside the pose's span violate its predicate: the run is the "
+                           f"pose's span, so they are not judged and the run cannot pass")
             if feed.hold_mismatch():
                 why.append(f"signal {name} has no rate_hz: it was judged with the median spacing seen so far, and "
                            f"the whole stream's median (hold {feed.final_hold_ns() * 1e-9:g} s) would judge a "

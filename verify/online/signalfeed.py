@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import SignalSpec
-from verify.ingest.fields import SignalStream, median_period_ns, signal_period_ns
+from verify.ingest.fields import SignalStream, median_period_ns, signal_margin, signal_period_ns
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.online.stream import Buffer
 from verify.signals import SignalBounds, signal_bounds, values_at
@@ -53,6 +53,9 @@ class SignalFeed:
         self.merged = 0  # a second message at an instant with the same value
         self.conflicting = 0  # ... with another value (the atom is unknown there)
         self.late = 0  # messages for an instant already judged (not used; the formula cannot pass)
+        # the first and last message violating the predicate (verify.ingest.fields.outside_span at the end)
+        self.first_violation_ns = 2**63 - 1
+        self.last_violation_ns = _NEVER
         self.fixed_period_ns = signal_period_ns(name, spec, np.zeros(0, dtype=np.int64)) if (
             spec.rate_hz is not None or self.follows_pose) else None
         self._history = Buffer(np.int64)  # without rate_hz: the times of the messages dropped from ``t``
@@ -62,6 +65,9 @@ class SignalFeed:
 
     # ---- input ------------------------------------------------------------------------------------------------------
     def push(self, t_ns: int, value: float) -> None:
+        if float(signal_margin(self.spec, np.asarray([value], dtype=np.float64))[0]) < 0:
+            self.first_violation_ns = min(self.first_violation_ns, t_ns)
+            self.last_violation_ns = max(self.last_violation_ns, t_ns)
         if t_ns <= self.horizon:
             self.late += 1
             return
@@ -144,6 +150,10 @@ class SignalFeed:
             if self.fixed_period_ns is None:
                 self._history.extend(np.asarray(self.t[:keep], dtype=np.int64))
             del self.t[:keep], self.v[:keep]
+
+    def violates_outside(self, first_ns: int, last_ns: int) -> bool:
+        """Whether a message violating the predicate lies outside the pose's span ``[first_ns, last_ns]``."""
+        return self.first_violation_ns < first_ns or self.last_violation_ns > last_ns
 
     def hold_mismatch(self) -> bool:
         """Without ``rate_hz``: whether the whole stream's median spacing (offline's hold) would have judged one of

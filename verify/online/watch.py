@@ -30,12 +30,12 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.scenario import Scenario
-from verify.errors import LogReadError, MissingTopicError
+from verify.errors import LogReadError, MissingTopicError, VerifyError
 from verify.ingest.clocks import clock_offsets_ns
 from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
 from verify.ingest.raw import RawTopic, check_log_path
-from verify.ingest.readerrors import one_type_per_topic
+from verify.ingest.readerrors import READ_ERRORS, in_words, one_type_per_topic
 from verify.ingest.salvage import SalvagedMessage
 from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
 from verify.online.follow import log_bytes, open_follower
@@ -107,6 +107,10 @@ class _Feeder:
             cols = self._decode_pose(pose)
         except LogReadError as err:
             raise LogReadError(err.reason, path=str(self.path)) from err
+        except READ_ERRORS as err:  # a decoder's error on damaged bytes: one line, as read_log words it
+            if isinstance(err, VerifyError):
+                raise
+            raise LogReadError(f"messages cannot be decoded: {in_words(err)}", path=str(self.path)) from err
         base = choose_time_base(cols.stamp_ns, np.asarray(cols.log_ns, dtype=np.int64), "auto")
         self.base_note = (f"--time-base auto: {base.name} time, chosen on the first {len(pose)} pose messages"
                           + (f" ({base.note})" if base.note else ""))
@@ -165,6 +169,10 @@ class _Feeder:
                     self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
         except LogReadError as err:
             raise LogReadError(err.reason, path=str(self.path)) from err
+        except READ_ERRORS as err:  # a decoder's error on damaged bytes: one line, as read_log words it
+            if isinstance(err, VerifyError):
+                raise
+            raise LogReadError(f"messages cannot be decoded: {in_words(err)}", path=str(self.path)) from err
 
     def _push_signals(self, msgs: list[SalvagedMessage], fields: list[tuple[str, str]]) -> None:
         """Times under the rules of every stream (``_times``), plus the topic's clock offset."""
@@ -240,10 +248,18 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
             if on_decision is not None:
                 on_decision(d)
 
+    def read(step: Callable[[], list[SalvagedMessage]]) -> list[SalvagedMessage]:
+        try:
+            return step()
+        except READ_ERRORS as err:  # the follower's reader or decompressor on damaged bytes
+            if isinstance(err, VerifyError):
+                raise
+            raise LogReadError(f"unreadable log: {in_words(err)}", path=str(p)) from err
+
     last_growth = time.monotonic()
     last_bytes = log_bytes(p)
     while True:
-        msgs = follower.poll()
+        msgs = read(follower.poll)
         if msgs:
             count += len(msgs)
             feeder.feed(msgs)
@@ -265,7 +281,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
         time.sleep(poll_s)
     notes: list[str] = []
     if not follower.finished:
-        extra = follower.rest()  # what --salvage reads beyond the complete chunks (a cut uncompressed chunk)
+        extra = read(follower.rest)  # what --salvage reads beyond the complete chunks (a cut uncompressed chunk)
         count += len(extra)
         feeder.feed(extra, final=True)
         notes.append("the log was not closed by its recorder: judged as --salvage judges it (partial)")

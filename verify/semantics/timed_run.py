@@ -19,7 +19,11 @@ from tubempc.mitl import Eventually, Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
 from verify.monitor.engine import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
-__all__ = ["TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
+__all__ = ["UNKNOWN_ENTRY", "TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
+
+#: the name of a timed-run entry whose regions are unknown (a NaN position, duplicates that disagree): every region
+#: label is unknown there, so the run's verdict is undecided unless a violation is shown elsewhere
+UNKNOWN_ENTRY = "?"
 
 
 def parse_spec(text: str) -> Formula:
@@ -81,7 +85,11 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
             inputs[name] = Truth(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
             continue
         holds = np.array([name in labels.get(region, ()) for region, _ in run], dtype=bool)
-        inputs[name] = truth_from_bool(holds)
+        truth = truth_from_bool(holds)
+        unknown = np.array([region == UNKNOWN_ENTRY for region, _ in run], dtype=bool)
+        if unknown.any():
+            truth = Truth(np.where(unknown, -np.inf, truth.lo), np.where(unknown, np.inf, truth.hi))
+        inputs[name] = truth
     values = evaluate(f, pos, inputs)
     root = values[f]
     verdict = verdict_of(float(root.lo[0]), float(root.hi[0]))
@@ -133,20 +141,29 @@ def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.fl
 
 
 def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64], names: Sequence[str],
-                      labels: Mapping[str, Sequence[str]]) -> tuple[list[tuple[str, float]], dict[str, list[str]]]:
+                      labels: Mapping[str, Sequence[str]], known: npt.NDArray[np.bool_] | None = None,
+                      ) -> tuple[list[tuple[str, float]], dict[str, list[str]]]:
     """Definition 3 when regions may overlap or nest: ``contains`` is ``(n_regions, n)`` (``geometry.containment``).
 
     Each maximal stretch of samples contained in the same non-empty *set* of regions starts an entry; the entry is
     named by its regions joined with ``+`` in scenario order (``room+table``) and carries the union of their
-    labels (a table inside a room: both labels hold). Returns the run and the labels of every entry name."""
+    labels (a table inside a room: both labels hold). ``known``: False where a sample's position is unknown; each
+    stretch of such samples is an entry ``UNKNOWN_ENTRY`` (its regions, hence its labels, unknown), never dropped.
+    Returns the run and the labels of every entry name."""
     n = contains.shape[1] if contains.ndim == 2 else 0
     if n == 0:
         return [], {}
-    change = np.flatnonzero(np.any(contains[:, 1:] != contains[:, :-1], axis=0)) + 1  # the set of regions changes
+    unknown = np.zeros(n, dtype=bool) if known is None else ~np.asarray(known, dtype=bool)
+    changed = np.any(contains[:, 1:] != contains[:, :-1], axis=0) | (unknown[1:] != unknown[:-1])
+    change = np.flatnonzero(changed) + 1  # the set of regions (or whether it is known) changes
     starts = np.concatenate(([0], change))
     run: list[tuple[str, float]] = []
     entry_labels: dict[str, list[str]] = {}
     for s in starts:
+        if unknown[s]:
+            run.append((UNKNOWN_ENTRY, float(times_s[s])))
+            entry_labels.setdefault(UNKNOWN_ENTRY, [])
+            continue
         members = [names[int(k)] for k in np.flatnonzero(contains[:, s])]
         if not members:
             continue
