@@ -357,6 +357,12 @@ class Head:
     def decided(self) -> bool:
         return self.closed or self.lo > 0 or self.hi < 0
 
+    @property
+    def margin_final(self) -> bool:
+        """Whether ``lo`` and ``hi`` are final: no later sample can change them (the verdict may be final earlier,
+        while a window is still open: an ``F`` already true can still become more so)."""
+        return self.closed
+
     def children(self) -> tuple[Head, ...]:
         return ()
 
@@ -380,6 +386,10 @@ class StreamHead(Head):
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or self.decided_ns is not None
 
     def need_from(self) -> int:
         return 0 if self.node.final == 0 else 1
@@ -428,6 +438,10 @@ class WindowHead(Head):
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or self.complete
 
     def need_from(self) -> int:
         return self.used
@@ -498,6 +512,10 @@ class BoolHead(Head):
 
     def children(self) -> tuple[Head, ...]:
         return tuple(self.kids)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or all(k.margin_final for k in self.kids)
 
     def need_from(self) -> int:
         return _NEVER  # reads no positions itself
