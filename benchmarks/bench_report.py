@@ -4,8 +4,8 @@
 
 ``certify_log`` on the demo log gives the certificate; its trajectory is tiled to each length (100 Hz) and the
 reports are written for that long trajectory. Prints, per length, the wall time of the formula's judgement with its
-per-obligation results and curves (``verify.judging.judge_formula``, part of certify) and of ``write_reports``, and the ratio of the report time to the time ``certify_log``
-takes on the demo log in the same process (the baseline).
+per-obligation results and curves (``verify.judging.judge_formula``, part of certify) and of ``write_reports``, and
+the ratio of the report time to the time ``certify_log`` takes on the demo log in the same process (the baseline).
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ import pandas as pd
 from tubempc.scenario import builtin_scenario
 from verify.certify import certify_log
 from verify.judging import judge_formula
-from verify.semantics.timed_run import parse_spec
 from verify.report import write_reports
+from verify.semantics.timed_run import parse_spec
 
 DEMO = Path(__file__).resolve().parent.parent / "logs" / "demo.mcap"
 

@@ -47,8 +47,8 @@ from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, entry_exits, parse_spec, timed_run_of_sets
 from verify.signals import signal_margin, signal_summary, values_at
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "POSITION_ROUNDING_M", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
-           "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "POSITION_ROUNDING_M", "CertifyResult", "HasCertificate",
+           "certify_data", "certify_log", "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
 
 
 

@@ -446,7 +446,7 @@ def _unknown_atom(atom: str, sub: str, i: int, tv: Any, ctx: _Context) -> Unknow
     from_ns, to_ns = int(pos.start_ns[a]), int(pos.stop_ns[b]) + (0 if pos.is_point[b] else 1)
     from_s, to_s = _s(from_ns), _s(to_ns)
     if atom in ctx.streams:
-        return _unknown_signal(atom, sub, i, from_s, to_s, tv, ctx)
+        return _unknown_signal(atom, sub, i, from_s=from_s, to_s=to_s, tv=tv, ctx=ctx)
     regions = ctx.regions(atom)
     if pos.is_point[i]:
         return Unknown(sub, atom, from_s, to_s,
@@ -469,7 +469,7 @@ def _unknown_atom(atom: str, sub: str, i: int, tv: Any, ctx: _Context) -> Unknow
                    f"samples at most {need:.3g} s apart there (or a lower speed bound) would decide it")
 
 
-def _unknown_signal(atom: str, sub: str, i: int, from_s: float, to_s: float, tv: Any, ctx: _Context) -> Unknown:
+def _unknown_signal(atom: str, sub: str, i: int, *, from_s: float, to_s: float, tv: Any, ctx: _Context) -> Unknown:
     stream = ctx.streams[atom]
     spec = stream.spec
     pos = tv.pos

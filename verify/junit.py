@@ -100,7 +100,7 @@ def _num(value: float | None, unit: str = "") -> str:
     return f"{value:.4g}{unit}" if value is not None and math.isfinite(value) else "-"
 
 
-def _case(name: str, classname: str, verdict: Verdict, summary: str, details: str,
+def _case(name: str, classname: str, verdict: Verdict, *, summary: str, details: str,
           inconclusive: InconclusiveAs) -> JUnitCase:
     if verdict is Verdict.PASS:
         return JUnitCase(name, classname)
@@ -128,14 +128,16 @@ def certificate_suite(certificate: Certificate, *, suite_name: str,
                    f"{_num(check.first_violation_time, ' s')}" + (f": {check.explanation}" if check.explanation
                                                                      else ""))
         details = "; ".join(f"{k}: {v}" for k, v in check.details.items())
-        cases.append(_case(check.name, suite_name, check.verdict, summary, details, inconclusive))
+        cases.append(_case(check.name, suite_name, check.verdict, summary=summary, details=details,
+                           inconclusive=inconclusive))
     for ob in certificate.obligations:
         unit = f" {ob.margin_unit}" if ob.margin_unit else ""
         summary = (f"{ob.verdict.value}: margin {_num(ob.margin, unit)}, first violation at "
                    f"{_num(ob.first_violation_time, ' s')}, decided at {_num(ob.decided_at, ' s')}"
                    + (f": {ob.explanation}" if ob.explanation else ""))
         name = ob.formula if ob.role == "conjunct" else f"{ob.formula} (whole formula)"
-        cases.append(_case(name, f"{suite_name}.obligations", ob.verdict, summary, summary, inconclusive))
+        cases.append(_case(name, f"{suite_name}.obligations", ob.verdict, summary=summary, details=summary,
+                           inconclusive=inconclusive))
     props = [("verdict", certificate.verdict.value), ("formula", certificate.formula),
              ("scenario_sha256", certificate.scenario_sha256), ("log_digest", certificate.log_digest),
              ("log_digest_algorithm", certificate.log_digest_algorithm)]

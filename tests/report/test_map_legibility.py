@@ -18,8 +18,8 @@ from tubempc.scenario import Scenario, builtin_scenario, load_scenario
 from verify.certificate import Certificate
 from verify.figures import render_figures
 from verify.judging import judge_formula
-from verify.semantics.timed_run import parse_spec
 from verify.report import write_reports
+from verify.semantics.timed_run import parse_spec
 from verify.workspace_map import map_texts, text_box, workspace_figure, workspace_map
 
 OUTDOOR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "outdoor-150m.yaml"

@@ -177,7 +177,7 @@ def test_margins_are_attributed_to_the_atom_they_are_the_value_of(tmp_path: Path
     spec = cert.check("spec_trajectory")
     assert spec is not None and spec.details["margin_atom"] == "ne_corner" and spec.margin_unit == "m"
     assert whole.first_violation_time == pytest.approx(tree.first_violation_time)  # the earliest violation
-    assert f"ne_corner at" in (whole.explanation or "")
+    assert "ne_corner at" in (whole.explanation or "")
     run = cert.check("spec_timed_run")
     assert run is not None and run.verdict.value == "fail"
 
@@ -223,7 +223,7 @@ def test_the_walkthroughs_report_shows_the_certificates_pass(tmp_path: Path) -> 
     assert {c.get("name") for c in suite.iter("testcase") if c.get("classname", "").endswith(".obligations")} >= {
         "G[0,inf) (!table & slow)", "F[15,25] dock"}
     assert "obligation G[0,inf) (!table & slow): pass, margin 0.1 m/s (slow)" in run.stderr
-    import verify.figures as figures
+    from verify import figures
 
     source = Path(figures.__file__).read_text()
     assert "check_trajectory" not in source and "judge_formula" not in source  # the figures judge nothing

@@ -44,10 +44,10 @@ from verify.geometry import (
 )
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
+from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
-from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.selection import select_checks
 from verify.semantics.timed_run import check_timed_run
 from verify.semantics.trajectory import reported_margin

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -100,7 +99,7 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
             inside = (dt >= lo_ns) & (True if hi_ns is None else dt <= hi_ns)
             d = np.where(has, np.where(inside, np.maximum(start[j], ad[j]), start[j]), float(pos.end_ns))
         elif isinstance(f, Until):
-            d = _until_times(f, pos, values, rec(f.left), rec(f.right), window_end)
+            d = _until_times(f, pos, values, da=rec(f.left), db=rec(f.right), window_end=window_end)
         else:
             raise TypeError(f"unknown formula node {f!r}")
         d = np.where(true | false, d, INF)
@@ -111,7 +110,7 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
     return memo
 
 
-def _until_times(f: Until, pos: Positions, values: Mapping[Formula, Truth], da: FloatArray, db: FloatArray,
+def _until_times(f: Until, pos: Positions, values: Mapping[Formula, Truth], *, da: FloatArray, db: FloatArray,
                  window_end: object) -> FloatArray:
     """``a U_I b``: true at its first witness (``b`` true at a point of the window, ``a`` true before it), settled
     when both are known there; false when ``a`` fails before any ``b`` could hold, or when the window closes."""

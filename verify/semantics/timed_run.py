@@ -56,7 +56,7 @@ def _to_ns(t: float) -> int:
 def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
                     end: float | None = None,
                     atom_values: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None = None,
-                    exits: Sequence[float] | None = None) -> TimedRunVerdict:
+                    *, exits: Sequence[float] | None = None) -> TimedRunVerdict:
     """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
 
     ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
@@ -92,7 +92,8 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
         return TimedRunVerdict("pass", str(f))
     why = explain(f, 0, pos, values)
     exit_ns = None if exits is None else np.array([_to_ns(float(t)) for t in exits], dtype=np.int64)
-    margin = _time_margin_s(values, why.subformula, why.time_ns, times, end_ns, exit_ns) if verdict == "fail" else None
+    margin = (_time_margin_s(values, why.subformula, why.time_ns, times, end_ns, exits=exit_ns) if verdict == "fail"
+              else None)
     margin_reason = None
     if verdict == "fail" and (margin is None or margin >= 0):
         margin = None
@@ -102,7 +103,7 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
 
 
 def _time_margin_s(values: Mapping[Formula, Any], subformula: str | None, time_ns: int, times: npt.NDArray[np.int64],
-                   end_ns: int, exits: npt.NDArray[np.int64] | None = None) -> float | None:
+                   end_ns: int, *, exits: npt.NDArray[np.int64] | None = None) -> float | None:
     """How far in time the run is from satisfying the witnessed sub-formula (seconds, <= 0).
 
     The pointwise semantics are boolean, so the margin is temporal: for ``F[a,b] phi`` never met, minus the time
