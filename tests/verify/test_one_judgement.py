@@ -140,6 +140,16 @@ def test_the_timed_run_pending_next_is_a_fail_at_its_window_end() -> None:
     assert check_timed_run("X[0,2] p", [("A", 0.0), ("B", 2.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "pass"
 
 
+def test_next_measures_the_time_from_each_entry_not_from_time_0() -> None:
+    """A mutant of ``_next`` that adds the entry's time to the next one's instead of subtracting it survived the
+    fast suite (every X was evaluated at time 0 only)."""
+    run = [("A", 0.0), ("P", 5.0), ("Q", 5.5)]
+    labels = {"A": [], "P": ["p"], "Q": ["q"]}
+    assert check_timed_run("G[0,inf) (p -> X[0,1] q)", run, labels, end=6.0).verdict == "pass"
+    assert check_timed_run("G[0,inf) (p -> X[0,0.4] q)", run, labels, end=6.0).verdict == "fail"
+    assert check_timed_run("G[0,inf) (p -> X[0.6,1] q)", run, labels, end=6.0).verdict == "fail"
+
+
 def _tree_scenario(tmp_path: Path) -> Scenario:
     """A field with a tree on the path (unsafe) and a far corner to reach."""
     path = tmp_path / "field.yaml"
