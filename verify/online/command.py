@@ -80,6 +80,11 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
         result = certify_log(_certified_path(log, res.finished), sc, spec=spec, time_base=time_base,
                              salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
+        if not quiet:  # the certificate's one-sentence explanation of each result that is not a pass
+            cert = result.certificate
+            for entry in [*cert.get("obligations", [])[1:], *cert.get("checks", [])]:
+                if entry.get("explanation"):
+                    click.echo(f"   why    {entry.get('formula') or entry.get('name')}: {entry['explanation']}")
         if not no_report:
             from verify.report import write_reports
 
