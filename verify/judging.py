@@ -495,6 +495,7 @@ def _unknown_signal(atom: str, sub: str, i: int, *, from_s: float, to_s: float, 
                        f"a usable {spec.field} there would decide it")
     silent = (int(pos.stop_ns[i]) + ctx.time0_ns - int(st[j])) * 1e-9
     if silent > hold_s:
+        from_s = max(from_s, _s(int(st[j]) + stream.hold_ns - ctx.time0_ns))  # unknown once the hold ran out
         return Unknown(sub, atom, from_s, to_s,
                        f"{spec.topic} silent {silent:.2f} s after its message at "
                        f"{_s(int(st[j]) - ctx.time0_ns):.2f} s > {period}", rate_hint)
