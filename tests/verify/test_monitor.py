@@ -229,3 +229,19 @@ def test_interval_bounds_round_inwards_to_whole_nanoseconds() -> None:
     assert bounds_ns(Interval(Fraction(3, 2) * ns, Fraction(5, 2) * ns, True, True)) == (2, 2)  # rounded inwards
     assert bounds_ns(Interval(Fraction(3, 2) * ns, Fraction(5, 2) * ns, False, False)) == (2, 2)
     assert bounds_ns(Interval(Fraction(3, 2) * ns, None, False, False)) == (2, None)
+
+
+def test_an_incomplete_inner_window_is_unknown_not_nan() -> None:
+    """``G F``: an inner ``F`` that already failed decides the ``G``, whatever the inner windows still open at the
+    end (their upper bound is +inf, which ``min`` skips; a NaN there would hide the failure)."""
+    run = [("A", 0.0), ("B", 5.0)]
+    labels: dict[str, list[str]] = {"A": [], "B": []}
+    assert check_timed_run("G[0,inf) F[0,2] p", run, labels, end=6.0).verdict == "fail"
+    assert check_timed_run("G[0,inf) F[0,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]},
+                           end=1.5).verdict == "pass"
+
+
+def test_next_includes_its_closed_lower_bound() -> None:
+    assert check_timed_run("X[1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "pass"
+    assert check_timed_run("X[0,1] p", [("A", 0.0), ("B", 0.0)], {"A": [], "B": ["p"]}, end=1.0).verdict == "pass"
+    assert check_timed_run("X(1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "fail"
