@@ -3,9 +3,9 @@
     python3 benchmarks/bench_report.py [--samples 11001 360000 1000000]
 
 ``certify_log`` on the demo log gives the certificate; its trajectory is tiled to each length (100 Hz) and the
-reports are written for that long trajectory. Prints, per length, the wall time of the per-obligation signals
-(``verify.obligations``) and of ``write_reports``, and the ratio of the report time to the time ``certify_log``
-takes on the demo log in the same process (the baseline).
+reports are written for that long trajectory. Prints, per length, the wall time of the formula's judgement with its
+per-obligation results and curves (``verify.judging.judge_formula``, part of certify) and of ``write_reports``, and
+the ratio of the report time to the time ``certify_log`` takes on the demo log in the same process (the baseline).
 """
 
 from __future__ import annotations
@@ -21,8 +21,9 @@ import pandas as pd
 
 from tubempc.scenario import builtin_scenario
 from verify.certify import certify_log
-from verify.obligations import obligations_of
+from verify.judging import judge_formula
 from verify.report import write_reports
+from verify.semantics.timed_run import parse_spec
 
 DEMO = Path(__file__).resolve().parent.parent / "logs" / "demo.mcap"
 
@@ -42,11 +43,12 @@ def main() -> None:
         idx = np.arange(n) % len(x0)
         traj = pd.DataFrame({"t_s": t, "x_m": x0[idx], "y_m": y0[idx], "theta_rad": 0.001 * t})
         cert = {**base.certificate, "duration_s": float(t[-1]), "judged_span_s": [0.0, float(t[-1])]}
-        result = SimpleNamespace(certificate=cert, exit_code=0, trajectory=traj, nominal=traj, inputs=None,
-                                 robustness=None)
         t0 = time.perf_counter()
-        obligations_of(cert["formula"], traj, sc, max_speed_mps=sc.max_speed_mps)
+        judged = judge_formula(parse_spec(cert["formula"]), np.round(t * 1e9).astype(np.int64), x0[idx], y0[idx], sc,
+                               time0_ns=0, max_speed_mps=sc.max_speed_mps)
         t1 = time.perf_counter()
+        result = SimpleNamespace(certificate=cert, exit_code=0, trajectory=traj, nominal=traj, inputs=None,
+                                 robustness=None, formula=judged)
         with tempfile.TemporaryDirectory() as tmp:
             write_reports(result, sc, tmp)
         t2 = time.perf_counter()

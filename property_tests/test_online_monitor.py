@@ -214,6 +214,13 @@ def test_close_equals_offline_on_random_runs(seed: int, n: int, spec: str, updat
             assert first == want["first_violation_time"], got.name
     if not late:
         assert res.verdict == cert["verdict"]
+        # every obligation's final verdict and margin are the certificate's (its obligations: the whole formula,
+        # then the conjuncts), whatever the batching
+        offline = {o["formula"]: o for o in cert["obligations"]}  # type: ignore[index]
+        for ob in res.state.obligations:
+            want = offline[ob.name]
+            assert ob.verdict == want["verdict"], (ob.name, ob.verdict, want["verdict"])
+            assert _same(ob.margin, want["margin"]), (ob.name, ob.margin, want["margin"])
     final = {c.name: c.verdict for c in (*res.state.checks, *res.state.obligations)}
     for name, verdict in seen:
         assert final[name] == verdict, name  # monotone: a decision made during the run is the final one

@@ -5,7 +5,12 @@ frozen ``Certificate`` (``Certificate.model_validate``), and ``certificate_schem
 ``docs/certificate.schema.json`` and printed by ``tubempc schema certificate``.
 
 Verdicts are an enum; every check states its margin's unit; a failed check must carry its first violation time and
-a margin (a validator refuses one without). Checks keep their own detail fields (``subformula``, ``reason``,
+a margin, or a null margin with ``margin_reason`` saying why no finite one exists (a formula false by constants or
+timing, a value that overflowed); a validator refuses anything else. ``obligations`` holds the formula's judgement
+per top-level conjunct (and for the whole formula), computed by the judging code (``verify.judging``): verdict,
+margin with the atom and unit it comes from, first violation, when it was decided, and for an undecided one which
+atom or window was unknown, when, why and what would decide it, with a one-sentence ``explanation`` that every
+report shows as is. Checks keep their own detail fields (``subformula``, ``reason``,
 ``radius_m``, ...) beside the common ones; the top level admits no field the schema does not name, so a new field
 is a schema change (and a ``CERTIFICATE_VERSION`` bump), never a silent one.
 """
@@ -18,13 +23,14 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 __all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
-           "NotChecked", "TimedRunEntry", "TubeInfo", "UnusableLog", "Verdict", "certificate_schema",
-           "certify_json_schema"]
+           "NotChecked", "ObligationEntry", "TimedRunEntry", "TubeInfo", "UnknownEntry", "UnusableLog", "Verdict",
+           "certificate_schema", "certify_json_schema"]
 
 #: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
-CERTIFICATE_VERSION = 3
-CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v3.json"
-CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v3.json"
+#: 4: per-obligation results; a failed check's margin may be null with margin_reason; decided_at and explanation
+CERTIFICATE_VERSION = 4
+CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v4.json"
+CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v4.json"
 
 
 class Verdict(StrEnum):
@@ -44,16 +50,24 @@ class CheckEntry(BaseModel):
                                   "obstacle_clearance, ...")
     verdict: Verdict
     margin: float | None = Field(description="worst margin in margin_unit (negative: violated); null when the check "
-                                             "could not compute one (then it is not a fail)")
+                                             "has no finite one (margin_reason says why) or is undecided")
     margin_unit: str | None = Field(description="unit of margin: m, s, m/s or rad/s, ...")
     first_violation_time: float | None = Field(description="seconds from time 0 of the first violation (fail only)")
+    margin_reason: str | None = Field(default=None, description="why a decided check states no finite margin")
+    decided_at: float | None = Field(default=None, description="seconds from time 0 when the data decided the "
+                                                               "verdict (null: undecided at the end of the log)")
+    explanation: str | None = Field(default=None, description="one sentence: why it is not a pass (a violation and "
+                                                              "its margin, or what is unknown and what would "
+                                                              "decide it)")
     subformula: str | None = Field(default=None, description="the sub-formula a formula check's witness names")
     reason: str | None = Field(default=None, description="why the check failed or could not be decided")
 
     @model_validator(mode="after")
     def _fail_has_time_and_margin(self) -> CheckEntry:
-        if self.verdict is Verdict.FAIL and (self.first_violation_time is None or self.margin is None):
-            raise ValueError(f"check {self.name!r} failed without a first violation time and a margin")
+        if self.verdict is Verdict.FAIL and self.first_violation_time is None:
+            raise ValueError(f"check {self.name!r} failed without a first violation time")
+        if self.verdict is Verdict.FAIL and self.margin is None and not self.margin_reason:
+            raise ValueError(f"check {self.name!r} failed without a margin and without a margin_reason")
         return self
 
     @property
@@ -61,6 +75,57 @@ class CheckEntry(BaseModel):
         """The check-specific fields (everything but the common ones)."""
         return dict(self.model_extra or {}) | {k: v for k, v in (("subformula", self.subformula),
                                                                    ("reason", self.reason)) if v is not None}
+
+
+class UnknownEntry(BaseModel):
+    """What left an obligation undecided: an atom over a stretch of time, or a window the log does not cover."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    subformula: str = Field(description="the undecided sub-formula the witness walk reached")
+    atom: str | None = Field(description="the atom that was unknown (null: a window or next sample, not an atom)")
+    from_s: float | None = Field(description="start of the unknown stretch or of the window (s from time 0)")
+    to_s: float | None = Field(description="end of the unknown stretch or of the window (null: unbounded)")
+    cause: str = Field(description="why it is unknown")
+    decide: str = Field(description="what data would decide it")
+
+
+class ObligationEntry(BaseModel):
+    """The formula's judgement under the trajectory semantics: for the whole formula (role ``formula``, the same
+    values as the spec_trajectory check) and for each top-level conjunct (role ``conjunct``)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    formula: str = Field(description="canonical text of the obligation")
+    role: Literal["formula", "conjunct"]
+    verdict: Verdict
+    margin: float | None = Field(description="pass: guaranteed robustness; fail: the optimistic one (violated by at "
+                                             "least that much), in margin_unit; null: none finite (margin_reason) "
+                                             "or undecided")
+    margin_unit: str | None = Field(description="unit of the atom the margin is the value of: m (regions) or the "
+                                                "signal field's unit")
+    margin_atom: str | None = Field(description="the atom whose value the margin is")
+    margin_time: float | None = Field(description="where that atom has that value (s from time 0; over a gap: the "
+                                                  "sample before it)")
+    margin_reason: str | None = Field(description="why a decided obligation states no finite margin")
+    first_violation_time: float | None = Field(description="the witness of the violation (s from time 0; fail only)")
+    decided_at: float | None = Field(description="when the data decided the verdict (s from time 0; null: undecided)")
+    subformula: str | None = Field(description="the sub-formula the witness names (fail or inconclusive)")
+    reason: str | None = Field(description="why that sub-formula is false or undecided")
+    unknown: UnknownEntry | None = Field(description="inconclusive only: what was unknown, when and why")
+    window: list[float | None] | None = Field(description="the conjunct's time window [lo, hi] in seconds (hi null: "
+                                                          "unbounded; null: no temporal operator at the top)")
+    explanation: str | None = Field(description="one sentence for a verdict other than pass")
+
+    @model_validator(mode="after")
+    def _complete(self) -> ObligationEntry:
+        if self.verdict is Verdict.FAIL and (self.first_violation_time is None or self.decided_at is None):
+            raise ValueError(f"obligation {self.formula!r} failed without a first violation and decision time")
+        if self.verdict is not Verdict.INCONCLUSIVE and self.margin is None and not self.margin_reason:
+            raise ValueError(f"obligation {self.formula!r} is decided without a margin and without a margin_reason")
+        if self.verdict is Verdict.INCONCLUSIVE and self.unknown is None:
+            raise ValueError(f"obligation {self.formula!r} is inconclusive without saying what is unknown")
+        return self
 
 
 class TimedRunEntry(BaseModel):
@@ -94,7 +159,7 @@ class Certificate(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", title="tubempc certificate")
 
-    certificate_version: Literal[3] = Field(description="bumped on every change of this schema")
+    certificate_version: Literal[4] = Field(description="bumped on every change of this schema")
     verdict: Verdict = Field(description="fail if any check fails; else inconclusive if any check is inconclusive "
                                          "or the log is partial; else pass")
     verdict_reason: str | None = Field(default=None, description="why a run without a violation is not a pass")
@@ -125,6 +190,9 @@ class Certificate(BaseModel):
     scenario_warnings: list[str] = Field(description="geometry the certifier accepts but a user may not mean")
     clock_findings: list[Any] | None = Field(default=None, description="what the clock checks found between topics")
     checks: list[CheckEntry]
+    obligations: list[ObligationEntry] = Field(description="the formula's judgement (trajectory semantics): the whole "
+                                                           "formula, then each top-level conjunct; empty when the "
+                                                           "formula checks were not selected")
     timed_run: list[TimedRunEntry]
     signals: dict[str, Any] | None = Field(default=None, description="per signal atom: topic, field, samples, range")
     data_quality: dict[str, Any]
@@ -133,6 +201,13 @@ class Certificate(BaseModel):
     def check(self, name: str) -> CheckEntry | None:
         return next((c for c in self.checks if c.name == name), None)
 
+    @property
+    def panels(self) -> list[ObligationEntry]:
+        """The obligations a reader checks one by one: the conjuncts, or the whole formula if it is not a
+        conjunction."""
+        parts = [o for o in self.obligations if o.role == "conjunct"]
+        return parts or [o for o in self.obligations if o.role == "formula"]
+
     def to_json_dict(self) -> dict[str, Any]:
         """The JSON-ready dict (optional fields that are null are left out)."""
         out = self.model_dump(mode="json", exclude={
@@ -140,7 +215,7 @@ class Certificate(BaseModel):
                         "clock_findings", "signals", "generator")
             if getattr(self, k) is None})
         for check in out["checks"]:
-            for key in ("subformula", "reason"):
+            for key in ("subformula", "reason", "margin_reason", "decided_at", "explanation"):
                 if check.get(key) is None:
                     check.pop(key, None)
         return out

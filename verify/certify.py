@@ -25,29 +25,36 @@ from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
-from verify.errors import ScenarioInputError, SpecError
+from verify.errors import ScenarioInputError
 from verify.geometry import containment, label_margins
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.ingest.fields import SignalStream, outside_span
+from verify.judging import (
+    EXIT_CODES,
+    POSITION_ROUNDING_M,
+    TUBE_TOLERANCE_RULE,
+    FormulaJudgement,
+    check_explanation,
+    formula_of,
+    judge_formula,
+    margin_entry,
+    overall_verdict,
+    timed_run_explanation,
+    tube_tolerance_m,
+)
 from verify.outputs import write_output_file
 from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
-from verify.semantics.timed_run import check_timed_run, parse_spec, timed_run_of_sets
-from verify.semantics.trajectory import check_trajectory, reported_margin
-from verify.signals import signal_bounds, signal_margin, signal_summary, values_at
+from verify.semantics.timed_run import check_timed_run, entry_exits, parse_spec, timed_run_of_sets
+from verify.signals import signal_margin, signal_summary, values_at
 
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "CertifyResult", "HasCertificate", "certify_data", "certify_log",
-           "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
+__all__ = ["CERTIFICATE_VERSION", "EXIT_CODES", "POSITION_ROUNDING_M", "CertifyResult", "HasCertificate",
+           "certify_data", "certify_log", "check_lines", "resolve_scenario", "verdict_line", "write_certificate"]
 
-#: added to the tube's tolerance: logged positions are absolute float64 (metres from the workspace origin), so a
-#: deviation computed from two of them carries ~1e-15 m of rounding; a run that rides the tube's boundary exactly (the
-#: lemma's worst case) must not fail on it
-POSITION_ROUNDING_M = 1e-9
-EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 2}
 
 
 Columns = dict[str, npt.NDArray[np.floating[Any]]]
@@ -97,6 +104,8 @@ class CertifyResult:
     def robustness(self) -> pd.DataFrame | None:
         """t_s, rho_m."""
         return self._table("robustness")
+    #: the judgement the obligations come from (curves for the reports)
+    formula: FormulaJudgement | None = field(default=None, compare=False)
 
     @property
     def verdict(self) -> str:
@@ -133,28 +142,22 @@ MARGIN_UNITS = {"spec_trajectory": "m", "spec_timed_run": "s", "tube": "m", "inp
                 "workspace": "m", "obstacle_clearance": "m"}
 
 
-def _check_entry(c: CheckResult, time0_ns: int) -> dict[str, Any]:
+def _check_entry(c: CheckResult, time0_ns: int, end_s: float) -> dict[str, Any]:
+    """A check as the certificate states it: the margin (or null with the reason), its unit, the first violation,
+    when the data decided it, and one sentence for a verdict other than pass (``verify.judging``)."""
     unit = c.details.get("margin_unit", MARGIN_UNITS.get(c.name))
-    return {"name": c.name, "verdict": c.verdict, "margin": _num(c.margin), "margin_unit": unit,
-            "first_violation_time": _rel_s(c.first_violation_ns, time0_ns),
-            **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin", "margin_unit")}}
-
-
-def _overall(checks: list[dict[str, Any]], partial: bool, problems: dict[str, str] | None = None
-             ) -> tuple[str, str | None]:
-    if not checks:
-        return "inconclusive", "no check was run: nothing is certified"
-    verdicts = [c["verdict"] for c in checks]
-    if "fail" in verdicts:
-        return "fail", None
-    if problems:
-        return "inconclusive", "; ".join(f"{k}: {v}" for k, v in sorted(problems.items()))
-    if "inconclusive" in verdicts:
-        names = [c["name"] for c in checks if c["verdict"] == "inconclusive"]
-        return "inconclusive", f"check(s) not decided: {', '.join(names)}"
-    if partial:
-        return "inconclusive", "the log is partial (salvaged): a partial log is never certified as pass"
-    return "pass", None
+    margin, margin_reason = margin_entry(c.verdict, c.margin, reason=c.details.get("margin_reason"))
+    first = _rel_s(c.first_violation_ns, time0_ns)
+    decided = c.details.get("decided_at", first if c.verdict == "fail" else
+                            (round(end_s, 9) if c.verdict == "pass" else None))
+    entry = {"name": c.name, "verdict": c.verdict, "margin": margin, "margin_unit": unit,
+             "first_violation_time": first,
+             **{k: v for k, v in c.details.items() if k not in ("name", "verdict", "margin", "margin_unit",
+                                                                 "margin_reason", "decided_at", "explanation")}}
+    entry["margin_reason"] = margin_reason
+    entry["decided_at"] = decided
+    entry["explanation"] = c.details.get("explanation") or check_explanation(entry)
+    return entry
 
 
 def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: str | None = None,
@@ -168,7 +171,7 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
-    formula_text = _formula_text(sc, spec)
+    formula_text = str(formula_of(sc, spec))
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
                    clock_offsets=clock_offsets)
     return _judge(log, sc, formula_text=formula_text, selection=selection)
@@ -180,17 +183,7 @@ def certify_data(log: LogData, scenario: Scenario | str | Path, *, spec: str | N
     streams it reads from a file: same checks, same margins, same verdicts."""
     sc = resolve_scenario(scenario)
     selection = select_checks(sc, checks)
-    return _judge(log, sc, formula_text=_formula_text(sc, spec), selection=selection)
-
-
-def _formula_text(sc: Scenario, spec: str | None) -> str:
-    formula = parse_spec(spec if spec is not None else sc.spec)
-    known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
-    unknown = sorted(atoms(formula) - known)
-    if unknown:
-        raise SpecError(f"formula {formula}: proposition(s) {', '.join(unknown)} label no region and name no "
-                        f"signal of scenario {sc.name!r}")
-    return str(formula)
+    return _judge(log, sc, formula_text=str(formula_of(sc, spec)), selection=selection)
 
 
 def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[str] | frozenset[str],
@@ -215,14 +208,6 @@ def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[st
     return dict(sorted(out.items()))
 
 
-def _spec_unit(streams: Mapping[str, SignalStream]) -> str:
-    """The formula's margin is the margin of the atom that decides it: metres, or a signal field's unit."""
-    if not streams:
-        return "m"
-    units = ", ".join(f"{k}: {v.spec.unit or 'its field unit'}" for k, v in sorted(streams.items()))
-    return f"m for region atoms; {units}"
-
-
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
            selection: Selection | None = None) -> CertifyResult:
     with np.errstate(all="ignore"):  # damaged values (1e308, inf) overflow to inf margins: judged, not warned
@@ -239,33 +224,46 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
 
     used = atoms(formula)
     streams = {k: v for k, v in log.signals.items() if k in used}
-    traj = check_trajectory(formula, t_rel, pose.x_m, pose.y_m, sc, max_speed_mps=v_max,
-                            signals={k: signal_bounds(v, pose.t_ns) for k, v in streams.items()})
+    judged = judge_formula(formula, t_rel, pose.x_m, pose.y_m, sc, time0_ns=t0, max_speed_mps=v_max,
+                           streams=streams)
+    whole = judged.whole
+
+    def rel(t_ns: int | None) -> float | None:
+        return None if t_ns is None else round(t_ns * 1e-9, 9)
+
     spec_traj = CheckResult(
         # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
-        "spec_trajectory", traj.verdict, reported_margin(traj.verdict, traj.margin_m, traj.margin_hi_m),
-        traj.time_ns + t0 if traj.verdict == "fail" and traj.time_ns is not None else None,
+        "spec_trajectory", whole.verdict, whole.margin,
+        whole.first_violation_ns + t0 if whole.first_violation_ns is not None else None,
         {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
                       "bounded by the speed bound)",
-         "guaranteed_margin_m": _num(traj.margin_m), "optimistic_margin_m": _num(traj.margin_hi_m),
-         "margin_unit": _spec_unit(streams),
+         "guaranteed_margin_m": _num(whole.lo), "optimistic_margin_m": _num(whole.hi),
+         "margin_unit": whole.margin_unit, "margin_atom": whole.margin_atom, "margin_time": rel(whole.margin_time_ns),
+         "margin_reason": whole.margin_reason, "decided_at": rel(whole.decided_ns),
+         "explanation": whole.explanation,
          "atom_margins": _atom_margins(sc, pose.x_m, pose.y_m, used - set(streams), streams),
-         **({"subformula": traj.subformula, "reason": traj.reason,
-             "time": _rel_s(traj.time_ns + t0 if traj.time_ns is not None else None, t0)}
-            if traj.verdict != "pass" else {})})
+         **({"subformula": whole.subformula, "reason": whole.reason,
+             "time": rel(whole.first_violation_ns) if whole.verdict == "fail" else
+             (whole.unknown.from_s if whole.unknown is not None else None)}
+            if whole.verdict != "pass" else {})})
 
     names = [r.name for r in sc.regions]
-    run, run_labels = timed_run_of_sets(containment(pose.x_m, pose.y_m, sc), t_rel.astype(np.float64) * 1e-9, names,
-                                        {r.name: list(r.labels) for r in sc.regions},
-                                        known=np.isfinite(pose.x_m) & np.isfinite(pose.y_m))
+    inside = containment(pose.x_m, pose.y_m, sc)
+    run_times = t_rel.astype(np.float64) * 1e-9
+    known = np.isfinite(pose.x_m) & np.isfinite(pose.y_m)
+    run, run_labels = timed_run_of_sets(inside, run_times, names, {r.name: list(r.labels) for r in sc.regions},
+                                        known=known)
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
     entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,
-                         atom_values={k: values_at(v, entry_ns) for k, v in streams.items()})
+                         atom_values={k: values_at(v, entry_ns) for k, v in streams.items()},
+                         exits=entry_exits(inside, run_times, known))
     spec_run = CheckResult(
         "spec_timed_run", tr.verdict, tr.margin_s,
         round(tr.time_s * 1e9) + t0 if tr.verdict == "fail" and tr.time_s is not None else None,
         {"semantics": "timed run (paper, Definition 3; pointwise)",
+         "explanation": timed_run_explanation(tr, end_s),
+         **({"margin_reason": tr.margin_reason} if tr.margin_reason else {}),
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
     outside = [f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's span, so "
@@ -276,7 +274,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": doubt})
                                if c.verdict == "pass" else c for c in (spec_traj, spec_run))
     checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
-    tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M
+    tol_m = tube_tolerance_m(sc)
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
     tube_info: dict[str, Any] | None = None
     if "tube" in selection:
@@ -287,17 +285,18 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         checks.append(check_tube(every.t_ns, every.x_m, every.y_m, nominal, radius_m=sc.tube_radius_m,
                                  tolerance_m=tol_m, match_ns=period_ns // 2))
         tube_info = {"radius_m": sc.tube_radius_m, "noise_tolerance_m": tol_m,
-                     "noise_tolerance_rule": "3 * scenario.mocap.noise_std + 1e-9 m (rounding of logged positions)"}
+                     "noise_tolerance_rule": TUBE_TOLERANCE_RULE}
     if "input_box" in selection:
         checks.append(check_input_box(log.cmd_t_ns, log.cmd_u, sc.inputs))
     if "workspace" in selection:
         checks.append(check_workspace(every.t_ns, every.x_m, every.y_m, sc))
     if "obstacle_clearance" in selection:
         checks.append(check_clearance(every.t_ns, every.x_m, every.y_m, sc))
-    entries = [_check_entry(c, t0) for c in checks]
+    entries = [_check_entry(c, t0, end_s) for c in checks]
     problems = {k: v for k, v in log.stream_problems.items()  # a signal's problem counts where the formula uses it
                 if not k.startswith("signal ") or k.removeprefix("signal ") in streams}
-    verdict, why = _overall(entries, log.partial, problems)
+    verdict, why = overall_verdict([(c["name"], c["verdict"]) for c in entries], partial=log.partial,
+                                   problems=problems)
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,
@@ -329,6 +328,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "scenario_warnings": sc.certification_warnings() + data_findings(sc, every.t_ns, every.x_m, every.y_m, t0),
         "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
+        "obligations": [o.to_json() for o in judged.entries] if "spec" in selection else [],
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
                         for k, v in log.signals.items()}} if log.signals else {}),
@@ -349,9 +349,10 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         tables["inputs"] = {"t_s": (log.cmd_t_ns - t0) * 1e-9, "u1": log.cmd_u[:, 0], "u2": log.cmd_u[:, 1],
                             "u3": log.cmd_u[:, 2]}
     if t_rel.size:
-        tables["robustness"] = {"t_s": traj.signal_t_ns * 1e-9, "rho_m": traj.signal_rho_m}
+        tables["robustness"] = {"t_s": judged.signal_t_ns * 1e-9, "rho_m": judged.signal}
     typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
-    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables)
+    return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables,
+                         formula=judged if "spec" in selection else None)
 
 
 def _jsonable(obj: Any) -> Any:
@@ -385,15 +386,34 @@ def verdict_line(log: str | Path, certificate: dict[str, Any]) -> str:
     return line
 
 
+def _margin_text(entry: Mapping[str, Any]) -> str:
+    margin = entry.get("margin")
+    if not isinstance(margin, int | float):
+        return "margin -"
+    unit = entry.get("margin_unit") or ""
+    atom = entry.get("margin_atom")
+    return f"margin {margin:.4g} {unit}".rstrip() + (f" ({atom})" if atom else "")
+
+
+def _entry_line(name: str, entry: Mapping[str, Any]) -> list[str]:
+    t, decided = entry.get("first_violation_time"), entry.get("decided_at")
+    line = (f"  {name}: {entry.get('verdict')}, {_margin_text(entry)}"
+            + (f", first violation at t={t:.2f} s" if isinstance(t, int | float) else "")
+            + (f", decided at t={decided:.2f} s" if isinstance(decided, int | float) else ""))
+    why = entry.get("explanation")
+    return [line] + ([f"    why: {why}"] if why else [])
+
+
 def check_lines(certificate: dict[str, Any]) -> list[str]:
-    """One line per check with its margin and first violation (``certify -v``)."""
-    lines = []
+    """``certify -v``: one line per check and per obligation of the formula with the certificate's margin (its unit
+    and, for a formula, the atom it is the value of), first violation and decision time; under a verdict other than
+    pass, the certificate's one-sentence explanation."""
+    lines: list[str] = []
     for c in certificate.get("checks", []) or []:
-        margin, t = c.get("margin"), c.get("first_violation_time")
-        unit = c.get("margin_unit") or ""
-        m = f"margin {margin:.4g} {unit}".rstrip() if isinstance(margin, int | float) else "margin -"
-        lines.append(f"  {c.get('name')}: {c.get('verdict')}, {m}"
-                     + (f", first violation at t={t:.2f} s" if isinstance(t, int | float) else ""))
+        lines += _entry_line(str(c.get("name")), c)
+    for o in certificate.get("obligations", []) or []:
+        role = "formula" if o.get("role") == "formula" else "obligation"
+        lines += _entry_line(f"{role} {o.get('formula')}", o)
     return lines
 
 

@@ -44,6 +44,13 @@ def _finite_min(a: FloatArray) -> float | None:
     return float(finite.min()) if finite.size else None
 
 
+def _least(a: FloatArray) -> float:
+    """A failed check's margin: the least margin over its samples, -inf included (a value that overflowed violates
+    by an unbounded amount; the certificate then states a null margin with the reason), NaN ignored."""
+    with np.errstate(all="ignore"):
+        return float(np.nanmin(a))
+
+
 def margin_check(name: str, t_ns: IntArray, margin: FloatArray, step_m: FloatArray,
                  details: dict[str, Any]) -> CheckResult:
     """Samples: fail where the margin < 0; gaps: inconclusive where the conservative bound < 0 (or data is NaN)."""
@@ -52,7 +59,7 @@ def margin_check(name: str, t_ns: IntArray, margin: FloatArray, step_m: FloatArr
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))
-        return CheckResult(name, "fail", _finite_min(margin), int(t_ns[k]), details)
+        return CheckResult(name, "fail", _least(margin), int(t_ns[k]), details)
     gaps = gap_bounds(margin, step_m)
     nan = np.isnan(margin)
     worst_gap = float(gaps.lo.min()) if gaps.lo.size else np.inf
@@ -112,7 +119,7 @@ def check_tube(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, nominal: tuple[
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))
-        return CheckResult("tube", "fail", _finite_min(margin), int(t_ns[k]),
+        return CheckResult("tube", "fail", _least(margin), int(t_ns[k]),
                            {**details, "max_deviation_m": float(np.nanmax(dev))})
     if np.isnan(margin).any():
         return CheckResult("tube", "inconclusive", _finite_min(margin), None,
@@ -121,6 +128,8 @@ def check_tube(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, nominal: tuple[
     return CheckResult("tube", "pass", _finite_min(margin), None, {**details, "max_deviation_m": float(dev.max())})
 
 
+#: the unit of each command component
+COMPONENT_UNITS = {"linear.x": "m/s", "linear.y": "m/s", "angular.z": "rad/s"}
 #: the component names of each input model, in the order of the bounds (``inputs.max_abs``)
 INPUT_COMPONENTS = {"holonomic": ("linear.x", "linear.y", "angular.z"),
                     "unicycle": ("linear.x", "angular.z", "linear.y")}
@@ -142,7 +151,7 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
     details: dict[str, Any] = {"model": limits.model, "max_abs": list(limits.max_abs),
                                "bounds": dict(zip(names, bounds.tolist(), strict=True)),
                                "tolerance": INPUT_TOLERANCE, "frame": "body (as logged)",
-                               "margin_unit": "m/s for linear.x and linear.y, rad/s for angular.z"}
+                               "margin_unit": "m/s or rad/s"}
     if t_ns is None or u is None or t_ns.size == 0:
         return CheckResult("input_box", "inconclusive", None, None, {**details, "reason": "no cmd_vel logged"})
     per = bounds[None, :] + INPUT_TOLERANCE - np.abs(u[:, cols])
@@ -154,11 +163,15 @@ def check_input_box(t_ns: IntArray | None, u: FloatArray | None, limits: InputLi
         worst = np.nanmin(per, axis=0) if np.isfinite(per).any() else np.full(3, np.nan)
     details["component_margins"] = {n: (float(m) if np.isfinite(m) else None) for n, m in zip(names, worst,
                                                                                               strict=True)}
+    if np.isfinite(worst).any():  # the margin is the tightest component's, in that component's unit
+        tight = names[int(np.nanargmin(np.where(np.isnan(worst), np.inf, worst)))]
+        details["margin_component"] = tight
+        details["margin_unit"] = COMPONENT_UNITS[tight]
     bad = margin < 0
     if np.any(bad):
         k = int(np.argmax(bad))
         comp = int(np.argmin(np.where(unknown[k], np.inf, per[k])))
-        return CheckResult("input_box", "fail", _finite_min(margin), int(t_ns[k]),
+        return CheckResult("input_box", "fail", _least(margin), int(t_ns[k]),
                            {**details, "component": names[comp], "value": float(u[k, cols[comp]])})
     if unknown.any():
         return CheckResult("input_box", "inconclusive", _finite_min(margin), None,

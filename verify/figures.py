@@ -4,7 +4,8 @@ input: the arrays of a certification (trajectory, nominal, inputs), its certific
 checks) and the scenario -> output: PNG bytes per figure, or ``None`` when the data for a figure is absent.
 
 Figures, in report order: the workspace map (``verify.workspace_map``), one panel per obligation of the formula
-(``verify.obligations``: the margin of its target, its window, verdict and violation), the clearance of the robot
+(its verdict, margin, violation and decision as the certificate states them, and the curve of its target's margin
+that the judging code computed with them, ``verify.judging``; nothing is judged here), the clearance of the robot
 disc from obstacles and the workspace edge, the states x(t), y(t), theta(t) (unwrapped) with the workspace bounds
 and the tube band (the paper's figures 6-8), the tube error, the inputs u1..u3 with their box (figures 9-11), and
 the sampling intervals (data quality: dropouts and out-of-order stamps). matplotlib is confined to the figure
@@ -24,9 +25,9 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from tubempc.scenario import Scenario
-from verify.certificate import Certificate, Verdict
+from verify.certificate import Certificate, ObligationEntry, Verdict
 from verify.geometry import region_margins, workspace_margin
-from verify.obligations import Obligation, obligations_of
+from verify.judging import FormulaJudgement, ObligationResult
 from verify.workspace_map import tube_radius_or_nan, workspace_figure
 
 __all__ = [
@@ -211,55 +212,74 @@ def tube_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.Dat
     return _png(fig)
 
 
-def _window_label(window: tuple[float, float]) -> str:
-    hi = "inf" if math.isinf(window[1]) else f"{window[1]:g}"
-    return f"window [{window[0]:g}, {hi}] s"
+def _window_label(window: Sequence[float | None]) -> str:
+    hi = window[1]
+    return f"window [{window[0]:g}, {'inf' if hi is None or math.isinf(hi) else f'{hi:g}'}] s"
 
 
-def obligations_figure(obligations: Sequence[Obligation], duration_s: float | None) -> bytes | None:
-    """One panel per top-level obligation: the margin of its body over time, its window shaded, its verdict and
-    the witness of a violation. A missed window shows as a curve that turns positive only after the window."""
+def obligations_figure(obligations: Sequence[ObligationEntry], duration_s: float | None,
+                       curves: Sequence[ObligationResult] = ()) -> bytes | None:
+    """One panel per obligation (``Certificate.panels``): its verdict, margin, violation and decision as the
+    certificate states them, the curve of its target's margin (``curves``: the judging code's, matched by formula
+    text; absent when the report is made from a certificate alone), and its window shaded."""
     if not obligations:
         return None
+    by_text = {c.formula: c for c in curves}
     n = len(obligations)
     fig = Figure(figsize=(8.0, 1.2 + 2.0 * n))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.5 / (1.2 + 2.0 * n), top=1 - 0.75 / (1.2 + 2.0 * n),
-                        hspace=0.6)
+                        hspace=0.7)
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     end = duration_s if duration_s is not None and math.isfinite(duration_s) else None
     for ax, ob in zip(axes, obligations, strict=True):
-        env = _envelope(pd.DataFrame({"t_s": ob.t_s, "rho_m": ob.body_margin_m}), ("rho_m",))
-        t, rho = env["t_s"].to_numpy(dtype=float), env["rho_m"].to_numpy(dtype=float)
+        curve = by_text.get(ob.formula)
+        if curve is not None and curve.curve_t_ns.size:
+            env = _envelope(pd.DataFrame({"t_s": curve.curve_t_ns * 1e-9, "rho": curve.curve}), ("rho",))
+            t, rho = env["t_s"].to_numpy(dtype=float), env["rho"].to_numpy(dtype=float)
+        else:
+            t, rho = np.zeros(0), np.zeros(0)
         last = end if end is not None else (float(t[-1]) if t.size else 0.0)
-        if ob.window_s is not None:
-            lo, hi = ob.window_s
+        in_window = np.ones_like(t, dtype=bool)
+        if ob.window is not None:
+            lo = float(ob.window[0] or 0.0)
+            hi = math.inf if ob.window[1] is None else float(ob.window[1])
             if lo < last:
-                ax.axvspan(lo, min(hi, last), color="#1f77b4", alpha=0.12, lw=0, label=_window_label(ob.window_s))
+                ax.axvspan(lo, min(hi, last), color="#1f77b4", alpha=0.12, lw=0, label=_window_label(ob.window))
             # an unbounded window ranges to the end of the log (finite-log semantics): nothing to say about it
-            note = ("" if hi <= last or math.isinf(hi) else f"{_window_label(ob.window_s)} opens after the log ends"
+            note = ("" if hi <= last or math.isinf(hi) else f"{_window_label(ob.window)} opens after the log ends"
                     if lo >= last else "the window continues past the log end: undecided there")
             if note:
                 ax.annotate(note, (0.995, 0.96), xycoords="axes fraction", ha="right", va="top", fontsize=7,
                             color="#1f77b4", bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none"})
             in_window = (t >= lo) & (t <= hi)
+        if t.size:
+            ax.plot(t, rho, color="black", lw=1.0, label=f"margin of {_short(curve.body if curve else ob.formula)}")
+            if ob.verdict is Verdict.FAIL:  # where the failed obligation's target was missed inside its window
+                ax.fill_between(t, rho, 0.0, where=in_window & (rho < 0), color=_FAIL_COLOUR, alpha=0.25, lw=0)
         else:
-            in_window = np.ones_like(t, dtype=bool)
-        ax.plot(t, rho, color="black", lw=1.0, label=f"margin of {_short(ob.body)}")
-        if ob.verdict == "fail":  # where the failed obligation's target was missed inside its window
-            ax.fill_between(t, rho, 0.0, where=in_window & (rho < 0), color=_FAIL_COLOUR, alpha=0.25, lw=0)
+            ax.annotate("no margin curve (report made from the certificate alone)", (0.5, 0.5),
+                        xycoords="axes fraction", ha="center", va="center", fontsize=8, color="#555555")
         ax.axhline(0.0, color="grey", lw=0.8)
-        if ob.violation_s is not None:
-            ax.axvline(ob.violation_s, color=_FAIL_COLOUR, lw=1.2, ls="--")
-            ax.plot([ob.violation_s], [0.0], "X", color=_FAIL_COLOUR, ms=9, label=f"violated at {ob.violation_s:.2f} s")
-        colour = _VERDICT_COLOURS.get(ob.verdict, "#555555")
-        margin = "" if ob.margin_m is None else f", margin {ob.margin_m:.3g} m"
-        if ob.verdict == "inconclusive" and ob.reason:
-            margin += f" ({_short(ob.reason, 50)})"
-        ax.set_title(f"{_short(ob.formula, 70)}: {ob.verdict.upper()}{margin}", fontsize=9, color=colour,
+        if ob.first_violation_time is not None:
+            tv = ob.first_violation_time
+            ax.axvline(tv, color=_FAIL_COLOUR, lw=1.2, ls="--")
+            ax.plot([tv], [0.0], "X", color=_FAIL_COLOUR, ms=9, label=f"violated at {tv:.2f} s")
+        if ob.decided_at is not None and ob.verdict is not Verdict.FAIL:
+            ax.axvline(ob.decided_at, color=_VERDICT_COLOURS["pass"], lw=0.8, ls=":",
+                       label=f"decided at {ob.decided_at:.2f} s")
+        colour = _VERDICT_COLOURS.get(ob.verdict.value, "#555555")
+        margin = ("" if ob.margin is None else f", margin {ob.margin:.4g} {ob.margin_unit or ''}".rstrip())
+        ax.set_title(f"{_short(ob.formula, 70)}: {ob.verdict.value.upper()}{margin}", fontsize=9, color=colour,
                      loc="left", weight="bold")
-        ax.set_ylabel("margin [m]")
+        if ob.explanation:
+            ax.annotate(_short(ob.explanation, 120), (0.005, 0.04), xycoords="axes fraction", ha="left",
+                        va="bottom", fontsize=6.5, color=colour,
+                        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.8})
+        unit = curve.body_unit if curve is not None else ob.margin_unit
+        ax.set_ylabel(f"margin [{unit}]" if unit and not unit.startswith("mixed") else "margin", fontsize=8)
         ax.grid(alpha=0.3)
-        ax.legend(loc="best", fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="best", fontsize=7)
         if end is not None:
             ax.set_xlim(min(0.0, float(t[0])) if t.size else 0.0, end)
     axes[-1].set_xlabel("t [s]")
@@ -329,22 +349,23 @@ def sampling_figure(scenario: Scenario, trajectory: pd.DataFrame | None) -> byte
 
 def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: pd.DataFrame | None,
                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
-                   robustness: pd.DataFrame | None) -> list[FigureSpec]:
+                   robustness: pd.DataFrame | None, judgement: FormulaJudgement | None = None) -> list[FigureSpec]:
     """Every figure that the data allows, in the order a reader asks: the map and the obligations, clearance, then
     states, tube and inputs, then data quality. (``robustness``, the whole formula's signal, is not drawn: one
-    curve for a conjunction hides which obligation failed; each obligation gets its own panel instead.)"""
+    curve for a conjunction hides which obligation failed; each obligation gets its own panel instead.) The
+    obligation panels read the certificate's ``obligations`` and the curves of ``judgement`` (the judging code's)."""
     del robustness
-    obligations = (obligations_of(certificate.formula, trajectory, scenario, max_speed_mps=scenario.max_speed_mps)
-                   if trajectory is not None else ())
+    curves = judgement.panels if judgement is not None else ()
     duration_s = certificate.duration_s
     out: list[FigureSpec] = [FigureSpec(
         "workspace", "Workspace map: regions, the path coloured by time with its direction, the tube band around the "
         "nominal, the timed run (numbered), and each first violation with what failed.",
         workspace_figure(certificate, scenario, trajectory, nominal))]
     optional = (
-        ("obligations", "Each obligation of the formula on its own panel: the margin of its target (metres, > 0 "
-         "satisfied), its window shaded, its verdict and where it was violated.",
-         obligations_figure(obligations, duration_s)),
+        ("obligations", "Each obligation of the formula on its own panel, as the certificate states it: its verdict, "
+         "margin, where it was violated or when it was decided, the margin of its target over time (> 0 satisfied "
+         "there; metres, or the signal's unit) and its window shaded.",
+         obligations_figure(certificate.panels, duration_s, curves)),
         ("clearance", "Clearance of the robot disc from the nearest unsafe region and from the workspace edge.",
          clearance_figure(certificate, scenario, trajectory)),
         ("states", "x(t), y(t), theta(t) (unwrapped) with the nominal, the tube band and the workspace bounds.",

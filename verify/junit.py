@@ -99,28 +99,44 @@ def _num(value: float | None, unit: str = "") -> str:
     return f"{value:.4g}{unit}" if value is not None and math.isfinite(value) else "-"
 
 
+def _case(name: str, classname: str, verdict: Verdict, *, summary: str, details: str,
+          inconclusive: InconclusiveAs) -> JUnitCase:
+    if verdict is Verdict.PASS:
+        return JUnitCase(name, classname)
+    if verdict is Verdict.FAIL:
+        return JUnitCase(name, classname, "failure", "violation", summary, details or summary)
+    if inconclusive == "skipped":
+        return JUnitCase(name, classname, "skipped", message=summary)
+    return JUnitCase(name, classname, "failure", "inconclusive", f"{summary} (could not be decided: not a pass)",
+                     details or summary)
+
+
 def certificate_suite(certificate: Certificate, *, suite_name: str,
                       inconclusive: InconclusiveAs = "failure") -> JUnitSuite:
-    """One test case per check of a certificate: a failed check is a ``failure`` of type ``violation``; an
-    inconclusive one a ``failure`` of type ``inconclusive`` (or ``skipped``); properties carry the verdict, the
-    formula and the hashes."""
+    """One test case per check and one per obligation of the formula (classname ``<suite>.obligations``; the
+    whole formula and each top-level conjunct) of a certificate: a failed one is a ``failure`` of type
+    ``violation``; an inconclusive one a ``failure`` of type ``inconclusive`` (or ``skipped``). The message states
+    the certificate's verdict, margin, first violation and its one-sentence explanation; properties carry the
+    verdict, the formula and the hashes."""
     if inconclusive not in INCONCLUSIVE_AS:
         raise ValueError(f"inconclusive={inconclusive!r} is not one of {INCONCLUSIVE_AS}")
     cases = []
     for check in certificate.checks:
         unit = f" {check.margin_unit}" if check.margin_unit else ""
         summary = (f"{check.verdict.value}: margin {_num(check.margin, unit)}, first violation at "
-                   f"{_num(check.first_violation_time, ' s')}")
+                   f"{_num(check.first_violation_time, ' s')}" + (f": {check.explanation}" if check.explanation
+                                                                     else ""))
         details = "; ".join(f"{k}: {v}" for k, v in check.details.items())
-        if check.verdict is Verdict.PASS:
-            cases.append(JUnitCase(check.name, suite_name))
-        elif check.verdict is Verdict.FAIL:
-            cases.append(JUnitCase(check.name, suite_name, "failure", "violation", summary, details or summary))
-        elif inconclusive == "skipped":
-            cases.append(JUnitCase(check.name, suite_name, "skipped", message=f"{summary}. {details}".strip(" .")))
-        else:
-            cases.append(JUnitCase(check.name, suite_name, "failure", "inconclusive",
-                                   f"{summary} (the check could not be decided: not a pass)", details or summary))
+        cases.append(_case(check.name, suite_name, check.verdict, summary=summary, details=details,
+                           inconclusive=inconclusive))
+    for ob in certificate.obligations:
+        unit = f" {ob.margin_unit}" if ob.margin_unit else ""
+        summary = (f"{ob.verdict.value}: margin {_num(ob.margin, unit)}, first violation at "
+                   f"{_num(ob.first_violation_time, ' s')}, decided at {_num(ob.decided_at, ' s')}"
+                   + (f": {ob.explanation}" if ob.explanation else ""))
+        name = ob.formula if ob.role == "conjunct" else f"{ob.formula} (whole formula)"
+        cases.append(_case(name, f"{suite_name}.obligations", ob.verdict, summary=summary, details=summary,
+                           inconclusive=inconclusive))
     props = [("verdict", certificate.verdict.value), ("formula", certificate.formula),
              ("scenario_sha256", certificate.scenario_sha256), ("log_digest", certificate.log_digest),
              ("log_digest_algorithm", certificate.log_digest_algorithm)]

@@ -2,8 +2,11 @@
 
 input: a ``CertifyResult`` (certificate dict plus trajectory/nominal/inputs/robustness frames) and the scenario
 -> output: ``report.md`` (figures as files under ``figures/``), a self-contained ``report.html`` (figures embedded
-as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (``verify.junit``: one test case per check, a
-``failure`` for a failed check and, by default, for an inconclusive one) so that CI systems show the checks natively.
+as base64 PNG, inline CSS, no script, no network), and ``junit.xml`` (``verify.junit``: one test case per check and per
+obligation, a ``failure`` for a failed one and, by default, for an inconclusive one) so that CI systems show them
+natively. The reports read the certificate (and the curves the judging code computed with it); they never judge:
+every verdict, margin, time and explanation shown is the certificate's, and the text of each comes from one
+formatter here (``check_row``, ``obligation_row``) shared by the Markdown and the HTML.
 
 Every string that comes from a log or a scenario is escaped: ``html.escape`` in HTML, entity and backslash escapes
 in Markdown, ElementTree (plus removal of characters XML 1.0 cannot carry) in JUnit.
@@ -25,7 +28,7 @@ from typing import Any, Protocol
 import pandas as pd
 
 from tubempc.scenario import Scenario
-from verify.certificate import Certificate, CheckEntry
+from verify.certificate import Certificate, CheckEntry, ObligationEntry
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
@@ -35,9 +38,11 @@ __all__ = [
     "CertifyResultLike",
     "ReportSection",
     "ReportWriteError",
+    "check_row",
     "html_report",
     "junit_xml",
     "markdown_report",
+    "obligation_row",
     "write_junit",
     "write_reports",
 ]
@@ -102,10 +107,6 @@ def typed(result: CertifyResultLike) -> Certificate:
     return Certificate.model_validate(result.certificate)
 
 
-def _check_details(check: CheckEntry) -> str:
-    return "; ".join(_detail(str(k), v) for k, v in sorted(check.details.items(), key=lambda kv: str(kv[0])))
-
-
 def _detail(key: str, value: Any) -> str:
     """One detail of a check; the per-atom margins as ``name [min, max] unit`` (the full values are in the
     certificate)."""
@@ -131,11 +132,38 @@ def fmt_time(value: Any) -> str:
     return "-"
 
 
-def fmt_margin(check: CheckEntry) -> str:
-    """A margin with 4 significant digits and its unit (``-0.004 m``), ``-`` when absent."""
+def fmt_margin(check: CheckEntry | ObligationEntry) -> str:
+    """A margin with 4 significant digits and its unit (``-0.004 m``), ``-`` when absent; a formula's names the
+    atom it is the value of (``-0.405 m (obs_3)``)."""
     if check.margin is None or not math.isfinite(check.margin):
         return "-"
-    return f"{check.margin:.4g} {check.margin_unit}" if check.margin_unit else f"{check.margin:.4g}"
+    text = f"{check.margin:.4g} {check.margin_unit}" if check.margin_unit else f"{check.margin:.4g}"
+    atom = check.margin_atom if isinstance(check, ObligationEntry) else check.details.get("margin_atom")
+    return f"{text} ({atom})" if isinstance(atom, str) and atom else text
+
+
+#: the columns of the checks table and of the obligations table (the same in Markdown and HTML)
+CHECK_COLUMNS = ("check", "verdict", "margin", "first violation", "decided at", "why", "details")
+OBLIGATION_COLUMNS = ("obligation", "verdict", "margin", "first violation", "decided at", "why")
+
+#: detail fields shown elsewhere (their own columns) or too long for the table (in the certificate)
+_HIDDEN_DETAILS = ("margin_atom", "margin_time", "explanation", "decided_at", "margin_reason")
+
+
+def check_row(check: CheckEntry) -> tuple[str, ...]:
+    """One row of the checks table, as text: the certificate's values, formatted once for every report."""
+    details = "; ".join(_detail(str(k), v) for k, v in sorted(check.details.items(), key=lambda kv: str(kv[0]))
+                        if k not in _HIDDEN_DETAILS)
+    return (check.name, check.verdict.value, fmt_margin(check), fmt_time(check.first_violation_time),
+            fmt_time(check.decided_at), check.explanation or ("-" if check.margin_reason is None
+                                                               else check.margin_reason), details)
+
+
+def obligation_row(ob: ObligationEntry) -> tuple[str, ...]:
+    """One row of the obligations table (the whole formula first, then each conjunct)."""
+    name = ob.formula if ob.role == "conjunct" else f"{ob.formula} (whole formula)"
+    return (name, ob.verdict.value, fmt_margin(ob), fmt_time(ob.first_violation_time), fmt_time(ob.decided_at),
+            ob.explanation or "-")
 
 
 def _summary_rows(cert: Certificate) -> list[tuple[str, str]]:
@@ -147,7 +175,7 @@ def _summary_rows(cert: Certificate) -> list[tuple[str, str]]:
     return rows
 
 
-_MAIN_FIELDS = ("verdict", "checks", "timed_run", "data_quality")
+_MAIN_FIELDS = ("verdict", "checks", "obligations", "timed_run", "data_quality")
 
 
 def _meta_rows(cert: Certificate, scenario: Scenario) -> list[tuple[str, str]]:
@@ -234,13 +262,15 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     lines += [f"- {_md(t)}" for t in _top_lines(cert)] + [""]
     lines += ["| | |", "|---|---|"]
     lines += [f"| {_md(k)} | {_md(v)} |" for k, v in _summary_rows(cert)]
-    lines += ["", "## Checks", "", "| check | verdict | margin | first violation | details |",
-              "|---|---|---|---|---|"]
-    for check in cert.checks:
-        lines.append(f"| {_md(check.name)} | {_md(check.verdict.value)} | {_md(fmt_margin(check))} | "
-                     f"{_md(fmt_time(check.first_violation_time))} | {_md(_check_details(check))} |")
+    lines += ["", "## Checks", "", "| " + " | ".join(CHECK_COLUMNS) + " |", "|" + "---|" * len(CHECK_COLUMNS)]
+    lines += ["| " + " | ".join(_md(c) for c in check_row(check)) + " |" for check in cert.checks]
     lines += [""] + [f"- {_md(note)}" for note in _not_run_notes(cert)]
-    lines += ["", "## Map and obligations", "", *figs("map"), "### Timed run", ""]
+    lines += ["", "## Map and obligations", ""]
+    if cert.obligations:
+        lines += ["| " + " | ".join(OBLIGATION_COLUMNS) + " |", "|" + "---|" * len(OBLIGATION_COLUMNS)]
+        lines += ["| " + " | ".join(_md(c) for c in obligation_row(ob)) + " |" for ob in cert.obligations]
+        lines.append("")
+    lines += [*figs("map"), "### Timed run", ""]
     run = cert.timed_run
     if run:
         lines += ["| # | region | entered at |", "|---|---|---|"]
@@ -308,17 +338,27 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
                if _top_lines(cert) else []),
              '<table class="summary">']
     parts += [f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in _summary_rows(cert)]
-    parts += ["</table>", "<h2>Checks</h2>", '<table class="checks"><tr><th>check</th><th>verdict</th>'
-              "<th>margin</th><th>first violation</th><th>details</th></tr>"]
+    parts += ["</table>", "<h2>Checks</h2>",
+              '<table class="checks"><tr>' + "".join(f"<th>{_e(c)}</th>" for c in CHECK_COLUMNS) + "</tr>"]
     for check in cert.checks:
-        parts.append(f"<tr><td>{_e(check.name)}</td><td>{_badge(check.verdict.value)}</td>"
-                     f"<td>{_e(fmt_margin(check))}</td><td>{_e(fmt_time(check.first_violation_time))}</td>"
-                     f"<td>{_e(_check_details(check))}</td></tr>")
+        row = check_row(check)
+        parts.append(f"<tr><td>{_e(row[0])}</td><td>{_badge(row[1])}</td>"
+                     + "".join(f"<td>{_e(c)}</td>" for c in row[2:5])
+                     + f'<td class="why">{_e(row[5])}</td><td class="details">{_e(row[6])}</td></tr>')
     parts.append("</table>")
     notes = _not_run_notes(cert)
     if notes:
         parts.append('<ul class="not-run">' + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ul>")
-    parts += ["<h2>Map and obligations</h2>", *figs("map"), "<h3>Timed run</h3>"]
+    parts.append("<h2>Map and obligations</h2>")
+    if cert.obligations:
+        parts.append('<table class="obligations"><tr>' + "".join(f"<th>{_e(c)}</th>" for c in OBLIGATION_COLUMNS)
+                     + "</tr>")
+        for ob in cert.obligations:
+            row = obligation_row(ob)
+            parts.append(f'<tr class="{_e(ob.role)}"><td>{_e(row[0])}</td><td>{_badge(row[1])}</td>'
+                         + "".join(f"<td>{_e(c)}</td>" for c in row[2:5]) + f'<td class="why">{_e(row[5])}</td></tr>')
+        parts.append("</table>")
+    parts += [*figs("map"), "<h3>Timed run</h3>"]
     run = cert.timed_run
     if run:
         parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at</th></tr>')
@@ -357,8 +397,9 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
 # ---- JUnit --------------------------------------------------------------------------------------------------------
 def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify",
               inconclusive: InconclusiveAs = "failure") -> ET.Element:
-    """``<testsuite>`` with one ``<testcase>`` per check (``verify.junit``: a failed check is a ``failure`` of type
-    ``violation``, an inconclusive one a ``failure`` of type ``inconclusive`` unless ``inconclusive="skipped"``)."""
+    """``<testsuite>`` with one ``<testcase>`` per check and per obligation (``verify.junit``: a failed one is a
+    ``failure`` of type ``violation``, an inconclusive one a ``failure`` of type ``inconclusive`` unless
+    ``inconclusive="skipped"``)."""
     return suite_element(certificate_suite(typed(result), suite_name=suite_name, inconclusive=inconclusive))
 
 
@@ -376,7 +417,8 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
     out = Path(out_dir)
     cert = typed(result)
     figures = render_figures(cert, scenario, trajectory=result.trajectory, nominal=result.nominal,
-                             inputs=result.inputs, robustness=result.robustness)
+                             inputs=result.inputs, robustness=result.robustness,
+                             judgement=getattr(result, "formula", None))
     written: dict[str, Path] = {}
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -167,6 +167,24 @@ def test_cli_replays_a_point_exactly_and_exits_1_on_a_violation(tmp_path: Path, 
     assert cert["verdict"] == "fail"
 
 
+@pytest.mark.parametrize("method", ["targeted", "random"])
+def test_a_reference_run_that_violates_is_the_counterexample_at_simulation_0(
+        method: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 22: with robot.radius=0.2 the controller plans too close to obs_4 and the unperturbed run touches it;
+    falsify ran 0 simulations, wrote no_violation_found with exit code 0, then crashed formatting None (exit 70)."""
+    with pytest.raises(SystemExit) as exc:
+        main(["falsify", "--scenario", "nexus-sml", "--from", "R4", "--to", "R5", "--set", "robot.radius=0.2",
+              "--method", method, "--budget", "5", "--seed", "0", "--workers", "1", "--out", str(tmp_path / "f")])
+    assert exc.value.code == 1
+    out = capsys.readouterr().out
+    assert "VIOLATION first found at simulation 0" in out
+    data = json.loads((tmp_path / "f" / "falsify.json").read_text())
+    assert data["verdict"] == "fail" and data["exit_code"] == 1
+    assert data["first_violation_sim"] == 0 and data["simulations"] == 0
+    assert data["worst"]["sim"] == 0 and data["worst"]["violated"] and data["reference"]["violated"]
+    assert data["files"]["worst"]["certificate_verdict"] == "fail"
+
+
 def test_cli_bad_override_is_one_line_and_exit_3(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["falsify", "--to", "R2", "--set", "tube.sigma_lo=0.5", "--budget", "1"])

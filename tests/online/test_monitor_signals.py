@@ -207,7 +207,7 @@ def test_a_signal_the_formula_does_not_use_is_ignored_and_unknown_names_are_erro
 
 def test_dataclass_of_decision_keeps_its_fields() -> None:
     d = Decision("G[0,inf) slow", "fail", 1.0, -0.1, 0.5, "m/s")
-    assert "margin -0.100 m/s" in d.line()
+    assert "margin -0.1 m/s" in d.line()
     assert dataclasses.replace(d, unit=None).line().endswith("(violated at 0.50 s)")
 
 

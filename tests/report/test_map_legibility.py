@@ -17,8 +17,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from tubempc.scenario import Scenario, builtin_scenario, load_scenario
 from verify.certificate import Certificate
 from verify.figures import render_figures
-from verify.obligations import obligations_of
+from verify.judging import judge_formula
 from verify.report import write_reports
+from verify.semantics.timed_run import parse_spec
 from verify.workspace_map import map_texts, text_box, workspace_figure, workspace_map
 
 OUTDOOR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "outdoor-150m.yaml"
@@ -104,11 +105,14 @@ def test_missed_window_reads_as_a_failed_obligation() -> None:
     t = np.arange(0.0, 60.0, 0.05)
     s = np.clip((t - 40.0) / 16.0, 0.0, 1.0)
     traj = pd.DataFrame({"t_s": t, "x_m": r1[0] + s * (r3[0] - r1[0]), "y_m": r1[1] + s * (r3[1] - r1[1])})
-    obs = {o.formula: o for o in obligations_of(scenario.spec, traj, scenario, max_speed_mps=scenario.max_speed_mps)}
+    t_ns = np.round(traj["t_s"].to_numpy() * 1e9).astype(np.int64)
+    judged = judge_formula(parse_spec(scenario.spec), t_ns, traj["x_m"].to_numpy(), traj["y_m"].to_numpy(), scenario,
+                           time0_ns=0, max_speed_mps=scenario.max_speed_mps)
+    obs = {o.formula: o for o in judged.panels}
     late = obs["F[30,50] mission_2"]
-    assert late.verdict == "fail" and late.violation_s == pytest.approx(50.0)
+    assert late.verdict == "fail" and late.first_violation_ns * 1e-9 == pytest.approx(50.0)
     assert late.window_s == (30.0, 50.0)
-    assert float(late.body_margin_m[-1]) > 0  # reached, but after the window
+    assert float(late.curve[-1]) > 0  # reached, but after the window
     assert obs["G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"].verdict == "pass"
 
 

@@ -103,17 +103,20 @@ def test_strings_from_log_and_scenario_are_escaped(tmp_path: Path, scenario: Sce
     assert '<script>alert("x")</script><img src="http://evil.example/x.png">&' in names
 
 
-def test_junit_one_case_per_check(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
+def test_junit_one_case_per_check_and_per_obligation(failing_report: tuple[Path, dict[str, Path], Any]) -> None:
     tmp_path, _, result = failing_report
     root = ET.parse(tmp_path / "junit.xml").getroot()
     assert root.tag == "testsuites"
     (suite,) = root.findall("testsuite")
     assert suite.get("name") == "run.mcap"
     # the inconclusive check is a failure too (dashboards paint <skipped> green): 2 failures, nothing skipped
-    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("4", "2", "0",
+    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped"), suite.get("errors")) == ("5", "2", "0",
                                                                                                       "0")
-    cases = {c.get("name"): c for c in suite.findall("testcase")}
+    cases = {c.get("name"): c for c in suite.findall("testcase") if c.get("classname") == "run.mcap"}
     assert list(cases) == [c["name"] for c in result.certificate["checks"]]
+    obligations = [c for c in suite.findall("testcase") if c.get("classname") == "run.mcap.obligations"]
+    assert [c.get("name") for c in obligations] == [f"{o['formula']} (whole formula)"
+                                                    for o in result.certificate["obligations"]]
     failure = cases["tube"].find("failure")
     assert failure is not None and "12.5" in (failure.get("message") or "")
     assert failure.get("type") == "violation"

@@ -42,7 +42,7 @@ def test_published_schema_is_the_models() -> None:
 def test_written_certificate_validates_and_round_trips(certificate: dict[str, Any]) -> None:
     jsonschema.validate(certificate, certificate_schema())
     model = Certificate.model_validate(certificate)
-    assert model.certificate_version == CERTIFICATE_VERSION == 3
+    assert model.certificate_version == CERTIFICATE_VERSION == 4
     assert model.verdict is Verdict.FAIL and model.to_json_dict() == certificate
     clearance = model.check("obstacle_clearance")
     assert clearance is not None and clearance.details["region"] == "R8"
@@ -53,11 +53,14 @@ def test_schema_refuses_what_the_contract_forbids(certificate: dict[str, Any]) -
     assert not list(validator.iter_errors(certificate))
     assert list(validator.iter_errors({**certificate, "verdict": "passed"}))  # verdicts are an enum
     assert list(validator.iter_errors({**certificate, "surprise": 1}))  # no field the schema does not name
-    assert list(validator.iter_errors({**certificate, "certificate_version": 2}))
+    assert list(validator.iter_errors({**certificate, "certificate_version": 3}))
     failed = next(c for c in certificate["checks"] if c["verdict"] == "fail")
-    no_margin = {**certificate, "checks": [{**failed, "margin": None}]}
-    with pytest.raises(ValidationError, match="without a first violation time and a margin"):
+    no_margin = {**certificate, "checks": [{**{k: v for k, v in failed.items() if k != "margin_reason"},
+                                            "margin": None}]}
+    with pytest.raises(ValidationError, match="without a margin and without a margin_reason"):
         Certificate.model_validate(no_margin)
+    Certificate.model_validate({**certificate, "checks": [{**failed, "margin": None,
+                                                           "margin_reason": "-inf: overflowed"}]})
     no_time = {**certificate, "checks": [{**failed, "first_violation_time": None}]}
     with pytest.raises(ValidationError, match="without a first violation time"):
         Certificate.model_validate(no_time)

@@ -197,3 +197,51 @@ def test_nan_sample_makes_safety_inconclusive_not_pass() -> None:
     x[5] = np.nan
     res = check_trajectory(parse("G[0,inf) mission_1"), t_ns, x, y, sc, max_speed_mps=sc.max_speed_mps)
     assert res.verdict == "inconclusive"
+
+
+# ---- the engine's small rules, stated exactly (mutants of each survived the suite: docs/property-testing.md) -------
+def test_a_margin_of_exactly_zero_is_undecided() -> None:
+    from verify.monitor.engine import verdict_of
+
+    assert verdict_of(0.0, 1.0) == "inconclusive" and verdict_of(-1.0, 0.0) == "inconclusive"
+    assert verdict_of(1e-300, 1.0) == "pass" and verdict_of(-1.0, -1e-300) == "fail"
+    assert verdict_of(0.0, 0.0) == "inconclusive"
+
+
+def test_boolean_atoms_are_plus_or_minus_one_and_unknown_is_both() -> None:
+    from verify.monitor.engine import truth_from_bool
+
+    t = truth_from_bool(np.array([True, False, True]), known=np.array([True, True, False]))
+    assert t.lo.tolist() == [1.0, -1.0, -1.0] and t.hi.tolist() == [1.0, -1.0, 1.0]
+    plain = truth_from_bool(np.array([True, False]))
+    assert plain.lo.tolist() == plain.hi.tolist() == [1.0, -1.0]
+
+
+def test_interval_bounds_round_inwards_to_whole_nanoseconds() -> None:
+    from tubempc.mitl import Interval
+    from verify.monitor.engine import bounds_ns
+
+    assert bounds_ns(Interval(1, 2, True, True)) == (1_000_000_000, 2_000_000_000)
+    assert bounds_ns(Interval(1, 2, False, False)) == (1_000_000_001, 1_999_999_999)
+    ns = Fraction(1, 10**9)
+    assert bounds_ns(Interval(ns, 3 * ns, True, True)) == (1, 3)  # whole nanoseconds: as written
+    assert bounds_ns(Interval(ns, 3 * ns, False, False)) == (2, 2)  # open ends: one nanosecond inside
+    assert bounds_ns(Interval(Fraction(3, 2) * ns, Fraction(5, 2) * ns, True, True)) == (2, 2)  # rounded inwards
+    assert bounds_ns(Interval(Fraction(3, 2) * ns, Fraction(5, 2) * ns, False, False)) == (2, 2)
+    assert bounds_ns(Interval(Fraction(3, 2) * ns, None, False, False)) == (2, None)
+
+
+def test_an_incomplete_inner_window_is_unknown_not_nan() -> None:
+    """``G F``: an inner ``F`` that already failed decides the ``G``, whatever the inner windows still open at the
+    end (their upper bound is +inf, which ``min`` skips; a NaN there would hide the failure)."""
+    run = [("A", 0.0), ("B", 5.0)]
+    labels: dict[str, list[str]] = {"A": [], "B": []}
+    assert check_timed_run("G[0,inf) F[0,2] p", run, labels, end=6.0).verdict == "fail"
+    assert check_timed_run("G[0,inf) F[0,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]},
+                           end=1.5).verdict == "pass"
+
+
+def test_next_includes_its_closed_lower_bound() -> None:
+    assert check_timed_run("X[1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "pass"
+    assert check_timed_run("X[0,1] p", [("A", 0.0), ("B", 0.0)], {"A": [], "B": ["p"]}, end=1.0).verdict == "pass"
+    assert check_timed_run("X(1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "fail"

@@ -19,6 +19,13 @@ import click
 __all__ = ["falsify"]
 
 
+def _g(value: object, spec: str = ".9g") -> str:
+    """A number for the summary lines; ``-`` for a missing or non-finite one (nothing was simulated or judged)."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return format(value, spec)
+    return "-"
+
+
 def _z(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -129,8 +136,8 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
             raise click.ClickException(f"the replayed run failed: {ev.error}")
         files = write_case(setup, ev, out, metadata={"replay": list(z)})
         state = "VIOLATION" if ev.violated else "no violation"
-        say(f"replay: {state}: margin {ev.margin:.9g} ({ev.worst_check}) in memory, "
-                   f"{files['margin_from_log']:.9g} ({files['check_from_log']}) from the written log; certificate "
+        say(f"replay: {state}: margin {_g(ev.margin)} ({ev.worst_check}) in memory, "
+                   f"{_g(files['margin_from_log'])} ({files['check_from_log']}) from the written log; certificate "
                    f"verdict {files['certificate_verdict']}")
         say(f"log: {files['log']}\ncertificate: {files['certificate']}\nreport: {files['report_html']}")
         raise click.exceptions.Exit(1 if files["violated_from_log"] else 0)
@@ -140,25 +147,24 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
     outcome = write_outcome(run_falsify(req, scenario, workers=workers, dask=dask), out)
     data = outcome.to_json()
     ref = data["reference"]
-    say(f"unperturbed run: margin {ref['margin']:.9g} ({ref['check']}), {ref['duration_s']:.1f} s")
+    say(f"unperturbed run: margin {_g(ref['margin'])} ({ref['check']}), {_g(ref['duration_s'], '.1f')} s")
     shrink = f" + {data['shrink_simulations']} shrinking" if data["shrink_simulations"] else ""
-    timing = data["timing"]
-    per = (f"; median {timing['simulation_s_median']:.3f} s per simulation + {timing['judge_s_median']:.3f} s to "
-           "judge it" if timing["simulation_s_median"] is not None else "")
-    say(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
-        f"{timing['elapsed_s']:.1f} s{per}")
-    if data["verdict"] == "fail" and ref["check"] is not None and ref["margin"] < 0:
-        say(f"VIOLATION in the unperturbed run (z = 0): margin {ref['margin']:.9g} ({ref['check']})")
+    if ref.get("violated"):
+        say("search: none (the unperturbed run already violates: it is the counterexample, simulation 0)")
+    else:
+        say(f"search: {data['simulations']} simulations{shrink} ({data['search_space']['dim']} parameters), "
+            f"{_g(data['timing']['elapsed_s'], '.1f')} s; median {_g(data['timing']['simulation_s_median'], '.3f')} "
+            f"s per simulation + {_g(data['timing']['judge_s_median'], '.3f')} s to judge it")
     worst = data["worst"]
     if worst is not None:
         first = data["first_violation_sim"]
-        found = f"VIOLATION first found at simulation {first}" if first else "no violation found"
-        say(f"{found}; worst margin {worst['margin']:.9g} ({worst['check']}) at simulation {worst['sim']}")
+        found = f"VIOLATION first found at simulation {first}" if first is not None else "no violation found"
+        say(f"{found}; worst margin {_g(worst['margin'])} ({worst['check']}) at simulation {worst['sim']}")
         if data["minimal"] is not None and data["minimal"]["sim"] != worst["sim"]:
             mini = data["minimal"]
-            say(f"shrunk counterexample: margin {mini['margin']:.9g} ({mini['check']})\n"
+            say(f"shrunk counterexample: margin {_g(mini['margin'])} ({mini['check']})\n"
                        f"  replay: {mini['replay']}")
         say(f"worst case: certificate verdict {data['files']['worst']['certificate_verdict']} (from the "
-                   f"written log: margin {data['files']['worst']['margin_from_log']:.9g})\n  replay: {worst['replay']}")
+                   f"written log: margin {_g(data['files']['worst']['margin_from_log'])})\n  replay: {worst['replay']}")
     say(f"verdict: {data['verdict']}; {out / 'falsify.json'}")
     raise click.exceptions.Exit(outcome.exit_code)

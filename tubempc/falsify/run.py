@@ -7,7 +7,8 @@ only, ``worst/run.mcap``, its ``certificate.json`` (certified from the written l
 
 Verdict and exit code: ``fail`` (1) when some candidate violates a selected check; otherwise ``inconclusive`` (2)
 when some candidate's selected check could not be decided, else ``no_violation_found`` (0) with the lowest margin.
-A search never proves the absence of a violation: 0 means none was found within the budget.
+A search never proves the absence of a violation: 0 means none was found within the budget. An unperturbed run
+(z = 0) that already violates is the counterexample, found at simulation 0: no search is run.
 """
 
 from __future__ import annotations
@@ -83,9 +84,20 @@ class FalsifyOutcome:
     files: dict[str, str] = field(default_factory=dict)
 
     @property
+    def reference_violates(self) -> bool:
+        """The unperturbed run already violates a selected check: it is the counterexample (simulation 0)."""
+        return self.reference.violated
+
+    @property
+    def worst(self) -> Evaluation | None:
+        """The worst case: the unperturbed run if it violates, else the search's lowest margin."""
+        return self.reference if self.reference_violates else self.result.worst
+
+    @property
     def verdict(self) -> str:
-        # the unperturbed run (z = 0) is a point of the search space too: a controller that fails it fails
-        evs = (self.reference, *self.result.evaluations, *self.result.shrink_evaluations)
+        if self.reference_violates:
+            return "fail"
+        evs = (*self.result.evaluations, *self.result.shrink_evaluations)
         if any(e.violated for e in evs):
             return "fail"
         if any(e.inconclusive for e in evs):
@@ -106,7 +118,8 @@ class FalsifyOutcome:
     def to_json(self) -> dict[str, Any]:
         res = self.result
         order = {id(e): k for k, e in enumerate((*res.evaluations, *res.shrink_evaluations), start=1)}
-        worst = res.worst
+        order[id(self.reference)] = 0  # the unperturbed run: simulation 0
+        worst = self.worst
         sims = [e.sim_s for e in (*res.evaluations, *res.shrink_evaluations) if e.error is None]
         judges = [e.judge_s for e in (*res.evaluations, *res.shrink_evaluations) if e.error is None]
         sc, ctrl = self.setup.scenario, self.setup.controller
@@ -129,12 +142,14 @@ class FalsifyOutcome:
             "budget": res.budget,
             "seed": res.seed,
             "simulations": len(res.evaluations),
-            "first_violation_sim": res.first_violation,
+            "first_violation_sim": 0 if self.reference_violates else res.first_violation,
             "shrink_simulations": len(res.shrink_evaluations),
             "errors": sum(1 for e in res.evaluations if e.error is not None),
             "reference": {"margin": self.reference.margin, "check": self.reference.worst_check,
+                          "violated": self.reference.violated,
                           "checks": self.reference.checks, "duration_s": self.reference.duration_s,
-                          "note": "the unperturbed run (z = 0), simulated once before the search, not counted"},
+                          "note": "the unperturbed run (z = 0), simulated once before the search, not counted; "
+                                  "when it violates, it is the counterexample (simulation 0) and no search is run"},
             "worst": None if worst is None else self.case(worst, sim=order.get(id(worst))),
             "minimal": None if res.minimal is None else self.case(res.minimal, sim=order.get(id(res.minimal))),
             "timing": {"elapsed_s": res.elapsed_s,
@@ -204,6 +219,8 @@ def prepare(req: FalsifyRequest, scenario: Scenario) -> tuple[FalsifySetup, Eval
 def run_falsify(req: FalsifyRequest, scenario: Scenario, *, workers: int | None = None,
                 dask: str | None = None) -> FalsifyOutcome:
     setup, reference = prepare(req, scenario)
+    if reference.violated:  # the counterexample is the unperturbed run: nothing to search for
+        return FalsifyOutcome(req, setup, reference, SearchResult(req.method, req.budget, req.seed, (), (), None, 0.0))
     try:
         result = search(setup, req.method, budget=req.budget, seed=req.seed, workers=workers, dask=dask,
                         stop_at_first=req.stop_at_first, shrink_budget=req.shrink_budget, known=[reference])
@@ -281,7 +298,7 @@ def write_outcome(outcome: FalsifyOutcome, out_dir: str | Path) -> FalsifyOutcom
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Any] = {"json": str(out / "falsify.json")}
-    worst = outcome.result.worst
+    worst = outcome.worst
     if worst is not None:
         meta = {"method": outcome.result.method, "seed": outcome.result.seed, "z": list(worst.z),
                 "overrides": list(outcome.request.overrides)}

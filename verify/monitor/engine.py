@@ -402,6 +402,8 @@ class Explanation:
     subformula: str
     time_ns: int
     reason: str
+    node: Formula | None = None  # the responsible sub-formula itself
+    index: int = -1  # the position at which it is false or unknown
 
 
 def explain(f: Formula, i: int, pos: Positions, values: Mapping[Formula, Truth]) -> Explanation:
@@ -417,18 +419,22 @@ def explain(f: Formula, i: int, pos: Positions, values: Mapping[Formula, Truth])
     want = "fail" if failing else "unknown"
     if isinstance(f, And | Or | Implies):
         kids = list(f.args) if isinstance(f, And | Or) else [Not(f.left), f.right]
+        if isinstance(f, And) and failing:  # the first violation: the earliest witness among the false conjuncts
+            found = [explain(g, i, pos, values) for g in kids if g in values and state(g, i) == "fail"]
+            if found:
+                return min(found, key=lambda e: e.time_ns)
         if isinstance(f, And) or not failing:
             for g in kids:
                 if g in values and state(g, i) == want:
                     return explain(g, i, pos, values)
         if isinstance(f, Implies) and failing:
             return explain(f.right, i, pos, values)
-        return Explanation(str(f), t_i, "every alternative is false" if failing else "no alternative decided")
+        return Explanation(str(f), t_i, "every alternative is false" if failing else "no alternative decided", f, i)
     if isinstance(f, Not):
         reason = "its negation holds" if failing else "its argument is undecided"
         if not failing and f.arg in values and state(f.arg, i) == "unknown" and not isinstance(f.arg, Atom):
             return explain(f.arg, i, pos, values)
-        return Explanation(str(f), t_i, reason)
+        return Explanation(str(f), t_i, reason, f, i)
     if isinstance(f, Always | Eventually):
         w = _windows(pos, f.interval, np.array([i], dtype=np.int64))
         arg_v = values[f.arg]
@@ -438,19 +444,19 @@ def explain(f: Formula, i: int, pos: Positions, values: Mapping[Formula, Truth])
             hits = np.flatnonzero(seg_state)
             if hits.size:
                 return explain(f.arg, rng[0] + int(hits[0]), pos, values)
-            return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log")
+            return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
         rng = (int(w.out0[0]), int(w.out1[0]))
         if failing:
-            return Explanation(str(f), _window_end(pos, w, i), "never satisfied within its window")
+            return Explanation(str(f), _window_end(pos, w, i), "never satisfied within its window", f, i)
         unk = np.flatnonzero(~(arg_v.hi[rng[0] : rng[1]] < 0))
         if unk.size:
             return explain(f.arg, rng[0] + int(unk[0]), pos, values)
-        return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log")
+        return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
     if isinstance(f, Until | Next):
         w = _windows(pos, f.interval, np.array([i], dtype=np.int64))
         return Explanation(str(f), _window_end(pos, w, i) if not failing else t_i,
-                           "violated" if failing else "undecided at the end of the log")
-    return Explanation(str(f), t_i, "false here" if failing else "unknown here (missing or ambiguous data)")
+                           "violated" if failing else "undecided at the end of the log", f, i)
+    return Explanation(str(f), t_i, "false here" if failing else "unknown here (missing or ambiguous data)", f, i)
 
 
 def _window_end(pos: Positions, w: _Windows, i: int) -> int:

@@ -41,6 +41,7 @@ class MarginRun:
     fail_ns: int | None = None
     fail_detail: dict[str, Any] = field(default_factory=dict)
     sample_min: float | None = None
+    least: float = math.inf  # the least margin, -inf included (a failed check's margin: verify.checks._least)
     nan: int = 0
     worst_gap: float = math.inf
     worst_gap_at: tuple[int, int] | None = None
@@ -51,6 +52,9 @@ class MarginRun:
         new = margin[new_from:]
         self.samples += new.shape[0]
         self.sample_min = _min(self.sample_min, _finite_min(new))
+        with np.errstate(all="ignore"):
+            if new.size and not np.isnan(new).all():
+                self.least = min(self.least, float(np.nanmin(new)))
         self.nan += int(np.isnan(new).sum())
         hit = None
         if self.fail_ns is None:
@@ -69,7 +73,7 @@ class MarginRun:
         if self.samples == 0:
             return CheckResult(self.name, "inconclusive", None, None, {"reason": "no samples"})
         if self.fail_ns is not None:
-            return CheckResult(self.name, "fail", self.sample_min, self.fail_ns, dict(self.fail_detail))
+            return CheckResult(self.name, "fail", self.least, self.fail_ns, dict(self.fail_detail))
         if self.nan or self.worst_gap < 0:
             why = []
             if self.nan:
@@ -96,9 +100,12 @@ class MergedRun:
     counts: dict[str, int] = field(default_factory=dict)
     max_dev: float | None = None
     missing_reason: str = "no samples"
+    unit: str | None = None  # the unit of the smallest margin (the input box: its tightest component's)
 
     def feed(self, res: CheckResult, n: int) -> bool:
         self.samples += n
+        if res.margin is not None and (self.margin is None or res.margin < self.margin):
+            self.unit = res.details.get("margin_unit", self.unit)
         self.margin = _min(self.margin, res.margin)
         for key in ("matched_samples", "unmatched_samples"):
             if key in res.details:
@@ -114,7 +121,7 @@ class MergedRun:
         return False
 
     def result(self, details: dict[str, Any]) -> CheckResult:
-        d = {**details, **self.counts}
+        d = {**details, **self.counts, **({"margin_unit": self.unit} if self.unit else {})}
         if self.max_dev is not None:
             d["max_deviation_m"] = self.max_dev
         if self.fail is not None:

@@ -1,6 +1,8 @@
 """The ``tubempc watch`` subcommand: a log that is still being written + scenario -> decisions as lines, exit code.
 
-Prints one line per decision (``12.34 s  obstacle_clearance FAIL margin -0.030 m``), then a summary line, and exits
+Prints one line per decision (``12.34 s  obstacle_clearance FAIL (violated at 12.34 s)``; with its margin once that is
+final), then one ``final`` line per obligation and check with the margin the certificate states, then a summary
+line, and exits
 with certify's codes (0 pass, 1 violation, 2 inconclusive, 3 unusable input). With ``--out DIR`` the certificate and
 reports that ``tubempc certify`` (with ``--salvage`` for a log its recorder did not close) writes for the log as
 read at the end go into DIR.
@@ -66,6 +68,9 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
                     on_decision=show)
     ctx = click.get_current_context(silent=True)
     quiet = ctx is not None and int(ctx.meta.get("verbosity", 0)) < 0  # -q: the decisions and the exit code only
+    if not quiet:  # the final margins (a decision states its margin only once no later sample can change it)
+        for text in res.result.state.final_lines():
+            click.echo(text)
     for note in [] if quiet else res.notes:
         click.echo(f"note: {note}")
     line = f"{log}: {res.result.verdict} ({res.stop_reason}; {monitor.counts['pose']} pose samples)"
@@ -75,6 +80,11 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
         result = certify_log(_certified_path(log, res.finished), sc, spec=spec, time_base=time_base,
                              salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
+        if not quiet:  # the certificate's one-sentence explanation of each result that is not a pass
+            cert = result.certificate
+            for entry in [*cert.get("obligations", [])[1:], *cert.get("checks", [])]:
+                if entry.get("explanation"):
+                    click.echo(f"   why    {entry.get('formula') or entry.get('name')}: {entry['explanation']}")
         if not no_report:
             from verify.report import write_reports
 

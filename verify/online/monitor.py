@@ -32,9 +32,9 @@ import numpy.typing as npt
 
 from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
-from verify.certify import POSITION_ROUNDING_M, resolve_scenario
+from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
-from verify.errors import SpecError, VerifyError
+from verify.errors import VerifyError
 from verify.geometry import (
     containment,
     label_margins,
@@ -44,11 +44,12 @@ from verify.geometry import (
 )
 from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
+from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
-from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run, parse_spec
+from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run
 from verify.semantics.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
@@ -67,7 +68,8 @@ class MonitorClosedError(VerifyError, RuntimeError):
 @dataclass(frozen=True, slots=True)
 class CheckState:
     """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
-    margin so far (m; guaranteed lower bound for formulas) and the first violation (s)."""
+    margin so far (the certificate's rule, ``verify.semantics.trajectory.reported_margin``, on the bounds so far),
+    whether that margin is final (no later sample can change it) and the first violation (s)."""
 
     name: str
     verdict: str
@@ -75,11 +77,16 @@ class CheckState:
     decided_at_s: float | None
     margin: float | None
     first_violation_s: float | None
+    margin_final: bool = False
+    unit: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class Decision:
-    """A check or obligation became final."""
+    """A check or obligation became final: its verdict, when (``time_s``), its first violation, and its margin when
+    that is final too (None while a later sample can still change it: an ``F`` already true may become more so,
+    a violated ``G`` more violated; the margin is then in ``final_lines`` at the end). So nothing a decision states
+    depends on how the samples were batched."""
 
     name: str
     verdict: str
@@ -89,8 +96,8 @@ class Decision:
     unit: str | None = "m"  # the margin's unit (None: not stated, e.g. a formula mixing metres and a signal's unit)
 
     def line(self) -> str:
-        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.3f}"
-        unit = "" if not margin or self.name in ("input_box",) or not self.unit else f" {self.unit}"
+        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.4g}"
+        unit = "" if not margin or not self.unit else f" {self.unit}"
         at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
         return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
 
@@ -107,6 +114,16 @@ class MonitorState:
     def all_decided(self) -> bool:
         return all(c.decided for c in (*self.checks, *self.obligations))
 
+    def final_lines(self) -> list[str]:
+        """At the end (``close``): one line per obligation and check with its final verdict, margin and first
+        violation, the values the certificate states for the same samples."""
+        out = []
+        for c in (*self.obligations, *self.checks):
+            margin = "" if c.margin is None else f" margin {c.margin:+.4g}" + (f" {c.unit}" if c.unit else "")
+            at = "" if c.first_violation_s is None else f" (violated at {c.first_violation_s:.2f} s)"
+            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{at}")
+        return out
+
 
 @dataclass(frozen=True, slots=True)
 class OnlineResult:
@@ -119,7 +136,7 @@ class OnlineResult:
 
     @property
     def exit_code(self) -> int:
-        return {"pass": 0, "fail": 1, "inconclusive": 2}[self.verdict]
+        return EXIT_CODES[self.verdict]
 
 
 def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
@@ -155,12 +172,7 @@ class OnlineMonitor:
         self.selection = select_checks(sc, checks)  # as certify: --checks, else the scenario's, else what it names
         self._selected = {n for c in self.selection.selected
                           for n in (("spec_trajectory", "spec_timed_run") if c == "spec" else (c,))}
-        self.formula = parse_spec(spec if spec is not None else sc.spec)
-        known = {lab for r in sc.regions for lab in r.labels} | set(sc.signals)
-        unknown = sorted(atoms(self.formula) - known)
-        if unknown:
-            raise SpecError(f"formula {self.formula}: proposition(s) {', '.join(unknown)} label no region and name "
-                            f"no signal of scenario {sc.name!r}")
+        self.formula = formula_of(sc, spec)  # the rule certify applies (verify.judging)
         self.max_pending = max_pending
         self._names = sorted(atoms(self.formula))
         # a name that is both a label and a signal is the signal (as verify.certify)
@@ -176,7 +188,8 @@ class OnlineMonitor:
         self._run = _Semantics(self.formula)
         self._obligation_names = [str(h.formula) for h in self._traj.obligations]
         # a formula's margin is its deciding atom's: metres for regions, the field's unit for a signal
-        self._units: dict[str, str | None] = {"spec_trajectory": self._unit_of(self.formula)}
+        self._units: dict[str, str | None] = {"spec_trajectory": self._unit_of(self.formula), "spec_timed_run": "s",
+                                              "tube": "m", "workspace": "m", "obstacle_clearance": "m"}
         self._units.update({str(h.formula): self._unit_of(h.formula) for h in self._traj.obligations})
         eta = sc.robot.radius
         discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
@@ -191,7 +204,7 @@ class OnlineMonitor:
         self._labels = [frozenset(r.labels) for r in sc.regions]
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
-        self._tol_m = 3.0 * sc.mocap.noise_std + POSITION_ROUNDING_M  # as verify.certify (rounding of positions)
+        self._tol_m = tube_tolerance_m(sc)
         self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
@@ -222,6 +235,8 @@ class OnlineMonitor:
         self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
         self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
         self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
+        self._run_changes: list[float] = []  # s from time 0 of every change of the containing set (exits included)
+        self._entry_change: list[int] = []  # per timed-run entry: its index in _run_changes
         self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
         self._ws = MarginRun("workspace")
         self._clear = MarginRun("obstacle_clearance")
@@ -459,6 +474,9 @@ class OnlineMonitor:
             changed[0] = True
         self._prev_set = inside[:, -1:].copy()
         entry = np.flatnonzero(changed & inside.any(axis=0))
+        ch = np.flatnonzero(changed)
+        self._entry_change += (len(self._run_changes) + np.searchsorted(ch, entry)).tolist()
+        self._run_changes += (t_rel[k0:][ch].astype(np.float64) * 1e-9).tolist()
         members = [self._entry_name(inside[:, int(e)]) for e in entry]
         conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -611,17 +629,18 @@ class OnlineMonitor:
 
     # ---- state -------------------------------------------------------------------------------------------------------
     def _head_state(self, name: str, h: Head, *, margin: bool) -> CheckState:
-        """Margin so far: the guaranteed robustness (lower bound) unless false, then its upper bound (how far
-        from being satisfied it is at best)."""
+        """Margin so far, by the certificate's rule (``reported_margin``): the guaranteed robustness on a pass, the
+        optimistic one on a fail (how far from being satisfied it is at best), none while undecided."""
         verdict = h.verdict
         t0 = self.t0_ns or 0
         m: float | None = None
         if margin:
-            m = h.hi if verdict == "fail" else h.lo
-            m = m if math.isfinite(m) else None
+            m = reported_margin(verdict, h.lo, h.hi)
+            m = m if m is not None and math.isfinite(m) else None
         decided_at = _rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
         first = _rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
-        return CheckState(name, verdict, h.decided, decided_at, m, first)
+        return CheckState(name, verdict, h.decided, decided_at, m, first, h.margin_final,
+                          self._units.get(name) if margin else None)
 
     def _check_states(self) -> list[CheckState]:
         t0 = self.t0_ns
@@ -629,7 +648,8 @@ class OnlineMonitor:
             end = self._traj.track.end_ns
             return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
-                               _rel_s(c.first_violation_ns, t0)) for c in self._final]
+                               _rel_s(c.first_violation_ns, t0), True,
+                               c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
     def _running_states(self) -> list[CheckState]:
@@ -673,8 +693,8 @@ class OnlineMonitor:
         for c in (*st.obligations, *st.checks):
             if c.decided and c.name not in self._reported:
                 self._reported.add(c.name)
-                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin, c.first_violation_s,
-                                    self._units.get(c.name, "m")))
+                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin if c.margin_final else None,
+                                    c.first_violation_s, c.unit))
         out.sort(key=lambda d: d.time_s)
         return out
 
@@ -698,22 +718,9 @@ class OnlineMonitor:
         self._final = checks
         self._final_decisions = self._unreturned + self._new_decisions()
         self._unreturned = []
-        verdicts = [c.verdict for c in checks]
-        why: str | None = None
-        if not checks:
-            verdict, why = "inconclusive", "no check was run: nothing is certified"
-        elif "fail" in verdicts:
-            verdict = "fail"
-        elif "inconclusive" in verdicts:
-            verdict = "inconclusive"
-            why = "check(s) not decided: " + ", ".join(c.name for c in checks if c.verdict == "inconclusive")
-        elif partial:
-            verdict, why = "inconclusive", "the log is partial (salvaged): a partial log is never certified as pass"
-        elif self.out_of_order["pose"]:
-            verdict = "inconclusive"
-            why = f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not judged"
-        else:
-            verdict = "pass"
+        problems = ({"pose": f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
+                             f"judged"} if self.out_of_order["pose"] else {})
+        verdict, why = overall_verdict([(c.name, c.verdict) for c in checks], partial=partial, problems=problems)
         self._result = OnlineResult(verdict, why, tuple(checks), self._state(closed=True))
         return self._result
 
@@ -722,15 +729,21 @@ class OnlineMonitor:
         """The decisions made by ``close`` (every check still open at the end)."""
         return list(getattr(self, "_final_decisions", []))
 
-    def _timed_run_margin_s(self, t0: int) -> float | None:
-        """A failed timed run's temporal margin, as the certificate states it (``verify.semantics.timed_run``):
-        computed once at the end on the entries kept (one per region change, so few)."""
+    def _timed_run_margin_s(self, t0: int) -> tuple[float | None, str | None]:
+        """A failed timed run's temporal margin (or why it has none), as the certificate states it
+        (``verify.semantics.timed_run``): computed once at the end on the entries kept (one per region change)."""
         if not self._run_entries:
-            return None
-        end_s = max((self._last_pose - t0) * 1e-9, self._run_entries[-1][1])
+            return None, None
+        last_ns = self._last_pose - t0
+        end_s = max(last_ns * 1e-9, self._run_entries[-1][1])
         labels = {name: sorted(lab) for name, lab in self._entry_labels.items()}
         values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
-        return check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values).margin_s
+        # as verify.semantics.timed_run.entry_exits: the next change of the containing set, or the last sample
+        last_s = float(np.float64(last_ns) * 1e-9)
+        exits = [self._run_changes[j + 1] if j + 1 < len(self._run_changes) else last_s for j in self._entry_change]
+        tr = check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values,
+                             exits=exits)
+        return tr.margin_s, tr.margin_reason
 
     def _formula_doubt(self) -> str | None:
         """Why the formula, as judged online, cannot pass: pose or signal samples that arrived for an instant
@@ -764,9 +777,11 @@ class OnlineMonitor:
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
-            spec_run = CheckResult("spec_timed_run", rv, self._timed_run_margin_s(t0) if rv == "fail" else None,
+            run_margin, run_reason = self._timed_run_margin_s(t0) if rv == "fail" else (None, None)
+            spec_run = CheckResult("spec_timed_run", rv, run_margin,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
-                                   {} if self._run.track.count else {"reason": "the timed run is empty"})
+                                   ({} if self._run.track.count else {"reason": "the timed run is empty"})
+                                   | ({"margin_reason": run_reason} if run_reason else {}))
         why = self._formula_doubt()
         if why:  # a judged sample turned out unknown (or may have been judged otherwise): the formula cannot pass
             spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})

@@ -357,6 +357,12 @@ class Head:
     def decided(self) -> bool:
         return self.closed or self.lo > 0 or self.hi < 0
 
+    @property
+    def margin_final(self) -> bool:
+        """Whether ``lo`` and ``hi`` are final: no later sample can change them (the verdict may be final earlier,
+        while a window is still open: an ``F`` already true can still become more so)."""
+        return self.closed
+
     def children(self) -> tuple[Head, ...]:
         return ()
 
@@ -380,6 +386,10 @@ class StreamHead(Head):
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or self.decided_ns is not None
 
     def need_from(self) -> int:
         return 0 if self.node.final == 0 else 1
@@ -408,6 +418,7 @@ class WindowHead(Head):
         self.acc_hi = -INF
         self.complete = False
         self.early_lo = -INF  # the (negated for G) argument certainly true at a position not final yet
+        self.acc_known = -(2**63)  # the latest time an argument value in the window became final
 
     def _early(self, track: Track, t0: int) -> None:
         """The argument's provisional values settle the window before they are final (a nested window that is
@@ -428,6 +439,10 @@ class WindowHead(Head):
 
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or self.complete
 
     def need_from(self) -> int:
         return self.used
@@ -459,6 +474,7 @@ class WindowHead(Head):
                     self._decide(int(_i(self.node.known, p, c)[k]), int(start[k]))
                 self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
                 self.acc_hi = max(self.acc_hi, float(hi_a[sel].max()))
+                self.acc_known = max(self.acc_known, int(_i(self.node.known, p, c)[sel].max()))
             self.used = c
         if self.decided_ns is None and not self.complete and self.node.final < track.count:
             self._early(track, t0)
@@ -469,8 +485,8 @@ class WindowHead(Head):
                 self.complete = bound <= track.end_ns and covered
                 if self.complete:
                     when = int(track.first_tick_at_or_after(np.array([bound], dtype=np.int64), closing)[0])
-                    if self.acc_lo <= 0 and self.acc_hi < 0:
-                        self._decide(min(when, track.end_ns), min(bound, track.end_ns))
+                    if self.acc_lo <= 0 and self.acc_hi < 0:  # decided once the window and its values are seen
+                        self._decide(max(min(when, track.end_ns), self.acc_known), min(bound, track.end_ns))
             elif closing:
                 self.complete = True
         lo, hi = max(self.acc_lo, self.early_lo), (self.acc_hi if self.complete else INF)
@@ -479,6 +495,8 @@ class WindowHead(Head):
             self.closed = True
             if self.decided_ns is None:
                 self.decided_ns = track.end_ns
+                if not self.always and self.hi < 0:  # an unbounded F never met: shown at the end of the log
+                    self.witness_ns = track.end_ns
 
     def _decide(self, when_ns: int, where_ns: int | None) -> None:
         """``where_ns``: the position that shows a violation (G) or the end of the window (F), if false."""
@@ -498,6 +516,10 @@ class BoolHead(Head):
 
     def children(self) -> tuple[Head, ...]:
         return tuple(self.kids)
+
+    @property
+    def margin_final(self) -> bool:
+        return self.closed or all(k.margin_final for k in self.kids)
 
     def need_from(self) -> int:
         return _NEVER  # reads no positions itself

@@ -19,7 +19,9 @@ from tubempc.mitl import Eventually, Formula, SpecSyntaxError, atoms, parse
 from verify.errors import SpecError
 from verify.monitor.engine import Positions, Truth, evaluate, explain, truth_from_bool, verdict_of
 
-__all__ = ["UNKNOWN_ENTRY", "TimedRunVerdict", "check_timed_run", "parse_spec", "timed_run_of", "timed_run_of_sets"]
+__all__ = [
+    "UNKNOWN_ENTRY", "TimedRunVerdict", "check_timed_run", "entry_exits", "parse_spec", "timed_run_of",
+    "timed_run_of_sets"]
 
 #: the name of a timed-run entry whose regions are unknown (a NaN position, duplicates that disagree): every region
 #: label is unknown there, so the run's verdict is undecided unless a violation is shown elsewhere
@@ -43,7 +45,8 @@ class TimedRunVerdict:
     subformula: str | None = None
     time_s: float | None = None
     reason: str | None = None
-    margin_s: float | None = None  # a fail's margin in seconds (<= 0; see ``_time_margin_s``)
+    margin_s: float | None = None  # a fail's margin in seconds (< 0; see ``_time_margin_s``)
+    margin_reason: str | None = None  # a fail without a margin: why
 
     @property
     def first_violation_time(self) -> float | None:
@@ -59,13 +62,15 @@ def _to_ns(t: float) -> int:
 def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapping[str, Sequence[str]],
                     end: float | None = None,
                     atom_values: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None = None,
-                    ) -> TimedRunVerdict:
+                    *, exits: Sequence[float] | None = None) -> TimedRunVerdict:
     """Pointwise 3-valued verdict of ``formula`` at the first entry of the timed ``run``.
 
     ``run``: ``(region, time_s)`` entries with non-decreasing times; ``labels``: region -> its atomic propositions
     (a region missing from ``labels`` has none); ``end``: when observation stopped (default: the last time).
     Times are compared in integer nanoseconds (``round(t * 1e9)``). ``atom_values``: robustness bounds
     ``(lo, hi)`` per run entry for atoms that are not region labels (signal atoms, sampled at the entry times).
+    ``exits``: when the robot left each entry's regions (``entry_exits``; default: at the next entry), which bounds
+    how long a false sub-formula stayed false (the margin of a fail).
     """
     f = parse_spec(formula)
     external = atom_values
@@ -96,18 +101,26 @@ def check_timed_run(formula: str, run: Sequence[tuple[str, float]], labels: Mapp
     if verdict == "pass":
         return TimedRunVerdict("pass", str(f))
     why = explain(f, 0, pos, values)
-    margin = _time_margin_s(values, why.subformula, why.time_ns, times, end_ns) if verdict == "fail" else None
-    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason, margin)
+    exit_ns = None if exits is None else np.array([_to_ns(float(t)) for t in exits], dtype=np.int64)
+    margin = (_time_margin_s(values, why.subformula, why.time_ns, times, end_ns, exits=exit_ns) if verdict == "fail"
+              else None)
+    margin_reason = None
+    if verdict == "fail" and (margin is None or margin >= 0):
+        margin = None
+        margin_reason = ("no time stretch to measure: the violation is decided by constants or at the end of the log "
+                         "(e.g. a window that opens after the log ends)")
+    return TimedRunVerdict(verdict, str(f), why.subformula, why.time_ns / 1e9, why.reason, margin, margin_reason)
 
 
 def _time_margin_s(values: Mapping[Formula, Any], subformula: str | None, time_ns: int, times: npt.NDArray[np.int64],
-                   end_ns: int) -> float | None:
+                   end_ns: int, *, exits: npt.NDArray[np.int64] | None = None) -> float | None:
     """How far in time the run is from satisfying the witnessed sub-formula (seconds, <= 0).
 
     The pointwise semantics are boolean, so the margin is temporal: for ``F[a,b] phi`` never met, minus the time
     from the window to the nearest entry at which ``phi`` held (the log's end when it never did: at least that
-    late); for any other false sub-formula, minus how long it stayed false from the witness on (until the next
-    entry at which it is not false, or the log's end).
+    late); for any other false sub-formula, minus how long it stayed false from the witness on: until the robot left
+    the regions of the last entry of the unbroken stretch of entries at which it is false (``exits``; without them,
+    until the next entry at which it is not false, or the log's end).
     """
     g = next((h for h in values if str(h) == subformula), None)
     if g is None:
@@ -121,6 +134,11 @@ def _time_margin_s(values: Mapping[Formula, Any], subformula: str | None, time_n
         return -float(gap.min()) / 1e9
     false = np.asarray(values[g].hi) < 0
     k = int(np.searchsorted(times, time_ns))
+    if exits is not None and k < times.shape[0]:
+        j = k
+        while j + 1 < times.shape[0] and false[j + 1] and int(times[j + 1]) <= int(exits[j]):
+            j += 1  # the next entry starts where this one was left: the sub-formula stays false across
+        return -max(min(int(exits[j]), end_ns) - time_ns, 0) / 1e9
     after = np.flatnonzero(~false[k:])
     stop = int(times[k + int(after[0])]) if after.size else end_ns
     return -max(stop - time_ns, 0) / 1e9
@@ -138,6 +156,22 @@ def timed_run_of(region_index: npt.NDArray[np.int64], times_s: npt.NDArray[np.fl
     change = np.flatnonzero(np.diff(region_index) != 0) + 1
     starts = np.concatenate(([0], change))
     return [(names[int(region_index[s])], float(times_s[s])) for s in starts if region_index[s] >= 0]
+
+
+def entry_exits(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64],
+                known: npt.NDArray[np.bool_] | None = None) -> list[float]:
+    """For each entry of ``timed_run_of_sets(contains, times_s, ..., known=known)``: the time the robot left its
+    regions (the first sample at which the set of containing regions, or whether it is known, changes), or the last
+    sample's time."""
+    n = contains.shape[1] if contains.ndim == 2 else 0
+    if n == 0:
+        return []
+    unknown = np.zeros(n, dtype=bool) if known is None else ~np.asarray(known, dtype=bool)
+    changed = np.any(contains[:, 1:] != contains[:, :-1], axis=0) | (unknown[1:] != unknown[:-1])
+    change = np.flatnonzero(changed) + 1
+    starts = np.concatenate(([0], change))
+    ends = np.concatenate((change, [n - 1]))
+    return [float(times_s[e]) for s, e in zip(starts, ends, strict=True) if unknown[s] or contains[:, s].any()]
 
 
 def timed_run_of_sets(contains: npt.NDArray[np.bool_], times_s: npt.NDArray[np.float64], names: Sequence[str],

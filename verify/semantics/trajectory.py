@@ -25,8 +25,8 @@ from verify.monitor.engine import Positions, Truth, evaluate_at_points, explain,
 from verify.monitor.grid import Grid, GridResult, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 from verify.signals import SignalBounds
 
-__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryVerdict", "check_trajectory", "interleave", "reported_margin",
-           "trajectory_positions"]
+__all__ = ["NEAR_ZERO_MARGIN_M", "TrajectoryValues", "TrajectoryVerdict", "check_trajectory", "interleave",
+           "reported_margin", "trajectory_positions", "trajectory_values"]
 
 #: the fast path computes distances with sqrt(dx*dx + dy*dy) (a few ulps from hypot); a root margin closer to 0
 #: than this is recomputed with hypot, so the verdict is the one of the exact margins
@@ -149,6 +149,45 @@ def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Flo
         return TrajectoryVerdict(verdict, lo0, hi0, None, None, None, t_ns, signal)
     why = explain(formula, 0, pos, result)
     return TrajectoryVerdict(verdict, lo0, hi0, why.subformula, why.time_ns, why.reason, t_ns, signal)
+
+
+@dataclass(frozen=True, slots=True)
+class TrajectoryValues:
+    """Every sub-formula's robustness bounds on the interleaved positions (samples and gaps), with exact margins."""
+
+    pos: Positions
+    point_at: IntArray
+    gap_at: IntArray
+    values: dict[Formula, Truth]
+
+
+def trajectory_values(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario, *,
+                      max_speed_mps: float, signals: Mapping[str, SignalBounds] | None = None) -> TrajectoryValues:
+    """The values ``check_trajectory`` reads its verdict from, for every sub-formula (at least one sample): the
+    regular-grid evaluator's interleaved when it applies, else the general engine's (bit-identical values)."""
+    sig = {k: v for k, v in (signals or {}).items() if k in atoms(formula)}
+    pos, point_at, gap_at = trajectory_positions(t_ns)
+    grid = regular_grid(t_ns)
+    if grid is not None and not sig and bool(np.isfinite(x_m).all()) and bool(np.isfinite(y_m).all()):
+        step = step_bound_regular_m(grid.dt_ns, x_m, y_m, max_speed_mps)
+        if bool(np.isfinite(step).all()):
+            try:
+                res = evaluate_grid(formula, grid, label_margins(x_m, y_m, scenario, atoms(formula), exact=True),
+                                    step)
+            except UnsupportedFormulaError:
+                pass
+            else:
+                return TrajectoryValues(pos, point_at, gap_at, _interleaved(res, point_at, gap_at, pos.size))
+    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
+    values: dict[str, Truth] = {}
+    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula) - set(sig)).items():
+        plo, phi = _sample_truth(margin)
+        gb = gap_bounds(margin, step)
+        values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
+    for name, b in sig.items():
+        values[name] = interleave(b.point_lo, b.point_hi, b.gap_lo, b.gap_hi, point_at=point_at, gap_at=gap_at,
+                                  size=pos.size)
+    return TrajectoryValues(pos, point_at, gap_at, evaluate_at_points(formula, pos, values))
 
 
 def _check_on_grid(formula: Formula, grid: Grid, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, *,
