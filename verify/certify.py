@@ -11,6 +11,7 @@ inconclusive, the log is partial (salvaged) or no check ran, else "pass".
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -35,6 +36,8 @@ from verify.judging import (
     POSITION_ROUNDING_M,
     TUBE_TOLERANCE_RULE,
     FormulaJudgement,
+    ObligationResult,
+    Unknown,
     check_explanation,
     formula_of,
     judge_formula,
@@ -266,9 +269,11 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
          **({"margin_reason": tr.margin_reason} if tr.margin_reason else {}),
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
-    outside = [f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's span, so "
-               f"they are not judged and the run cannot pass" for k, v in sorted(streams.items())
-               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None] if pose.t_ns.size else []
+    doubted = {k: f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's "
+                  f"span, so they are not judged and the run cannot pass" for k, v in sorted(streams.items())
+               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None} if pose.t_ns.size else {}
+    outside = list(doubted.values())
+    obligations = [_doubt_obligation(o, doubted, end_s) for o in judged.entries]
     if outside:  # as the online monitor's doubt: the formula's checks cannot pass
         doubt = "; ".join(outside)
         spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": doubt})
@@ -328,7 +333,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "scenario_warnings": sc.certification_warnings() + data_findings(sc, every.t_ns, every.x_m, every.y_m, t0),
         "clock_findings": list(log.data_quality.get("clocks", {}).get("findings", [])),
         "checks": entries,
-        "obligations": [o.to_json() for o in judged.entries] if "spec" in selection else [],
+        "obligations": [o.to_json() for o in obligations] if "spec" in selection else [],
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
                         for k, v in log.signals.items()}} if log.signals else {}),
@@ -353,6 +358,21 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
     return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables,
                          formula=judged if "spec" in selection else None)
+
+
+def _doubt_obligation(o: ObligationResult, doubted: Mapping[str, str], end_s: float) -> ObligationResult:
+    """A passing obligation that uses a signal whose messages outside the pose's span violate its predicate cannot
+    pass (the spec checks' rule, applied to each obligation so that the certificate tells one story)."""
+    if o.verdict != "pass":
+        return o
+    hit = sorted(set(doubted) & atoms(parse_spec(o.formula)))
+    if not hit:
+        return o
+    why = Unknown(subformula=hit[0], atom=hit[0], from_s=round(end_s, 9), to_s=None, cause=doubted[hit[0]],
+                  decide="record the pose for as long as the signal, or trim the log to the pose's span")
+    return dataclasses.replace(o, verdict="inconclusive", margin=None, margin_unit=None, margin_atom=None,
+                               margin_time_ns=None, margin_reason=None, decided_ns=None, subformula=hit[0],
+                               reason=doubted[hit[0]], unknown=why)
 
 
 def _jsonable(obj: Any) -> Any:
