@@ -245,3 +245,11 @@ def test_next_includes_its_closed_lower_bound() -> None:
     assert check_timed_run("X[1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "pass"
     assert check_timed_run("X[0,1] p", [("A", 0.0), ("B", 0.0)], {"A": [], "B": ["p"]}, end=1.0).verdict == "pass"
     assert check_timed_run("X(1,2] p", [("A", 0.0), ("B", 1.0)], {"A": [], "B": ["p"]}, end=2.0).verdict == "fail"
+
+
+def test_next_unbounded_and_known_false_and_pending() -> None:
+    labels: dict[str, list[str]] = {"A": [], "B": ["p"], "C": []}
+    assert check_timed_run("X p", [("A", 0.0), ("B", 1.0)], labels).verdict == "pass"  # X = X[0,inf)
+    assert check_timed_run("X[0,2] p", [("A", 0.0), ("C", 1.0)], labels, end=2.0).verdict == "fail"
+    # a pending X at the last entry is unknown (upper bound +inf): the violation at the first entry still shows
+    assert check_timed_run("G[0,inf) X[0,5] p", [("A", 0.0), ("C", 0.5)], labels, end=1.0).verdict == "fail"
