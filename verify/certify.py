@@ -11,7 +11,6 @@ inconclusive, the log is partial (salvaged) or no check ran, else "pass".
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -36,8 +35,6 @@ from verify.judging import (
     POSITION_ROUNDING_M,
     TUBE_TOLERANCE_RULE,
     FormulaJudgement,
-    ObligationResult,
-    Unknown,
     check_explanation,
     formula_of,
     judge_formula,
@@ -229,7 +226,14 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     streams = {k: v for k, v in log.signals.items() if k in used}
     judged = judge_formula(formula, t_rel, pose.x_m, pose.y_m, sc, time0_ns=t0, max_speed_mps=v_max,
                            streams=streams)
-    whole = judged.whole
+    end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
+    # signal messages outside the pose's span that violate their predicate: not judged (the run is the pose's span,
+    # and every check and obligation states its verdict over it), but the run cannot pass: a problem of the stream
+    doubted = {f"signal {k}": "messages outside the pose's span violate its predicate: the run is the pose's span, "
+                              "so they are not judged and the run cannot pass" for k, v in sorted(streams.items())
+               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None} if pose.t_ns.size else {}
+    obligations = list(judged.entries)
+    whole = obligations[0]  # the spec_trajectory check is the whole formula's obligation, told twice
 
     def rel(t_ns: int | None) -> float | None:
         return None if t_ns is None else round(t_ns * 1e-9, 9)
@@ -256,7 +260,6 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     known = np.isfinite(pose.x_m) & np.isfinite(pose.y_m)
     run, run_labels = timed_run_of_sets(inside, run_times, names, {r.name: list(r.labels) for r in sc.regions},
                                         known=known)
-    end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0
     entry_ns = np.array([t0 + round(t * 1e9) for _, t in run], dtype=np.int64)
     tr = check_timed_run(formula_text, run, run_labels, end=end_s,
                          atom_values={k: values_at(v, entry_ns) for k, v in streams.items()},
@@ -269,15 +272,6 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
          **({"margin_reason": tr.margin_reason} if tr.margin_reason else {}),
          **({"subformula": tr.subformula, "reason": tr.reason, "time": tr.time_s} if tr.verdict != "pass" else {})})
 
-    doubted = {k: f"messages of signal {k} outside the pose's span violate its predicate: the run is the pose's "
-                  f"span, so they are not judged and the run cannot pass" for k, v in sorted(streams.items())
-               if outside_span(v, int(pose.t_ns[0]), int(pose.t_ns[-1]))[2] is not None} if pose.t_ns.size else {}
-    outside = list(doubted.values())
-    obligations = [_doubt_obligation(o, doubted, end_s) for o in judged.entries]
-    if outside:  # as the online monitor's doubt: the formula's checks cannot pass
-        doubt = "; ".join(outside)
-        spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": doubt})
-                               if c.verdict == "pass" else c for c in (spec_traj, spec_run))
     checks: list[CheckResult] = [spec_traj, spec_run] if "spec" in selection else []
     tol_m = tube_tolerance_m(sc)
     every = log.pose_samples  # per-sample checks judge every sample (duplicates that disagree included)
@@ -300,6 +294,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     entries = [_check_entry(c, t0, end_s) for c in checks]
     problems = {k: v for k, v in log.stream_problems.items()  # a signal's problem counts where the formula uses it
                 if not k.startswith("signal ") or k.removeprefix("signal ") in streams}
+    problems.update(doubted)
     verdict, why = overall_verdict([(c["name"], c["verdict"]) for c in entries], partial=log.partial,
                                    problems=problems)
     cert: dict[str, Any] = {
@@ -358,21 +353,6 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     typed = Certificate.model_validate(_jsonable(cert))  # the contract: a certificate that breaks it is a bug here
     return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables,
                          formula=judged if "spec" in selection else None)
-
-
-def _doubt_obligation(o: ObligationResult, doubted: Mapping[str, str], end_s: float) -> ObligationResult:
-    """A passing obligation that uses a signal whose messages outside the pose's span violate its predicate cannot
-    pass (the spec checks' rule, applied to each obligation so that the certificate tells one story)."""
-    if o.verdict != "pass":
-        return o
-    hit = sorted(set(doubted) & atoms(parse_spec(o.formula)))
-    if not hit:
-        return o
-    why = Unknown(subformula=hit[0], atom=hit[0], from_s=round(end_s, 9), to_s=None, cause=doubted[hit[0]],
-                  decide="record the pose for as long as the signal, or trim the log to the pose's span")
-    return dataclasses.replace(o, verdict="inconclusive", margin=None, margin_unit=None, margin_atom=None,
-                               margin_time_ns=None, margin_reason=None, decided_ns=None, subformula=hit[0],
-                               reason=doubted[hit[0]], unknown=why)
 
 
 def _jsonable(obj: Any) -> Any:

@@ -433,13 +433,9 @@ def test_a_signal_violation_after_the_pose_stream_ends_is_never_a_pass(tmp_path:
         assert code == (2 if hot else 0), (hot, err)
         assert cert["data_quality"]["signals"]["motor_ok"]["outside_pose_span"] >= 200
         assert any("outside the pose's span" in n for n in cert["data_quality"]["notes"])
-        if hot:
-            assert "outside the pose's span violate" in json.dumps(cert["checks"])
-        # the obligations tell the same story as the checks: none passes where the spec checks cannot
-        whole = next(o for o in cert["obligations"] if o["role"] == "formula")
-        assert whole["verdict"] == ("inconclusive" if hot else "pass"), whole
-        if hot:
-            assert "outside the pose's span violate" in whole["explanation"], whole
+        if hot:  # the checks and obligations judge the pose's span; the run cannot pass, and says why
+            assert cert["verdict"] == "inconclusive"
+            assert "outside the pose's span violate" in cert["verdict_reason"], cert["verdict_reason"]
         code, out, err = run(["watch", str(log), "--scenario", str(scenario), "--spec", SIGNAL_SPEC,
                               "--time-base", "auto", "--checks", "spec"], capsys)
         assert code == (2 if hot else 0), (hot, out, err)

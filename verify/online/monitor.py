@@ -720,6 +720,10 @@ class OnlineMonitor:
         self._unreturned = []
         problems = ({"pose": f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
                              f"judged"} if self.out_of_order["pose"] else {})
+        for name, feed in sorted(self._feeds.items()):  # as certify: the run is the pose's span, and cannot pass
+            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
+                problems[f"signal {name}"] = ("messages outside the pose's span violate its predicate: the run is "
+                                              "the pose's span, so they are not judged and the run cannot pass")
         verdict, why = overall_verdict([(c.name, c.verdict) for c in checks], partial=partial, problems=problems)
         self._result = OnlineResult(verdict, why, tuple(checks), self._state(closed=True))
         return self._result
@@ -756,9 +760,6 @@ class OnlineMonitor:
             if feed.late:
                 why.append(f"{feed.late} message(s) of signal {name} arrived after the pose samples at or after "
                            f"their time were judged (more than the lag bound late, or out of order)")
-            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
-                why.append(f"messages of signal {name} outside the pose's span violate its predicate: the run is the "
-                           f"pose's span, so they are not judged and the run cannot pass")
             if feed.hold_mismatch():
                 why.append(f"signal {name} has no rate_hz: it was judged with the median spacing seen so far, and "
                            f"the whole stream's median (hold {feed.final_hold_ns() * 1e-9:g} s) would judge a "
