@@ -11,12 +11,17 @@ level per operator), interval bounds below ``10**MAX_BOUND_DIGITS`` seconds.
 
 from __future__ import annotations
 
+import hashlib
+import pprint
 from fractions import Fraction
 from functools import lru_cache
 from typing import Any
 
+import lark
 from lark import Lark, Token, Transformer, Tree, v_args
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+from lark.grammar import Rule
+from lark.lexer import TerminalDef
 
 from tubempc.errors import SpecSyntaxError
 from tubempc.mitl.ast import (
@@ -185,9 +190,43 @@ class _ToAst(Transformer[Token, Formula]):
         return inner
 
 
+_LARK_OPTIONS: dict[str, Any] = {"parser": "lalr", "lexer": "basic", "maybe_placeholders": False}
+
+
+def tables_key() -> str:
+    """What the parse tables depend on: the grammar, the Lark options and Lark's version (sha256 hex)."""
+    text = _GRAMMAR + repr(sorted(_LARK_OPTIONS.items())) + lark.__version__
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def tables_source() -> str:
+    """The text of ``tubempc/mitl/_lalr_tables.py``: the LALR tables Lark builds from the grammar, serialised as
+    Python literals (Lark's own ``memo_serialize``, the form its standalone generator embeds), keyed by
+    ``tables_key()``. ``scripts/build_mitl_tables.py`` writes it; a test checks that the committed file's key is
+    current and that the loaded parser parses and refuses exactly as a freshly built one does."""
+    built = Lark(_GRAMMAR, **_LARK_OPTIONS)
+    data, memo = built.memo_serialize([TerminalDef, Rule])
+    return ('"""LALR tables of the MITL grammar (written by scripts/build_mitl_tables.py; do not edit).\n\n'
+            "Building them takes about 0.25 s at every start; loading them about 0.01 s. ``parser._parser`` uses\n"
+            "them only while ``KEY`` matches the grammar, the options and Lark's version; otherwise it builds the\n"
+            'parser from the grammar.\n"""\n\n'
+            "from typing import Any\n\n"
+            f"KEY = {tables_key()!r}\n\n"
+            f"DATA: dict[str, Any] = {pprint.pformat(data, width=120)}\n\n"
+            f"MEMO: dict[int, Any] = {pprint.pformat(memo, width=120)}\n")
+
+
 @lru_cache(maxsize=1)
 def _parser() -> Lark:
-    return Lark(_GRAMMAR, parser="lalr", lexer="basic", maybe_placeholders=False)
+    """The LALR parser: from the pre-built tables when they match the grammar and Lark, else built here."""
+    try:
+        from tubempc.mitl import _lalr_tables as tables  # generated; absent while it is being regenerated
+    except ImportError:
+        return Lark(_GRAMMAR, **_LARK_OPTIONS)
+    if tables_key() != tables.KEY:
+        return Lark(_GRAMMAR, **_LARK_OPTIONS)
+    loaded: Lark = Lark._load_from_dict(tables.DATA, tables.MEMO)  # type: ignore[no-untyped-call]
+    return loaded
 
 
 @lru_cache(maxsize=1)
