@@ -35,9 +35,12 @@ from verify.ingest.raw import RawTopic, detect_format, read_raw
 from verify.ingest.readerrors import READ_ERRORS, in_words
 from verify.ingest.salvage import walk_mcap, walk_ros1
 
-__all__ = ["INFO_VERSION", "CommandInfo", "LogInfo", "PoseInfo", "TopicInfo", "info_dict", "info_lines", "log_info"]
+__all__ = ["INFO_SCHEMA_ID", "INFO_VERSION", "CommandInfo", "LogInfo", "PoseInfo", "TopicInfo", "info_dict",
+           "info_lines", "info_schema", "log_info"]
 
 INFO_VERSION = 1
+#: ``$id`` of the published JSON Schema of ``tubempc info --json`` (``docs/info.schema.json``)
+INFO_SCHEMA_ID = f"https://tubempc.invalid/schema/info-v{INFO_VERSION}.json"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 POSE_TYPES = frozenset({POSE_STAMPED, ODOMETRY, TF})
 COMMAND_TYPES = frozenset({TWIST, TWIST_STAMPED})
@@ -49,6 +52,8 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True, slots=True)
 class Gap:
+    """A gap between two consecutive messages of a topic."""
+
     after_s: float  # seconds from the log's first message to the message before the gap
     gap_s: float
 
@@ -107,6 +112,8 @@ class CommandInfo:
 
 @dataclass(frozen=True, slots=True)
 class LogInfo:
+    """What a log holds (``tubempc info``): its format and clock, every topic, the pose-like and command streams."""
+
     path: str
     format: str
     log_clock: str  # "wall" or "simulated"
@@ -397,6 +404,32 @@ def _assemble(p: Path, fmt: str, types: dict[str, str], poses: list[PoseInfo],  
 def info_dict(info: LogInfo) -> dict[str, Any]:
     """The JSON form of ``info`` (``tubempc info --json``): plain data, seconds and metres, ``info_version``."""
     return {"info_version": INFO_VERSION, **asdict(info)}
+
+
+def _closed(node: Any) -> None:
+    """Every object of the schema names all its fields: no field the model does not have is accepted."""
+    if isinstance(node, dict):
+        if node.get("type") == "object" and "properties" in node:
+            node.setdefault("additionalProperties", False)
+        for value in node.values():
+            _closed(value)
+    elif isinstance(node, list):
+        for value in node:
+            _closed(value)
+
+
+def info_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of ``info_dict``: generated from the ``LogInfo`` dataclasses by pydantic,
+    with ``info_version`` fixed to ``INFO_VERSION`` and closed objects (``docs/info.schema.json``, printed by
+    ``tubempc schema info``)."""
+    from pydantic import TypeAdapter  # only the schema command needs the generator
+
+    schema = TypeAdapter(LogInfo).json_schema(mode="serialization")
+    schema["properties"] = {"info_version": {"const": INFO_VERSION, "title": "Info Version", "type": "integer"},
+                            **schema["properties"]}
+    schema["required"] = ["info_version", *schema.get("required", [])]
+    _closed(schema)
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": INFO_SCHEMA_ID, **schema}
 
 
 def _num(v: float | None, fmt: str = ".3f") -> str:

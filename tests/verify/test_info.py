@@ -95,3 +95,38 @@ def test_a_truncated_log_names_salvage_and_salvage_describes_what_remains() -> N
     assert info.partial and info.notes and info.notes[0].startswith("salvaged: truncated.bag: stopped at")
     pose = next(t for t in info.topics if t.topic == "/qualisys/nexus/pose")
     assert pose.count > 0 and pose.time == "header" and any(p.topic == pose.topic for p in info.poses)
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_info_json_validates_against_the_published_schema(make_log: MakeLog, paper_traj: Callable[..., Any],
+                                                          scenario: Scenario) -> None:
+    """``info --json`` is a typed output: its published schema (docs/info.schema.json, ``tubempc schema info``) is
+    the dataclasses', and what ``info --json`` prints validates against it (TF child frames, commands and gaps
+    included); a field the schema does not name, or a wrong version, is refused."""
+    import json
+    import subprocess
+    import sys
+
+    import jsonschema
+
+    from verify.info import info_schema
+
+    published = json.loads((ROOT / "docs" / "info.schema.json").read_text())
+    assert published == info_schema(), "regenerate: tubempc schema info > docs/info.schema.json"
+    traj = paper_traj(scenario, rate_hz=10.0, end_s=20.0)
+    log = make_log("mcap", traj, pose_type="TF", tf_child="base_link")
+    cli = subprocess.run([sys.executable, "-m", "tubempc", "info", str(log), "--json"], capture_output=True,
+                         text=True, check=True, timeout=300)
+    printed = json.loads(cli.stdout)
+    validator = jsonschema.Draft202012Validator(published)
+    assert not list(validator.iter_errors(printed))
+    assert printed["poses"] and printed["commands"] and printed["topics"][0]["largest_gaps"]
+    assert list(validator.iter_errors({**printed, "surprise": 1}))
+    assert list(validator.iter_errors({**printed, "info_version": 2}))
+    topic = {**printed["topics"][0], "rate": 1.0}
+    assert list(validator.iter_errors({**printed, "topics": [topic]}))
+    schema_cli = subprocess.run([sys.executable, "-m", "tubempc", "schema", "info"], capture_output=True, text=True,
+                                check=True, timeout=120)
+    assert json.loads(schema_cli.stdout) == published

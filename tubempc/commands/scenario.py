@@ -125,6 +125,14 @@ def schema_certify_json() -> None:
     click.echo(json.dumps(certify_json_schema(), indent=2))
 
 
+@schema.command("info")
+def schema_info() -> None:
+    """The JSON Schema of `tubempc info --json` (also docs/info.schema.json)."""
+    from verify.info import info_schema
+
+    click.echo(json.dumps(info_schema(), indent=2))
+
+
 @click.command("spec")
 @click.argument("text")
 def spec(text: str) -> None:
