@@ -27,8 +27,9 @@ from matplotlib.figure import Figure
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, ObligationEntry, Verdict
 from verify.geometry import region_margins, workspace_margin
+from verify.ingest.quality import DROPOUT_FACTOR
 from verify.judging import FormulaJudgement, ObligationResult
-from verify.workspace_map import tube_radius_or_nan, workspace_figure
+from verify.workspace_map import nominal_layers, tube_radius_or_nan, workspace_caption, workspace_figure
 
 __all__ = [
     "FigureSpec",
@@ -36,8 +37,11 @@ __all__ = [
     "failed_checks",
     "inputs_figure",
     "obligations_figure",
+    "pose_dropouts",
     "render_figures",
+    "sampling_caption",
     "sampling_figure",
+    "states_caption",
     "states_figure",
     "tube_figure",
     "workspace_figure",
@@ -120,8 +124,9 @@ def states_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m", "theta_rad")):
         return None
     tr = _envelope(_unwrapped(trajectory), ("x_m", "y_m", "theta_rad"))
+    drawn_nominal, drawn_band = nominal_layers(scenario, nominal)
     nom = (_envelope(_unwrapped(nominal), [c for c in ("x_m", "y_m", "theta_rad") if c in nominal.columns])
-           if nominal is not None and _usable(nominal, ("t_s", "x_m", "y_m")) else None)
+           if nominal is not None and drawn_nominal else None)
     fig = Figure(figsize=(8.0, 7.5))
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
@@ -133,7 +138,7 @@ def states_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.D
         ax.plot(tr["t_s"], tr[col], color="black", lw=1.0, label="measured")
         if nom is not None and col in nom.columns:
             ax.plot(nom["t_s"], nom[col], "--", color="#1f77b4", lw=1.0, label="nominal")
-            if col in bounds:
+            if col in bounds and drawn_band:
                 ax.fill_between(nom["t_s"], nom[col] - r_q, nom[col] + r_q, color="#1f77b4", alpha=0.25,
                                 lw=0, label="tube")
         if col in bounds:
@@ -148,6 +153,15 @@ def states_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     fig.align_ylabels(axes)
     axes[0].set_title("States over time")
     return _png(fig)
+
+
+def states_caption(certificate: Certificate, scenario: Scenario, nominal: pd.DataFrame | None) -> str:
+    """The states figure's caption: what ``states_figure`` draws for these data."""
+    drawn_nominal, drawn_band = nominal_layers(scenario, nominal)
+    with_nominal = (" the nominal with its tube band," if drawn_band else " the nominal," if drawn_nominal else "")
+    marks = " and each failed check's first violation dotted" if failed_checks(certificate) else ""
+    return (f"x(t), y(t), theta(t) (unwrapped) with{with_nominal} the bounds of the robot's centre from the "
+            f"workspace{marks}.")
 
 
 def inputs_figure(certificate: Certificate, scenario: Scenario, inputs: pd.DataFrame | None) -> bytes | None:
@@ -320,24 +334,55 @@ def clearance_figure(certificate: Certificate, scenario: Scenario,
     return _png(fig)
 
 
-def sampling_figure(scenario: Scenario, trajectory: pd.DataFrame | None) -> bytes | None:
-    """Intervals between pose stamps against the MoCap period: dropouts stand out, out-of-order is negative."""
+def pose_dropouts(certificate: Certificate) -> tuple[float | None, int]:
+    """(gap threshold in s, dropout count) of the pose stream as the certificate's data quality states them: the
+    data-quality rule (``verify.ingest.quality``: a gap longer than ``DROPOUT_FACTOR`` median periods); (None, 0)
+    when the certificate states none."""
+    pose = certificate.data_quality.get("pose")
+    dropouts = pose.get("dropouts") if isinstance(pose, dict) else None
+    if not isinstance(dropouts, dict):
+        return None, 0
+    threshold, count = dropouts.get("threshold_s"), dropouts.get("count")
+    return (float(threshold) if isinstance(threshold, int | float) else None,
+            int(count) if isinstance(count, int) else 0)
+
+
+def sampling_caption(certificate: Certificate) -> str:
+    """The sampling figure's caption: what ``sampling_figure`` draws for this certificate."""
+    threshold_s, n_dropouts = pose_dropouts(certificate)
+    if threshold_s is None:
+        return "Pose stamp intervals against the MoCap period (data quality)."
+    circled = f"; the {n_dropouts} dropout(s) the data-quality table counts are circled" if n_dropouts else ""
+    return f"Pose stamp intervals against the MoCap period and the dropout threshold (data quality){circled}."
+
+
+def sampling_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None) -> bytes | None:
+    """Intervals between pose stamps against the MoCap period; the gaps the data-quality table counts as dropouts
+    (its threshold, read from the certificate) circled; non-increasing stamps (never in a cleaned stream) too."""
     if trajectory is None or not _usable(trajectory, ("t_s",)) or len(trajectory) < 2:
         return None
     t = trajectory["t_s"].to_numpy(dtype=float)
     dt_s = np.diff(t)
     period_s = 1.0 / scenario.mocap.rate_hz
+    threshold_s, n_dropouts = pose_dropouts(certificate)
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
     ax = fig.add_subplot()
     env = _envelope(pd.DataFrame({"t_s": t[1:], "dt_s": dt_s}), ("dt_s",))  # keeps each bucket's min and max
     t_env, dt_env = env["t_s"].to_numpy(), env["dt_s"].to_numpy()
-    n_anomalies = int(np.count_nonzero((dt_s > 2.0 * period_s) | (dt_s <= 0) | ~np.isfinite(dt_s)))
-    anomalies = (dt_env > 2.0 * period_s) | (dt_env <= 0) | ~np.isfinite(dt_env)
     ax.plot(t_env, dt_env, ".", ms=2, color="black", label="stamp interval")
-    if anomalies.any():
-        ax.plot(t_env[anomalies], dt_env[anomalies], "o", ms=5, mfc="none", color=_FAIL_COLOUR,
-                label=f"gaps > 2 periods or non-increasing ({n_anomalies})")
+    if threshold_s is not None:
+        ax.axhline(threshold_s, color=_FAIL_COLOUR, ls=":", lw=0.8,
+                   label=f"dropout threshold {threshold_s * 1e3:.3g} ms ({DROPOUT_FACTOR:g} median periods)")
+        gaps = dt_env > threshold_s
+        if gaps.any():
+            ax.plot(t_env[gaps], dt_env[gaps], "o", ms=5, mfc="none", color=_FAIL_COLOUR,
+                    label=f"dropouts ({n_dropouts}, as the data-quality table counts)")
+    bad = (dt_env <= 0) | ~np.isfinite(dt_env)
+    if bad.any():
+        n_bad = int(np.count_nonzero((dt_s <= 0) | ~np.isfinite(dt_s)))
+        ax.plot(t_env[bad], dt_env[bad], "s", ms=5, mfc="none", color=_FAIL_COLOUR,
+                label=f"non-increasing stamps ({n_bad})")
     ax.axhline(period_s, color="#1f77b4", ls="--", lw=0.8, label=f"MoCap period {period_s * 1e3:.3g} ms")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("dt [s]")
@@ -358,8 +403,7 @@ def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: 
     curves = judgement.panels if judgement is not None else ()
     duration_s = certificate.duration_s
     out: list[FigureSpec] = [FigureSpec(
-        "workspace", "Workspace map: regions, the path coloured by time with its direction, the tube band around the "
-        "nominal, the timed run (numbered), and each first violation with what failed.",
+        "workspace", workspace_caption(certificate, scenario, trajectory, nominal),
         workspace_figure(certificate, scenario, trajectory, nominal))]
     optional = (
         ("obligations", "Each obligation of the formula on its own panel, as the certificate states it: its verdict, "
@@ -368,12 +412,12 @@ def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: 
          obligations_figure(certificate.panels, duration_s, curves)),
         ("clearance", "Clearance of the robot disc from the nearest unsafe region and from the workspace edge.",
          clearance_figure(certificate, scenario, trajectory)),
-        ("states", "x(t), y(t), theta(t) (unwrapped) with the nominal, the tube band and the workspace bounds.",
+        ("states", states_caption(certificate, scenario, nominal),
          states_figure(certificate, scenario, trajectory, nominal)),
         ("tube", "Tube error |p - p_hat| over time against the tube radius r_q.",
          tube_figure(certificate, scenario, trajectory, nominal)),
         ("inputs", "u1, u2, u3 over time with the input box.", inputs_figure(certificate, scenario, inputs)),
-        ("sampling", "Pose stamp intervals (data quality).", sampling_figure(scenario, trajectory)),
+        ("sampling", sampling_caption(certificate), sampling_figure(certificate, scenario, trajectory)),
     )
     out.extend(FigureSpec(stem, caption, png) for stem, caption, png in optional if png is not None)
     return out

@@ -204,10 +204,38 @@ def _is_quiet(value: Any) -> bool:
     return value in (0, 0.0, False, None, "", "{}", "[]") or (isinstance(value, list | dict) and not value)
 
 
+#: data-quality fields that describe a stream or state a rule (counts read, rates, thresholds, conventions, bounds,
+#: where a time came from) rather than report a problem: listed after the findings and not counted as findings.
+#: Every other field that is not quiet is a finding (a new field counts until it is named here).
+_DESCRIPTIVE_FIELDS = frozenset({
+    "read", "judged", "messages", "rate_hz", "expected_rate_hz", "threshold_s", "longest_gap_s",
+    "convention", "speed_bound_mps", "tolerance_m", "max_speed_mps", "median", "max_abs", "fast_decode",
+    "time_base", "type", "topic", "pose_topic", "period_source", "unit", "field",
+})
+
+
+def _is_finding(key: str, value: Any) -> bool:
+    """A data-quality row that reports something (a count of problems, a note), not a description. A stream's own
+    ``count`` (``pose.count``: messages) describes it; a nested one (``pose.dropouts.count``) counts problems."""
+    parts = key.split(".")
+    if parts[-1] == "count":
+        return not _is_quiet(value) and len(parts) > 2
+    return not _is_quiet(value) and parts[-1] not in _DESCRIPTIVE_FIELDS
+
+
 def _quality_rows(cert: Certificate) -> list[tuple[str, Any]]:
-    """Flattened data-quality entries, the ones that report something first (their order otherwise kept)."""
+    """Flattened data-quality entries: the findings first, then what describes the streams, then the quiet ones
+    (their order otherwise kept)."""
     rows = list(_flatten(cert.data_quality))
-    return [r for r in rows if not _is_quiet(r[1])] + [r for r in rows if _is_quiet(r[1])]
+    findings = [r for r in rows if _is_finding(*r)]
+    described = [r for r in rows if not _is_finding(*r) and not _is_quiet(r[1])]
+    return findings + described + [r for r in rows if _is_quiet(r[1])]
+
+
+def _quality_heading(rows: Sequence[tuple[str, Any]]) -> str:
+    n = sum(1 for r in rows if _is_finding(*r))
+    return (f"{n} finding(s) that report something, listed first; then what describes the streams" if n else
+            "no finding reports a problem; the rows describe the streams")
 
 
 def _figure_groups(figures: Sequence[FigureSpec]) -> dict[str, list[FigureSpec]]:
@@ -280,6 +308,7 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     lines += ["", "## States and inputs", "", *figs("states"), "## Data quality", ""]
     dq = _quality_rows(cert)
     if dq:
+        lines += [_md(_quality_heading(dq)[:1].upper() + _quality_heading(dq)[1:]) + ".", ""]
         lines += ["| finding | value |", "|---|---|"] + [f"| {_md(k)} | {_md(_fmt(v))} |" for k, v in dq]
     else:
         lines.append("No data-quality findings were reported.")
@@ -369,9 +398,7 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
         parts.append("<p>The robot disc was never fully inside a region.</p>")
     parts += ["<h2>States and inputs</h2>", *figs("states")]
     dq = _quality_rows(cert)
-    noted = sum(1 for _, v in dq if not _is_quiet(v))
-    parts.append(f"<details><summary><h2>Data quality</h2> ({noted} finding(s) that report something, listed first"
-                 f")</summary>")
+    parts.append(f"<details><summary><h2>Data quality</h2> ({_e(_quality_heading(dq))})</summary>")
     if dq:
         parts.append('<table class="data-quality"><tr><th>finding</th><th>value</th></tr>')
         parts += [f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in dq]

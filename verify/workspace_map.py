@@ -37,8 +37,8 @@ from matplotlib.transforms import Bbox
 from tubempc.scenario import Region, Scenario, ScenarioError
 from verify.certificate import Certificate, CheckEntry, Verdict
 
-__all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "place_texts", "region_caption", "text_box",
-           "violations_of", "workspace_figure", "workspace_map"]
+__all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "nominal_layers", "place_texts", "region_caption",
+           "text_box", "violations_of", "workspace_caption", "workspace_figure", "workspace_map"]
 
 #: a map whose larger side exceeds this many robot radii gets zoomed panels around the violations
 LARGE_MAP_RATIO = 40.0
@@ -124,7 +124,7 @@ def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
     """Outline of the band of half-width ``radius_m`` around the nominal path (left side, then right reversed)."""
     xy = _decimate(nominal)[["x_m", "y_m"]].to_numpy(dtype=float)
     xy = xy[np.all(np.isfinite(xy), axis=1)]
-    if len(xy) < 2 or radius_m <= 0:
+    if len(xy) < 2 or not (math.isfinite(radius_m) and radius_m > 0):
         return None
     xy = xy[np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0, axis=1)])]
     if len(xy) < 2:
@@ -314,8 +314,16 @@ def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: i
     return lc
 
 
+def nominal_layers(scenario: Scenario, nominal: pd.DataFrame | None) -> tuple[bool, bool]:
+    """(the nominal path is drawn, its tube band is drawn): what the map and the states figure draw for these data,
+    and what their captions say."""
+    if nominal is None or not _usable(nominal, ("t_s", "x_m", "y_m")):
+        return False, False
+    return True, _tube_polygon(nominal, tube_radius_or_nan(scenario)) is not None
+
+
 def _draw_nominal(ax: Axes, nominal: pd.DataFrame | None, r_q: float, *, with_legend: bool) -> None:
-    if not _usable(nominal, ("x_m", "y_m")) or nominal is None:
+    if not _usable(nominal, ("t_s", "x_m", "y_m")) or nominal is None:
         return
     poly = _tube_polygon(nominal, r_q)
     if poly is not None:
@@ -366,14 +374,7 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     eta = scenario.robot.radius
     has_path = _usable(trajectory, ("t_s", "x_m", "y_m")) and trajectory is not None
     violations = violations_of(certificate) if has_path else []
-    large = max(width_m, height_m) > LARGE_MAP_RATIO * eta
-    zooms: list[tuple[Violation, tuple[float, float]]] = []
-    if large and trajectory is not None:
-        for v in violations:
-            pos = _position_at(trajectory, v.t_s)
-            if pos is not None and all(math.dist(pos, p) > 1e-9 for _, p in zooms):
-                zooms.append((v, pos))
-        zooms = zooms[:MAX_ZOOMS]
+    zooms = _zooms(scenario, trajectory, violations)
     pad = 0.02 * max(width_m, height_m)
     # layout in inches, bottom up: zoom row, colour bar (label below it), map (height from the workspace's aspect)
     map_w_in = 0.64 * _FIG_W_IN
@@ -464,6 +465,43 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
         half_m = max(8.0 * eta, 0.03 * max(width_m, height_m))
         _zoom_panel(fig, ax, _Zoom(k, len(zooms), v, pos, half_m), scenario, trajectory=trajectory, nominal=nominal)
     return MapFigure(fig, hidden)
+
+
+def _zooms(scenario: Scenario, trajectory: pd.DataFrame | None,
+           violations: Sequence[Violation]) -> list[tuple[Violation, tuple[float, float]]]:
+    """The violations that get a zoomed panel (a map large against the robot; one per place, at most
+    ``MAX_ZOOMS``) with their positions."""
+    ws = scenario.workspace
+    if trajectory is None or max(ws.x[1] - ws.x[0], ws.y[1] - ws.y[0]) <= LARGE_MAP_RATIO * scenario.robot.radius:
+        return []
+    zooms: list[tuple[Violation, tuple[float, float]]] = []
+    for v in violations:
+        pos = _position_at(trajectory, v.t_s)
+        if pos is not None and all(math.dist(pos, p) > 1e-9 for _, p in zooms):
+            zooms.append((v, pos))
+    return zooms[:MAX_ZOOMS]
+
+
+def workspace_caption(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
+                      nominal: pd.DataFrame | None) -> str:
+    """The map's caption: it names what ``workspace_map`` draws for these data, and nothing it does not."""
+    has_path = trajectory is not None and _usable(trajectory, ("t_s", "x_m", "y_m"))
+    parts = ["regions"]
+    if has_path:
+        parts.append("the path coloured by time with its direction")
+    drawn_nominal, drawn_band = nominal_layers(scenario, nominal)
+    if drawn_nominal:
+        parts.append("the nominal path with its tube band" if drawn_band else "the nominal path")
+    if has_path and certificate.timed_run:
+        parts.append("the timed run (numbered)")
+    violations = violations_of(certificate) if has_path else []
+    if violations:
+        parts.append("each first violation with what failed")
+    text = "Workspace map: " + ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
+    zooms = _zooms(scenario, trajectory, violations) if has_path else []
+    if zooms:
+        text += f"; below, a zoomed panel around {'each violation' if len(zooms) > 1 else 'the violation'}"
+    return text + "."
 
 
 @dataclass(frozen=True, slots=True)
