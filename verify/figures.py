@@ -14,10 +14,16 @@ modules (this one and ``verify.workspace_map``).
 
 from __future__ import annotations
 
+import gc
 import io
 import math
-from collections.abc import Sequence
+import multiprocessing
+import os
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -35,6 +41,8 @@ __all__ = [
     "FigureSpec",
     "clearance_figure",
     "failed_checks",
+    "figure_builders",
+    "figure_workers",
     "inputs_figure",
     "obligations_figure",
     "pose_dropouts",
@@ -316,7 +324,7 @@ def clearance_figure(certificate: Certificate, scenario: Scenario,
                           "edge_m": workspace_margin(x, y, scenario)})
     unsafe = [k for k, r in enumerate(scenario.regions) if r.unsafe]
     if unsafe:
-        frame["obstacle_m"] = -np.max(region_margins(x, y, scenario)[unsafe], axis=0)
+        frame["obstacle_m"] = -np.max(region_margins(x, y, scenario, unsafe), axis=0)
     env = _envelope(frame, [c for c in ("edge_m", "obstacle_m") if c in frame.columns])
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
@@ -392,32 +400,102 @@ def sampling_figure(certificate: Certificate, scenario: Scenario, trajectory: pd
     return _png(fig)
 
 
+_OBLIGATIONS_CAPTION = ("Each obligation of the formula on its own panel, as the certificate states it: its verdict, "
+                        "margin, where it was violated or when it was decided, the margin of its target over time "
+                        "(> 0 satisfied there; metres, or the signal's unit) and its window shaded.")
+_CLEARANCE_CAPTION = "Clearance of the robot disc from the nearest unsafe region and from the workspace edge."
+_TUBE_CAPTION = "Tube error |p - p_hat| over time against the tube radius r_q."
+_INPUTS_CAPTION = "u1, u2, u3 over time with the input box."
+
+#: the figure builders of the report being rendered, read by forked workers by index (``_render_one``)
+_PENDING: list[Callable[[], FigureSpec | None]] = []
+
+
+def _spec(stem: str, caption: str, draw: Callable[[], bytes | None]) -> FigureSpec | None:
+    png = draw()
+    return None if png is None else FigureSpec(stem, caption, png)
+
+
+def figure_builders(certificate: Certificate, scenario: Scenario, *, trajectory: pd.DataFrame | None,
+                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
+                    judgement: FormulaJudgement | None = None) -> list[Callable[[], FigureSpec | None]]:
+    """One builder per figure, in report order; each returns its ``FigureSpec`` (caption beside the drawing), or
+    ``None`` when its data are absent. Nothing is drawn until a builder is called."""
+    curves = judgement.panels if judgement is not None else ()
+    return [
+        partial(_spec, "workspace", workspace_caption(certificate, scenario, trajectory, nominal),
+                partial(workspace_figure, certificate, scenario, trajectory, nominal)),
+        partial(_spec, "obligations", _OBLIGATIONS_CAPTION,
+                partial(obligations_figure, certificate.panels, certificate.duration_s, curves)),
+        partial(_spec, "clearance", _CLEARANCE_CAPTION, partial(clearance_figure, certificate, scenario, trajectory)),
+        partial(_spec, "states", states_caption(certificate, scenario, nominal),
+                partial(states_figure, certificate, scenario, trajectory, nominal)),
+        partial(_spec, "tube", _TUBE_CAPTION, partial(tube_figure, certificate, scenario, trajectory, nominal)),
+        partial(_spec, "inputs", _INPUTS_CAPTION, partial(inputs_figure, certificate, scenario, inputs)),
+        partial(_spec, "sampling", sampling_caption(certificate),
+                partial(sampling_figure, certificate, scenario, trajectory)),
+    ]
+
+
+def figure_workers() -> int:
+    """Processes that render a report's figures: 2 where this process may fork safely (a machine with 2 or more
+    cores, the only thread of a process that is not a pool's worker), else 1 (drawn here)."""
+    if (os.cpu_count() or 1) < 2 or threading.active_count() > 1 or multiprocessing.current_process().daemon:
+        return 1
+    return 2
+
+
+def _render_one(index: int) -> FigureSpec | None:
+    return _PENDING[index]()
+
+
+@contextmanager
+def _gc_paused() -> Iterator[None]:
+    """No cyclic garbage collection while drawing: matplotlib allocates many small objects, and the collections
+    they trigger walk every object of the process (the log's frames included) again and again (about 15 % of the
+    drawing time); the cycles are collected once afterwards."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: pd.DataFrame | None,
                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
-                   robustness: pd.DataFrame | None, judgement: FormulaJudgement | None = None) -> list[FigureSpec]:
+                   robustness: pd.DataFrame | None, judgement: FormulaJudgement | None = None,
+                   workers: int | None = None) -> list[FigureSpec]:
     """Every figure that the data allows, in the order a reader asks: the map and the obligations, clearance, then
     states, tube and inputs, then data quality. (``robustness``, the whole formula's signal, is not drawn: one
     curve for a conjunction hides which obligation failed; each obligation gets its own panel instead.) The
-    obligation panels read the certificate's ``obligations`` and the curves of ``judgement`` (the judging code's)."""
+    obligation panels read the certificate's ``obligations`` and the curves of ``judgement`` (the judging code's).
+
+    ``workers`` (default ``figure_workers()``): processes drawing the figures; above 1 the figures are drawn by
+    forked processes (the data are inherited, only the PNG bytes come back), the same figures as drawn here."""
     del robustness
-    curves = judgement.panels if judgement is not None else ()
-    duration_s = certificate.duration_s
-    out: list[FigureSpec] = [FigureSpec(
-        "workspace", workspace_caption(certificate, scenario, trajectory, nominal),
-        workspace_figure(certificate, scenario, trajectory, nominal))]
-    optional = (
-        ("obligations", "Each obligation of the formula on its own panel, as the certificate states it: its verdict, "
-         "margin, where it was violated or when it was decided, the margin of its target over time (> 0 satisfied "
-         "there; metres, or the signal's unit) and its window shaded.",
-         obligations_figure(certificate.panels, duration_s, curves)),
-        ("clearance", "Clearance of the robot disc from the nearest unsafe region and from the workspace edge.",
-         clearance_figure(certificate, scenario, trajectory)),
-        ("states", states_caption(certificate, scenario, nominal),
-         states_figure(certificate, scenario, trajectory, nominal)),
-        ("tube", "Tube error |p - p_hat| over time against the tube radius r_q.",
-         tube_figure(certificate, scenario, trajectory, nominal)),
-        ("inputs", "u1, u2, u3 over time with the input box.", inputs_figure(certificate, scenario, inputs)),
-        ("sampling", sampling_caption(certificate), sampling_figure(certificate, scenario, trajectory)),
-    )
-    out.extend(FigureSpec(stem, caption, png) for stem, caption, png in optional if png is not None)
-    return out
+    builders = figure_builders(certificate, scenario, trajectory=trajectory, nominal=nominal, inputs=inputs,
+                               judgement=judgement)
+    count = min(figure_workers() if workers is None else workers, len(builders))
+    with _gc_paused():
+        specs = _render_forked(builders, count) if count > 1 else None
+        if specs is None:
+            specs = [build() for build in builders]
+    return [spec for spec in specs if spec is not None]
+
+
+def _render_forked(builders: list[Callable[[], FigureSpec | None]], count: int) -> list[FigureSpec | None] | None:
+    """The builders' results drawn by ``count`` forked processes; None when no process can be started (then the
+    caller draws them itself). An error inside a builder is raised here, as it would be when drawn here."""
+    global _PENDING  # noqa: PLW0603 (the table the forked workers inherit)
+    _PENDING = builders
+    try:
+        try:
+            pool = multiprocessing.get_context("fork").Pool(count)
+        except OSError:
+            return None
+        with pool:
+            return pool.map(_render_one, range(len(builders)), chunksize=1)
+    finally:
+        _PENDING = []

@@ -16,6 +16,7 @@ A margin of exactly 0 is reported as undecided by the monitor (see docs/certifie
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,11 +41,14 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 
-def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario) -> FloatArray:
-    """``(n_regions, n)`` margins, one row per region in scenario order (NaN where the position is NaN)."""
+def region_margins(x_m: FloatArray, y_m: FloatArray, scenario: Scenario,
+                   indices: Sequence[int] | None = None) -> FloatArray:
+    """``(n_regions, n)`` margins, one row per region in scenario order (NaN where the position is NaN); with
+    ``indices``, one row per listed region, in that order."""
     eta = scenario.robot.radius
-    out = np.empty((len(scenario.regions), x_m.shape[0]), dtype=np.float64)
-    for k, r in enumerate(scenario.regions):
+    regions = scenario.regions if indices is None else [scenario.regions[i] for i in indices]
+    out = np.empty((len(regions), x_m.shape[0]), dtype=np.float64)
+    for k, r in enumerate(regions):
         if r.polygon is not None:
             sd = polygon_signed_distance(x_m, y_m, r.polygon)
             out[k] = sd + eta if r.unsafe else sd - eta

@@ -433,19 +433,22 @@ def junit_xml(result: CertifyResultLike, *, suite_name: str = "certify",
 # ---- writing ------------------------------------------------------------------------------------------------------
 def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | Path, *,
                   suite_name: str = "certify", sections: Sequence[ReportSection] = (),
-                  junit_inconclusive: InconclusiveAs = "failure") -> dict[str, Path]:
+                  junit_inconclusive: InconclusiveAs = "failure", figure_workers: int | None = None
+                  ) -> dict[str, Path]:
     """Write ``report.md``, ``report.html``, ``junit.xml`` and ``figures/*.png`` into ``out_dir`` (created).
 
     Returns the written paths keyed by their path relative to ``out_dir`` (``"report.html"``,
     ``"figures/workspace.png"``, ...). ``suite_name`` names the JUnit suite (a batch passes the log's name).
     ``sections`` are appended to both reports (the demo's comparison with the paper uses this).
     ``junit_inconclusive``: how ``junit.xml`` reports an inconclusive check (``verify.junit``).
+    ``figure_workers``: processes drawing the figures (``verify.figures.render_figures``; a batch that already
+    writes several logs at once passes 1).
     """
     out = Path(out_dir)
     cert = typed(result)
     figures = render_figures(cert, scenario, trajectory=result.trajectory, nominal=result.nominal,
                              inputs=result.inputs, robustness=result.robustness,
-                             judgement=getattr(result, "formula", None))
+                             judgement=getattr(result, "formula", None), workers=figure_workers)
     written: dict[str, Path] = {}
     try:
         out.mkdir(parents=True, exist_ok=True)

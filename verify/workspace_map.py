@@ -326,9 +326,9 @@ def _draw_nominal(ax: Axes, nominal: pd.DataFrame | None, r_q: float, *, with_le
     if not _usable(nominal, ("t_s", "x_m", "y_m")) or nominal is None:
         return
     poly = _tube_polygon(nominal, r_q)
-    if poly is not None:
-        ax.add_patch(Polygon(poly, closed=True, fc="#1f77b4", ec="none", alpha=0.3,
-                             label=f"tube r_q = {r_q:.3g} m" if with_legend else None))
+    if poly is not None:  # add_artist: the axes' limits are the workspace's (add_patch walks every vertex for them)
+        ax.add_artist(Polygon(poly, closed=True, fc="#1f77b4", ec="none", alpha=0.3,
+                              label=f"tube r_q = {r_q:.3g} m" if with_legend else None))
     nom = _decimate(nominal)
     ax.plot(nom["x_m"], nom["y_m"], "--", color="#1f77b4", lw=0.9, label="nominal" if with_legend else None)
 

@@ -58,7 +58,7 @@ def _write_item(job: _WriteJob) -> JUnitSuite:
             from verify.report import write_reports
 
             write_reports(item.result, job.scenario, sub, suite_name=item.name,
-                          junit_inconclusive=job.junit_inconclusive)
+                          junit_inconclusive=job.junit_inconclusive, figure_workers=1)  # logs are written in parallel
         suite = certificate_suite(Certificate.model_validate(item.result.certificate), suite_name=item.name,
                                   inconclusive=job.junit_inconclusive)
         return dataclasses.replace(suite, time_s=item.elapsed_s)
