@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, ObligationEntry, Verdict
+from verify.decimate import envelope
 from verify.geometry import region_margins, workspace_margin
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.judging import FormulaJudgement, ObligationResult
@@ -55,7 +56,6 @@ __all__ = [
     "workspace_figure",
 ]
 
-ENVELOPE_BUCKETS = 1_000  # time series keep the min and max of each of this many time buckets: spikes stay
 _DPI = 110
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
 _FAIL_COLOUR = "#d62728"
@@ -76,25 +76,11 @@ def _png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _envelope(frame: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
-    """Rows holding the min and the max of every column in each of ``ENVELOPE_BUCKETS`` consecutive buckets.
-
-    Drawing 1e6 samples into 800 pixels shows nothing more than this, and no excursion is lost.
-    """
-    n = len(frame)
-    if n <= 4 * ENVELOPE_BUCKETS:
-        return frame
-    k = math.ceil(n / ENVELOPE_BUCKETS)
-    pad = (-n) % k
-    keep = [np.array([0, n - 1])]
-    for col in columns:
-        v = frame[col].to_numpy(dtype=float)
-        blocks = np.concatenate([v, np.full(pad, v[-1])]).reshape(-1, k)
-        offsets = np.arange(blocks.shape[0]) * k
-        nan = np.isnan(blocks)
-        keep.append(np.where(nan, np.inf, blocks).argmin(axis=1) + offsets)
-        keep.append(np.where(nan, -np.inf, blocks).argmax(axis=1) + offsets)
-    return frame.iloc[np.unique(np.clip(np.concatenate(keep), 0, n - 1))]
+def _envelope(frame: pd.DataFrame, columns: Sequence[str], certificate: Certificate | None = None) -> pd.DataFrame:
+    """``verify.decimate.envelope``: every bucket's extremes and gaps, and the rows at the failed checks' first
+    violations (the dotted lines) when ``certificate`` is given."""
+    keep = [t for _, t in failed_checks(certificate)] if certificate is not None else []
+    return envelope(frame, columns, keep_t_s=keep)
 
 
 def _usable(frame: pd.DataFrame | None, columns: Sequence[str]) -> bool:
@@ -131,7 +117,7 @@ def states_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     """x(t), y(t), theta(t); nominal and its tube band; the bounds on the robot's centre from the workspace."""
     if trajectory is None or not _usable(trajectory, ("t_s", "x_m", "y_m", "theta_rad")):
         return None
-    tr = _envelope(_unwrapped(trajectory), ("x_m", "y_m", "theta_rad"))
+    tr = _envelope(_unwrapped(trajectory), ("x_m", "y_m", "theta_rad"), certificate)
     drawn_nominal, drawn_band = nominal_layers(scenario, nominal)
     nom = (_envelope(_unwrapped(nominal), [c for c in ("x_m", "y_m", "theta_rad") if c in nominal.columns])
            if nominal is not None and drawn_nominal else None)
@@ -176,7 +162,7 @@ def inputs_figure(certificate: Certificate, scenario: Scenario, inputs: pd.DataF
     """u1, u2, u3 over time with the input box ``|u_i| <= max_abs[i]``."""
     if inputs is None or not _usable(inputs, ("t_s", "u1", "u2", "u3")):
         return None
-    data = _envelope(inputs, ("u1", "u2", "u3"))
+    data = _envelope(inputs, ("u1", "u2", "u3"), certificate)
     fig = Figure(figsize=(8.0, 7.5))
     fig.subplots_adjust(left=0.13, right=0.97, bottom=0.07, top=0.95, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
@@ -214,7 +200,7 @@ def tube_figure(certificate: Certificate, scenario: Scenario, trajectory: pd.Dat
     t = t[inside]
     dx = trajectory["x_m"].to_numpy(dtype=float)[inside] - np.interp(t, t_nom, nom["x_m"].to_numpy(dtype=float))
     dy = trajectory["y_m"].to_numpy(dtype=float)[inside] - np.interp(t, t_nom, nom["y_m"].to_numpy(dtype=float))
-    env = _envelope(pd.DataFrame({"t_s": t, "err_m": np.hypot(dx, dy)}), ("err_m",))
+    env = _envelope(pd.DataFrame({"t_s": t, "err_m": np.hypot(dx, dy)}), ("err_m",), certificate)
     t, err_m = env["t_s"].to_numpy(), env["err_m"].to_numpy()
     r_q = tube_radius_or_nan(scenario)
     fig = Figure(figsize=(8.0, 3.2))
@@ -256,7 +242,8 @@ def obligations_figure(obligations: Sequence[ObligationEntry], duration_s: float
     for ax, ob in zip(axes, obligations, strict=True):
         curve = by_text.get(ob.formula)
         if curve is not None and curve.curve_t_ns.size:
-            env = _envelope(pd.DataFrame({"t_s": curve.curve_t_ns * 1e-9, "rho": curve.curve}), ("rho",))
+            env = envelope(pd.DataFrame({"t_s": curve.curve_t_ns * 1e-9, "rho": curve.curve}), ("rho",),
+                           keep_t_s=[] if ob.first_violation_time is None else [ob.first_violation_time])
             t, rho = env["t_s"].to_numpy(dtype=float), env["rho"].to_numpy(dtype=float)
         else:
             t, rho = np.zeros(0), np.zeros(0)
@@ -325,7 +312,7 @@ def clearance_figure(certificate: Certificate, scenario: Scenario,
     unsafe = [k for k, r in enumerate(scenario.regions) if r.unsafe]
     if unsafe:
         frame["obstacle_m"] = -np.max(region_margins(x, y, scenario, unsafe), axis=0)
-    env = _envelope(frame, [c for c in ("edge_m", "obstacle_m") if c in frame.columns])
+    env = _envelope(frame, [c for c in ("edge_m", "obstacle_m") if c in frame.columns], certificate)
     fig = Figure(figsize=(8.0, 3.2))
     fig.subplots_adjust(left=0.1, right=0.97, bottom=0.16, top=0.89)
     ax = fig.add_subplot()

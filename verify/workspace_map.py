@@ -36,6 +36,7 @@ from matplotlib.transforms import Bbox
 
 from tubempc.scenario import Region, Scenario, ScenarioError
 from verify.certificate import Certificate, CheckEntry, Verdict
+from verify.decimate import envelope
 
 __all__ = ["LARGE_MAP_RATIO", "MapFigure", "Violation", "map_texts", "nominal_layers", "place_texts", "region_caption",
            "text_box", "violations_of", "workspace_caption", "workspace_figure", "workspace_map"]
@@ -115,9 +116,10 @@ def _position_at(trajectory: pd.DataFrame, t_s: float) -> tuple[float, float] | 
     return (x, y) if math.isfinite(x) and math.isfinite(y) else None
 
 
-def _decimate(frame: pd.DataFrame) -> pd.DataFrame:
-    n = len(frame)
-    return frame if n <= MAX_PATH_POINTS else frame.iloc[::math.ceil(n / MAX_PATH_POINTS)]
+def _decimate(frame: pd.DataFrame, keep_t_s: Sequence[float] = ()) -> pd.DataFrame:
+    """At most about ``MAX_PATH_POINTS`` rows of a path: every bucket's extremes of x and y, its gaps, and the
+    rows at ``keep_t_s`` (``verify.decimate.envelope``: an excursion or a violation of a long log stays drawn)."""
+    return envelope(frame, ("x_m", "y_m"), buckets=MAX_PATH_POINTS // 4, keep_t_s=keep_t_s)
 
 
 def _tube_polygon(nominal: pd.DataFrame, radius_m: float) -> np.ndarray | None:
@@ -288,8 +290,9 @@ def _draw_small_region_markers(ax: Axes, scenario: Scenario, px_per_m: float) ->
             ax.plot(*center, "o", ms=5, mfc=colour, mec="black", mew=0.5, zorder=3)
 
 
-def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: int) -> LineCollection:
-    tr = _decimate(trajectory)
+def _draw_path(ax: Axes, trajectory: pd.DataFrame, norm: Normalize, *, arrows: int,
+               keep_t_s: Sequence[float] = ()) -> LineCollection:
+    tr = _decimate(trajectory, keep_t_s)
     xy = tr[["x_m", "y_m"]].to_numpy(dtype=float)
     t = tr["t_s"].to_numpy(dtype=float)
     segments = np.stack([xy[:-1], xy[1:]], axis=1)
@@ -410,7 +413,7 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     if has_path and trajectory is not None:
         t = trajectory["t_s"].to_numpy(dtype=float)
         norm = Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t)) if t.size > 1 else float(t[0]) + 1.0)
-        lc = _draw_path(ax, trajectory, norm, arrows=8)
+        lc = _draw_path(ax, trajectory, norm, arrows=8, keep_t_s=[v.t_s for v in violations])
         fig.colorbar(lc, cax=cax, orientation="horizontal", label="time along the path t [s]")
         ax.plot([], [], "-", color="#21918c", lw=1.6, label="trajectory (colour: time)")
         first, last = _position_at(trajectory, float(t[0])), _position_at(trajectory, float(t[-1]))
@@ -529,7 +532,8 @@ def _zoom_panel(fig: Figure, main: Axes, zoom: _Zoom, scenario: Scenario, *, tra
             np.abs(trajectory["y_m"].to_numpy(dtype=float) - centre[1]) <= 2 * half_m)
         part = trajectory[near]
         if len(part) > 1:
-            _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0)
+            _draw_path(ax, part, Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t))), arrows=0,
+                       keep_t_s=[v.t_s])
     for region in scenario.regions:
         (cx, cy), _ = _anchor(region)
         if abs(cx - centre[0]) < half_m and abs(cy - centre[1]) < half_m:
