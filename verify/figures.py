@@ -15,7 +15,6 @@ modules (this one and ``verify.workspace_map``).
 from __future__ import annotations
 
 import gc
-import io
 import math
 import multiprocessing
 import os
@@ -36,7 +35,7 @@ from verify.decimate import envelope
 from verify.geometry import region_margins, workspace_margin
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.judging import FormulaJudgement, ObligationResult
-from verify.workspace_map import nominal_layers, tube_radius_or_nan, workspace_caption, workspace_figure
+from verify.workspace_map import nominal_layers, png_bytes, tube_radius_or_nan, workspace_caption, workspace_figure
 
 __all__ = [
     "FigureSpec",
@@ -56,7 +55,6 @@ __all__ = [
     "workspace_figure",
 ]
 
-_DPI = 110
 _VERDICT_COLOURS = {"pass": "#2ca02c", "fail": "#d62728", "inconclusive": "#ff7f0e"}
 _FAIL_COLOUR = "#d62728"
 
@@ -71,9 +69,7 @@ class FigureSpec:
 
 
 def _png(fig: Figure) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI)
-    return buf.getvalue()
+    return png_bytes(fig)
 
 
 def _envelope(frame: pd.DataFrame, columns: Sequence[str], certificate: Certificate | None = None) -> pd.DataFrame:
