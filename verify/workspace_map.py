@@ -460,12 +460,15 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
         labels.append(_Label(ax.annotate(region_caption(region.name, region.labels), center,
                                          xytext=(0, 0), textcoords="offset points", fontsize=8), _ring(r_pt)))
     path = (_path_points(ax, trajectory, 6.0) if has_path and trajectory is not None else np.zeros((0, 2)))
+    half_m = max(8.0 * eta, 0.03 * max(width_m, height_m))  # of each zoom box, boxed on the map below
+    zoom_px = np.array([[*ax.transData.transform((c[0] - half_m, c[1] - half_m)),
+                         *ax.transData.transform((c[0] + half_m, c[1] + half_m))]
+                        for c in (_inside_limits(ax, pos, half_m) for _, pos in zooms)]).reshape(-1, 4)
     hidden = place_texts(fig, ax, [*labels, *run_labels], keep_out=_point_boxes(ax, np.array(markers), 6.0),
-                         prefer_out=_point_boxes(ax, path, 3.0))
+                         prefer_out=np.vstack([_point_boxes(ax, path, 3.0), zoom_px]))
     ax.set_title("Workspace, trajectory and timed run")
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
     for k, (v, pos) in enumerate(zooms):
-        half_m = max(8.0 * eta, 0.03 * max(width_m, height_m))
         _zoom_panel(fig, ax, _Zoom(k, len(zooms), v, pos, half_m), scenario, trajectory=trajectory, nominal=nominal)
     return MapFigure(fig, hidden)
 
