@@ -11,7 +11,8 @@ channel are read; a chunk is read at the offsets its chunk index gives (CRC at `
 at ``start + 9 + 40 + len(compression)``), decompressed (none / lz4 / zstd) and checked (size, CRC when non-zero)
 by ``rosbags``' own ``decompress``; its records (opcode u8, length u64, content) are walked from the start to the
 end of the chunk; message records (opcode 5: channel u16, sequence u32, log time u64, publish time u64, payload) of
-the wanted channels with ``message_start_time <= log time <= message_end_time`` (chunk index values) are kept and
+the wanted channels are kept (all of them, whatever their log time: as the scan ``verify.ingest.mcapfile`` and the
+format's reference reader keep them, where rosbags also drops a message outside its chunk's indexed time range) and
 sorted stably by log time; the chunks are merged by (log time, chunk offset). Hence the order is (log time, chunk
 offset, record position).
 
@@ -43,7 +44,16 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
-from verify.ingest.mcaprecords import CHUNK_FIXED, MESSAGE_HEAD, RECORD_HEAD, Op, zstd
+from verify.ingest.mcaprecords import (
+    CHUNK_FIXED,
+    MESSAGE_HEAD,
+    RECORD_HEAD,
+    MalformedError,
+    Op,
+    Scan,
+    record_messages,
+    zstd,
+)
 from verify.ingest.records import (
     MCAP,
     WORKERS,
@@ -178,14 +188,14 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     u8 = np.frombuffer(raw, dtype=np.uint8)
     hints = _index_hints(fd, size, chunk, usize)
     pos, op, length = _walk(raw, u8, hints)
+    _parse_others(raw, pos, op, length)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]
     if np.any(length < _MSG_HEAD):
         raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
     channel = _read_u(u8, pos + 9, 2)
     log_ns = _read_u(u8, pos + 9 + 6, 8)
-    lo, hi = int(chunk.message_start_time), int(chunk.message_end_time)
-    keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted))) & (log_ns >= lo) & (log_ns <= hi)
+    keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted)))
     pos, length, channel, log_ns = pos[keep], length[keep], channel[keep], log_ns[keep]
     if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
         perm = np.argsort(log_ns, kind="stable")  # rosbags: sorted(..., key=timestamp), stable
@@ -207,7 +217,7 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
     if not chunks or any(c.compression for c in chunks):
         return None
     pairs: list[npt.NDArray[np.uint64]] = []  # per (chunk, channel): its message index entries (log time, offset)
-    meta: list[tuple[int, int, int, int, int, int]] = []  # ... and channel, count, base, limit, start, end time
+    meta: list[tuple[int, int, int, int]] = []  # ... and channel, count, base, limit
     try:
         for chunk in chunks:
             counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
@@ -221,22 +231,23 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             region = os.pread(fd, n, lo)
             base = int(chunk.chunk_start_offset) + _CHUNK_DATA_AT
             limit = base + int(chunk.uncompressed_size)
+            if not _chunk_chains(fd, chunk, region, lo, base):
+                return None
             for cid in mine:
                 got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)
                 if got is None or got[0] != cid:
                     return None
                 pairs.append(got[1])
-                meta.append((cid, got[1].shape[0], base, limit, int(chunk.message_start_time),
-                             int(chunk.message_end_time)))
+                meta.append((cid, got[1].shape[0], base, limit))
         flat = np.concatenate(pairs)
         if np.any(flat >= np.uint64(2**63)):
             return None
-        m = np.array(meta, dtype=np.int64).reshape(-1, 6)
+        m = np.array(meta, dtype=np.int64).reshape(-1, 4)
         k = m[:, 1]
         at = flat[:, 1].astype(np.int64) + np.repeat(m[:, 2], k)
         order = np.argsort(at, kind="stable")
         at, log_ns, chan = at[order], flat[:, 0].astype(np.int64)[order], np.repeat(m[:, 0], k)[order]
-        lim, lo_t, hi_t = (np.repeat(m[:, j], k)[order] for j in (3, 4, 5))
+        lim = np.repeat(m[:, 3], k)[order]
         if at.shape[0] > 1 and np.any(np.diff(at) == 0):
             return None
         u8, pos = read_records(fd, 0, size, at, MCAP, limits=lim)
@@ -247,12 +258,89 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             return None
     except (SpanError, _UnusualError, KeyError, OSError):
         return None
-    keep = (log_ns >= lo_t) & (log_ns <= hi_t)
-    pos, length, chan, log_ns = pos[keep], length[keep], chan[keep], log_ns[keep]
     if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
         perm = np.argsort(log_ns, kind="stable")
         pos, length, chan, log_ns = pos[perm], length[perm], chan[perm], log_ns[perm]
     return chan, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
+
+
+#: records inside a chunk that the scan parses besides messages: a damaged one stops the scan, so the fast read
+#: parses them too (and declines when one does not parse)
+_PARSED_OPS = (int(Op.SCHEMA), int(Op.CHANNEL), int(Op.STATISTICS))
+
+
+def _parse_others(raw: bytes, pos: IntArray, op: IntArray, length: IntArray) -> None:
+    """Parse a walked chunk's schema, channel and statistics records as the scan does (``_UnusualError`` when one
+    is malformed: the scan then reads the file and says where it stops)."""
+    for k in np.flatnonzero(np.isin(op, _PARSED_OPS)).tolist():
+        at = int(pos[k]) + RECORD_HEAD
+        try:
+            record_messages(int(op[k]), memoryview(raw)[at : at + int(length[k])], Scan({}, {}))
+        except (MalformedError, struct.error) as err:
+            raise _UnusualError("a malformed record in a chunk") from err
+
+
+_HEAD_CLUSTER_B = 4096  # record heads closer than this are read in one pread
+
+
+def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int) -> bool:
+    """Whether an uncompressed chunk read message by message is one the scan reads without stopping: no CRC to
+    check (a chunk with one is read whole and checked), every record from the chunk's start on ends where the next
+    begins and the last exactly at the chunk's end, message records hold their fixed fields, and its schema,
+    channel and statistics records parse. Only record heads are read (the message index of every channel gives
+    where each message record starts; the records between them are stepped over one by one), not the unwanted
+    payloads. False: read the chunk whole instead."""
+    start, usize = int(chunk.chunk_start_offset), int(chunk.uncompressed_size)
+    if os.pread(fd, 4, start + _CHUNK_CRC_AT) != b"\0\0\0\0":
+        return False
+    found: list[IntArray] = []
+    for off in chunk.message_index_offsets.values():
+        got = _index_record(region, int(off) - lo)
+        if got is None:
+            return False
+        found.append(got[1][:, 1].astype(np.int64))
+    cand_a = np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+    if cand_a.shape[0] and (int(cand_a[0]) < 0 or int(cand_a[-1]) + RECORD_HEAD > usize):
+        return False
+    cand: list[int] = cand_a.tolist()
+    heads: dict[int, tuple[int, int]] = {}
+    i = 0
+    while i < len(cand):  # the heads of the indexed records, nearby ones in one read
+        j = i
+        while j + 1 < len(cand) and cand[j + 1] - cand[i] < _HEAD_CLUSTER_B:
+            j += 1
+        n = cand[j] - cand[i] + RECORD_HEAD
+        piece = os.pread(fd, n, base + cand[i])
+        if len(piece) != n:
+            return False
+        for k in range(i, j + 1):
+            r = cand[k] - cand[i]
+            heads[cand[k]] = (piece[r], struct.unpack_from("<Q", piece, r + 1)[0])
+        i = j + 1
+    pos = 0
+    while pos < usize:
+        head = heads.get(pos)
+        if head is None:
+            raw = os.pread(fd, RECORD_HEAD, base + pos)
+            if len(raw) != RECORD_HEAD:
+                return False
+            head = (raw[0], struct.unpack_from("<Q", raw, 1)[0])
+        op, n = head
+        end = pos + RECORD_HEAD + n
+        if end > usize:
+            return False
+        if op == _OP_MESSAGE:
+            if n < _MSG_HEAD:
+                return False
+        elif op in _PARSED_OPS:
+            content = os.pread(fd, n, base + pos + RECORD_HEAD)
+            try:
+                record_messages(op, memoryview(content), Scan({}, {}))
+            except (MalformedError, struct.error):
+                return False
+        heads.pop(pos, None)
+        pos = end
+    return pos == usize and not heads  # every indexed record was a record of the walk
 
 
 def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:

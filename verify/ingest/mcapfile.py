@@ -40,7 +40,18 @@ from rosbags.rosbag2.storage_mcap import McapReader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
-from verify.ingest.mcaprecords import FOOTER_RECORD, MAGIC, CutError, MalformedError, Op, Scan, scan
+from verify.ingest.mcaprecords import (
+    CHUNK_FIXED,
+    FOOTER_RECORD,
+    MAGIC,
+    RECORD_HEAD,
+    CutError,
+    MalformedError,
+    Op,
+    Scan,
+    record_messages,
+    scan,
+)
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
@@ -210,7 +221,7 @@ def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] 
     except _ROSBAGS_OPEN_ERRORS:
         return None
     try:
-        if not _summary_is_complete(storage):
+        if not _summary_is_complete(storage) or not _records_chain(file, storage):
             return None
         conns = [c for c in storage.connections if c.topic in want]
         if any(c.msgtype == _SCHEMALESS for c in conns):
@@ -270,6 +281,63 @@ def _summary_is_complete(storage: McapReader) -> bool:
         return False
     # messages outside the chunks (or missing from their message indexes) are counted by the statistics
     return int(storage.statistics.message_count) == indexed
+
+
+#: top-level records whose content the scan parses (``mcaprecords.record_messages``); every other record (indexes,
+#: attachments, metadata, summary offsets) is only stepped over
+_PARSED = frozenset({Op.SCHEMA, Op.CHANNEL, Op.MESSAGE, Op.STATISTICS})
+
+
+def _records_chain(file: Path, storage: McapReader) -> bool:
+    """Whether the file's top-level records are what the scan reads without stopping, as far as it can be told
+    without reading the chunks' contents: from the header on, every record's length ends by the file's end and the
+    next record follows it, up to the footer; schema, channel, message and statistics records parse; each chunk's
+    fixed fields and compression string fit its record; and every chunk of the chunk index is a chunk record of that
+    length where the index puts it. The indexed reader reads the chunks at the index's offsets, so a damaged record
+    length, or a damaged record between the chunks, would otherwise be read past where the scan (the plain read, and
+    salvage) stops. What this does not check is inside the chunks the indexed reader does not read (their
+    decompression and CRC, and the records of an uncompressed chunk it reads message by message)."""
+    chunks = {int(c.chunk_start_offset): int(c.chunk_length) for c in storage.chunks}
+    seen = 0
+    found = Scan({}, {})
+    try:
+        with file.open("rb") as fh:
+            fd = fh.fileno()
+            size = os.fstat(fd).st_size
+            pos = len(MAGIC)
+            while True:
+                head = os.pread(fd, RECORD_HEAD + CHUNK_FIXED + 4, pos)
+                if len(head) < RECORD_HEAD:
+                    return False
+                op = head[0]
+                (length,) = struct.unpack_from("<Q", head, 1)
+                nxt = pos + RECORD_HEAD + length
+                if nxt > size:
+                    return False
+                if op == Op.FOOTER:
+                    return seen == len(chunks)
+                if op == Op.CHUNK:
+                    if chunks.get(pos) != RECORD_HEAD + length:
+                        return False
+                    seen += 1
+                    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
+                    if len(fixed) < CHUNK_FIXED + 4:
+                        return False
+                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
+                    if CHUNK_FIXED + 4 + name_len + 8 > length:
+                        return False
+                    at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
+                    (stored,) = struct.unpack("<Q", os.pread(fd, 8, at))
+                    if CHUNK_FIXED + 4 + name_len + 8 + stored > length:
+                        return False
+                elif op in _PARSED:
+                    content = os.pread(fd, length, pos + RECORD_HEAD)
+                    if len(content) != length:
+                        return False
+                    record_messages(op, memoryview(content), found)
+                pos = nxt
+    except (OSError, struct.error, MalformedError, ValueError, MemoryError, OverflowError):
+        return False
 
 
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:

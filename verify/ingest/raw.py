@@ -309,10 +309,24 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
                 raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
         _check_counts(path, fmt, selected, out)
         return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
+    _check_rows(path, fmt, rows)
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
     _check_counts(path, fmt, selected, out)
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | memoryview]]) -> None:
+    """Every row a reader yields has an integer log time and a payload: a damaged sqlite3 page can hold a message
+    row whose columns read as NULL (its NOT NULL constraint is only checked when rows are written), which rosbags
+    yields as it is."""
+    if all(map(int.__instancecheck__, map(itemgetter(1), rows))) and \
+            all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))):
+        return
+    bad = next(r for r in rows if not isinstance(r[1], int) or not isinstance(r[2], bytes | memoryview))
+    what = "log time" if not isinstance(bad[1], int) else "payload"
+    raise LogReadError(f"damaged {fmt} log: a message on {bad[0].topic} has no {what} (a damaged database row)",
+                       path=str(path))
 
 
 def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:
