@@ -201,3 +201,55 @@ def test_a_sqlite3_row_without_data_is_one_line_on_both_paths(seeds: dict[str, P
         err = capsys.readouterr().err.strip()
         assert exc.value.code == 3, err
         assert err.count("\n") == 0 and POSE in err and "damaged sqlite3 log" in err, err
+
+
+def test_an_unwanted_message_on_an_undeclared_channel(seeds: dict[str, Path], tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A camera message whose channel id is damaged: the scan refuses a message on a channel the file never
+    declares; the indexed reader, reading only the wanted records of that chunk, read on. Both refuse now."""
+    buf = bytearray(seeds["mcap-cam"].read_bytes())
+    camera = channel_ids(bytes(buf))[CAMERA]
+    start = [s for op, s, _e in top_records(bytes(buf)) if op == Op.CHUNK][1]
+    base, inner = chunk_records(bytes(buf), start)
+    at = next(pos for op, pos, content in inner
+              if op == Op.MESSAGE and struct.unpack_from("<H", content, 0)[0] == camera)
+    struct.pack_into("<H", buf, base + at + RECORD_HEAD, 999)
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(bytes(buf))
+    got = both(path, monkeypatch)
+    assert got[0] == "refused" and "channel 999" in got[1]
+
+
+def test_a_summary_channel_that_differs_from_the_data_sections(seeds: dict[str, Path], tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The summary repeats a channel with a damaged topic: the scan takes the channel's first record (in the data
+    section), rosbags' summary the damaged copy; the indexed reader now declines and both read the same topics."""
+    buf = bytearray(seeds["mcap-zstd"].read_bytes())
+    pose = channel_ids(bytes(buf))[POSE]
+    records = top_records(bytes(buf))
+    chunk_at = [s for op, s, _e in records if op == Op.CHUNK]
+    summary = [(s, e) for op, s, e in records if op == Op.CHANNEL and s > chunk_at[-1]]
+    for s, _e in summary:
+        if struct.unpack_from("<H", buf, s + RECORD_HEAD)[0] == pose:
+            (n,) = struct.unpack_from("<I", buf, s + RECORD_HEAD + 4)
+            buf[s + RECORD_HEAD + 8 + n - 4 : s + RECORD_HEAD + 8 + n] = b"XXXX"  # the topic's last 4 bytes
+            break
+    else:
+        pytest.skip("the summary does not repeat the channels")
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(bytes(buf))
+    got = both(path, monkeypatch)
+    assert got[0] == "read" and len(got[2][POSE][0]) == 301
+
+
+def test_a_chunk_whose_size_field_the_index_contradicts(seeds: dict[str, Path], tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A chunk's uncompressed size field zeroed: the indexed reader took the size from the chunk index and read
+    the chunk; the scan refuses it. Both refuse now, with the same line."""
+    buf = bytearray(seeds["mcap-cam"].read_bytes())
+    start = [s for op, s, _e in top_records(bytes(buf)) if op == Op.CHUNK][2]
+    struct.pack_into("<Q", buf, start + RECORD_HEAD + 16, 0)
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(bytes(buf))
+    got = both(path, monkeypatch)
+    assert got[0] == "refused" and "header says 0" in got[1]

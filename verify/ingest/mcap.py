@@ -118,6 +118,7 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
     if not chunks:
         return None  # unindexed file: rosbags scans the data section (and checks the order); not reproduced here
     topic_of = {int(c.id): c.topic for c in connections}
+    known = {int(cid): str(ch.topic) for cid, ch in storage.channels.items()}  # every channel of the summary
     wanted = set(topic_of)
     # the chunks rosbags reads, merged by chunk offset on equal log times
     selected = sorted((c for c in chunks if any(c.channel_count.get(cid, 0) for cid in wanted)),
@@ -131,12 +132,12 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         fd = fh.fileno()
         size = os.fstat(fd).st_size
         # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
-        whole = _sparse(fd, size, selected, wanted)
+        whole = _sparse(fd, size, selected, wanted, known)
         if whole is not None:
             batches: Iterable[tuple[IntArray, IntArray, IntArray, IntArray, U8Array]] = [whole]
         else:
             workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
-            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected, workers=workers)
+            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted, known), selected, workers=workers)
         for channel, log_ns, starts, lens, u8 in batches:
             for t in topics:
                 mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
@@ -169,13 +170,13 @@ def _decompress(data: bytes | memoryview, compression: str, usize: int, crc: int
     return rosbags_decompress(bytes(data), compression, usize, crc)
 
 
-def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
+def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], known: dict[int, str]
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
     """The wanted messages of one chunk in rosbags' order: channel, log time, payload start and length in the
     returned bytes (the decompressed chunk, or only its wanted records: ``_sparse``)."""
     start = int(chunk.chunk_start_offset)
     usize = int(chunk.uncompressed_size)
-    if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted)) is not None:
+    if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted, known)) is not None:
         return sparse  # only its wanted records read
     (crc,) = struct.unpack("<I", _pread(fd, size, start + _CHUNK_CRC_AT, 4))
     at, csize = start + _CHUNK_DATA_AT + len(chunk.compression), int(chunk.compressed_size)
@@ -188,12 +189,14 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     u8 = np.frombuffer(raw, dtype=np.uint8)
     hints = _index_hints(fd, size, chunk, usize)
     pos, op, length = _walk(raw, u8, hints)
-    _parse_others(raw, pos, op, length)
+    _parse_others(raw, pos, op, length, known)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]
     if np.any(length < _MSG_HEAD):
         raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
     channel = _read_u(u8, pos + 9, 2)
+    if not np.all(np.isin(channel, np.fromiter(known, dtype=np.int64, count=len(known)))):
+        raise _UnusualError("a message on a channel the summary does not declare")  # the scan refuses it
     log_ns = _read_u(u8, pos + 9 + 6, 8)
     keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted)))
     pos, length, channel, log_ns = pos[keep], length[keep], channel[keep], log_ns[keep]
@@ -203,7 +206,7 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
 
 
-def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
+def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int], known: dict[int, str]
             ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array] | None:
     """The wanted channels' message records of uncompressed chunks whose records are not all wanted, read message
     by message: the message index records of every chunk (one read per chunk) give each wanted message's file
@@ -231,7 +234,7 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             region = os.pread(fd, n, lo)
             base = int(chunk.chunk_start_offset) + _CHUNK_DATA_AT
             limit = base + int(chunk.uncompressed_size)
-            if not _chunk_chains(fd, chunk, region, lo, base):
+            if not _chunk_chains(fd, chunk, region, lo, base, known):
                 return None
             for cid in mine:
                 got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)
@@ -269,21 +272,30 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
 _PARSED_OPS = (int(Op.SCHEMA), int(Op.CHANNEL), int(Op.STATISTICS))
 
 
-def _parse_others(raw: bytes, pos: IntArray, op: IntArray, length: IntArray) -> None:
+def _parse_others(raw: bytes, pos: IntArray, op: IntArray, length: IntArray, known: dict[int, str]) -> None:
     """Parse a walked chunk's schema, channel and statistics records as the scan does (``_UnusualError`` when one
-    is malformed: the scan then reads the file and says where it stops)."""
+    is malformed, or a channel's topic is not the summary's: the scan then reads the file and decides)."""
     for k in np.flatnonzero(np.isin(op, _PARSED_OPS)).tolist():
         at = int(pos[k]) + RECORD_HEAD
-        try:
-            record_messages(int(op[k]), memoryview(raw)[at : at + int(length[k])], Scan({}, {}))
-        except (MalformedError, struct.error) as err:
-            raise _UnusualError("a malformed record in a chunk") from err
+        if not _parses(int(op[k]), memoryview(raw)[at : at + int(length[k])], known):
+            raise _UnusualError("a malformed record in a chunk")
+
+
+def _parses(op: int, content: memoryview, known: dict[int, str]) -> bool:
+    """Whether a schema, channel or statistics record parses as the scan parses it, and a channel's topic is the
+    one the summary gives its id (the scan takes a channel's first record, which may be this one)."""
+    found = Scan({}, {})
+    try:
+        record_messages(op, content, found)
+    except (MalformedError, struct.error):
+        return False
+    return all(known.get(cid) == ch.topic for cid, ch in found.channels.items())
 
 
 _HEAD_CLUSTER_B = 4096  # record heads closer than this are read in one pread
 
 
-def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int) -> bool:
+def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, known: dict[int, str]) -> bool:
     """Whether an uncompressed chunk read message by message is one the scan reads without stopping: no CRC to
     check (a chunk with one is read whole and checked), every record from the chunk's start on ends where the next
     begins and the last exactly at the chunk's end, message records hold their fixed fields, and its schema,
@@ -303,40 +315,37 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int) 
     if cand_a.shape[0] and (int(cand_a[0]) < 0 or int(cand_a[-1]) + RECORD_HEAD > usize):
         return False
     cand: list[int] = cand_a.tolist()
-    heads: dict[int, tuple[int, int]] = {}
+    heads: dict[int, tuple[int, int, int]] = {}  # record position -> opcode, content length, first u16 (channel)
     i = 0
     while i < len(cand):  # the heads of the indexed records, nearby ones in one read
         j = i
         while j + 1 < len(cand) and cand[j + 1] - cand[i] < _HEAD_CLUSTER_B:
             j += 1
-        n = cand[j] - cand[i] + RECORD_HEAD
+        n = cand[j] - cand[i] + RECORD_HEAD + 2
         piece = os.pread(fd, n, base + cand[i])
         if len(piece) != n:
             return False
         for k in range(i, j + 1):
             r = cand[k] - cand[i]
-            heads[cand[k]] = (piece[r], struct.unpack_from("<Q", piece, r + 1)[0])
+            heads[cand[k]] = struct.unpack_from("<BQH", piece, r)
         i = j + 1
     pos = 0
     while pos < usize:
         head = heads.get(pos)
         if head is None:
-            raw = os.pread(fd, RECORD_HEAD, base + pos)
-            if len(raw) != RECORD_HEAD:
+            raw = os.pread(fd, RECORD_HEAD + 2, base + pos)
+            if len(raw) != RECORD_HEAD + 2:
                 return False
-            head = (raw[0], struct.unpack_from("<Q", raw, 1)[0])
-        op, n = head
+            head = struct.unpack("<BQH", raw)
+        op, n, channel = head
         end = pos + RECORD_HEAD + n
         if end > usize:
             return False
         if op == _OP_MESSAGE:
-            if n < _MSG_HEAD:
-                return False
+            if n < _MSG_HEAD or channel not in known:
+                return False  # the scan refuses a message on a channel the file never declares
         elif op in _PARSED_OPS:
-            content = os.pread(fd, n, base + pos + RECORD_HEAD)
-            try:
-                record_messages(op, memoryview(content), Scan({}, {}))
-            except (MalformedError, struct.error):
+            if not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
                 return False
         heads.pop(pos, None)
         pos = end

@@ -164,7 +164,7 @@ def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
     per_file: list[tuple[McapLog, dict[str, int]]] | None = None
     if fast:
         got = [_read_indexed(f, want) for f in files]
-        per_file = None if any(g is None for g in got) else [g for g in got if g is not None]
+        per_file = None if any(g is None or _short(g) for g in got) else [g for g in got if g is not None]
     if per_file is None:
         per_file = [_read_scanned(f, want, shown, named=meta is not None) for f in files]
     topics: dict[str, McapTopic] = {}
@@ -187,6 +187,15 @@ def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
             raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
                                     f"can be read", path=shown)
     return McapLog(topics, available)
+
+
+def _short(got: tuple[McapLog, dict[str, int]] | None) -> bool:
+    """Whether the indexed read of a file holds fewer messages on a topic than the file declares: a damaged file,
+    which the scan reads (and refuses, or salvages, saying where and why) as the plain path does."""
+    if got is None:
+        return False
+    log, counts = got
+    return any(n > (len(log.topics[t].payloads) if t in log.topics else 0) for t, n in counts.items())
 
 
 def _concat(a: McapTopic, b: McapTopic) -> McapTopic:
@@ -297,7 +306,7 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
     length, or a damaged record between the chunks, would otherwise be read past where the scan (the plain read, and
     salvage) stops. What this does not check is inside the chunks the indexed reader does not read (their
     decompression and CRC, and the records of an uncompressed chunk it reads message by message)."""
-    chunks = {int(c.chunk_start_offset): int(c.chunk_length) for c in storage.chunks}
+    chunks = {int(c.chunk_start_offset): c for c in storage.chunks}
     seen = 0
     found = Scan({}, {})
     try:
@@ -315,20 +324,26 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                 if nxt > size:
                     return False
                 if op == Op.FOOTER:
-                    return seen == len(chunks)
+                    return seen == len(chunks) and _same_channels(found, storage)
                 if op == Op.CHUNK:
-                    if chunks.get(pos) != RECORD_HEAD + length:
+                    info = chunks.get(pos)
+                    if info is None or int(info.chunk_length) != RECORD_HEAD + length:
                         return False
                     seen += 1
                     fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
                     if len(fixed) < CHUNK_FIXED + 4:
                         return False
-                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
+                    usize, name_len = struct.unpack_from("<QI", fixed, 16)
                     if CHUNK_FIXED + 4 + name_len + 8 > length:
                         return False
                     at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
+                    name = os.pread(fd, name_len, at - name_len)
                     (stored,) = struct.unpack("<Q", os.pread(fd, 8, at))
                     if CHUNK_FIXED + 4 + name_len + 8 + stored > length:
+                        return False
+                    # the chunk as the index describes it (the indexed reader reads it by the index)
+                    if (usize, stored, name) != (int(info.uncompressed_size), int(info.compressed_size),
+                                                 str(info.compression).encode()):
                         return False
                 elif op in _PARSED:
                     content = os.pread(fd, length, pos + RECORD_HEAD)
@@ -338,6 +353,17 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                 pos = nxt
     except (OSError, struct.error, MalformedError, ValueError, MemoryError, OverflowError):
         return False
+
+
+def _same_channels(found: Scan, storage: McapReader) -> bool:
+    """Whether the channels the scan takes (the first record of each id, wherever it is) are those rosbags took
+    from the summary: same topic and same schema name."""
+    for cid, ch in found.channels.items():
+        theirs = storage.channels.get(cid)
+        schema = found.schemas.get(ch.schema_id)
+        if theirs is None or theirs.topic != ch.topic or schema is None or theirs.schema != schema.name:
+            return False
+    return True
 
 
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:
