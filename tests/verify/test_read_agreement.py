@@ -44,7 +44,7 @@ FUZZ = _fuzz()
 def seeds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("seeds")
     return {fmt: FUZZ.write_run(FUZZ.base_run(violating=False), FUZZ.seed_path(root, fmt, False), fmt)
-            for fmt in ("mcap-cam", "mcap-zstd", "dir")}
+            for fmt in ("mcap-cam", "mcap-zstd", "dir", "bag-lz4")}
 
 
 def read_on(path: Path, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[Any, ...]:
@@ -253,3 +253,15 @@ def test_a_chunk_whose_size_field_the_index_contradicts(seeds: dict[str, Path], 
     path.write_bytes(bytes(buf))
     got = both(path, monkeypatch)
     assert got[0] == "refused" and "header says 0" in got[1]
+
+
+def test_a_ros1_chunk_info_without_its_time_fields(seeds: dict[str, Path], tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A chunk info record whose ``start_time`` field name is damaged: rosbags refuses the index (salvage then
+    reads the chunks), the fast reader did not need the field. It refuses the index too now."""
+    buf = seeds["bag-lz4"].read_bytes()
+    assert buf.count(b"start_time=") > 1
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(buf.replace(b"start_time=", b"start_tima=", 1))
+    got = both(path, monkeypatch)
+    assert got[0] == "read" and got[1] is True
