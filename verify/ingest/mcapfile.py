@@ -333,7 +333,8 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                     fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
                     if len(fixed) < CHUNK_FIXED + 4:
                         return False
-                    usize, name_len = struct.unpack_from("<QI", fixed, 16)
+                    (usize,) = struct.unpack_from("<Q", fixed, 16)
+                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
                     if CHUNK_FIXED + 4 + name_len + 8 > length:
                         return False
                     at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
