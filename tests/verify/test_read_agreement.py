@@ -44,7 +44,7 @@ FUZZ = _fuzz()
 def seeds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("seeds")
     return {fmt: FUZZ.write_run(FUZZ.base_run(violating=False), FUZZ.seed_path(root, fmt, False), fmt)
-            for fmt in ("mcap-cam", "mcap-zstd", "dir", "bag-lz4")}
+            for fmt in ("mcap-cam", "mcap-zstd", "dir", "bag-lz4", "db3")}
 
 
 def read_on(path: Path, fast: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[Any, ...]:
@@ -265,3 +265,23 @@ def test_a_ros1_chunk_info_without_its_time_fields(seeds: dict[str, Path], tmp_p
     path.write_bytes(buf.replace(b"start_time=", b"start_tima=", 1))
     got = both(path, monkeypatch)
     assert got[0] == "read" and got[1] is True
+
+
+def test_a_bare_db3_whose_ordered_read_misses_a_row_is_refused(seeds: dict[str, Path],
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """A damaged timestamp index (``PRAGMA integrity_check``: "row N missing from index timestamp_idx") makes the
+    ordered read return fewer rows than the table holds; rosbags' open counts the table and its path refuses the
+    log. The fast path skipped that count on a bare .db3; it now counts too. Simulated by a rows query that skips
+    one pose row, as the damaged index does."""
+    from verify.ingest import sqlite as sqlite_module
+    from verify.ingest.sqlite import rosbags_query
+
+    con = sqlite3.connect(f"file:{seeds['db3']}?immutable=1", uri=True)
+    (skip,) = con.execute("SELECT min(m.id) FROM messages m JOIN topics t ON m.topic_id=t.id WHERE t.name=?",
+                          (POSE,)).fetchone()
+    con.close()
+    monkeypatch.setattr(sqlite_module, "rosbags_query",
+                        lambda ids: rosbags_query(ids).replace("ORDER BY", f"AND messages.id != {int(skip)} ORDER BY"))
+    monkeypatch.setenv("TUBEMPC_FAST_INGEST", "1")
+    with pytest.raises(LogReadError, match=f"declares 301 messages on {POSE} but only 300"):
+        read_raw(seeds["db3"], TOPICS)

@@ -234,7 +234,7 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int], known
             region = os.pread(fd, n, lo)
             base = int(chunk.chunk_start_offset) + _CHUNK_DATA_AT
             limit = base + int(chunk.uncompressed_size)
-            if not _chunk_chains(fd, chunk, region, lo, base, known):
+            if not _chunk_chains(fd, chunk, region, lo, base, known=known):
                 return None
             for cid in mine:
                 got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)
@@ -295,7 +295,7 @@ def _parses(op: int, content: memoryview, known: dict[int, str]) -> bool:
 _HEAD_CLUSTER_B = 4096  # record heads closer than this are read in one pread
 
 
-def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, known: dict[int, str]) -> bool:
+def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, *, known: dict[int, str]) -> bool:
     """Whether an uncompressed chunk read message by message is one the scan reads without stopping: no CRC to
     check (a chunk with one is read whole and checked), every record from the chunk's start on ends where the next
     begins and the last exactly at the chunk's end, message records hold their fixed fields, and its schema,
@@ -344,9 +344,8 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
         if op == _OP_MESSAGE:
             if n < _MSG_HEAD or channel not in known:
                 return False  # the scan refuses a message on a channel the file never declares
-        elif op in _PARSED_OPS:
-            if not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
-                return False
+        elif op in _PARSED_OPS and not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
+            return False
         heads.pop(pos, None)
         pos = end
     return pos == usize and not heads  # every indexed record was a record of the walk

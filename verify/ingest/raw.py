@@ -356,6 +356,8 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
         conns = list(reader.connections)
         selected = [c for c in conns if c.topic in wanted]
         fast = _read_rosbag2_fast(reader, selected) if selected else None
+        if fast is not None:  # the counts rosbags' open declares (its count scan, for the selected topics only)
+            selected = _with_counts(reader, selected)
     except Exception:  # as above
         fast = None
     finally:
@@ -372,6 +374,22 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
             raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
     _check_counts(path, "sqlite3", selected, out)
     return RawLog(str(path), "sqlite3", False, out, {c.topic: c.msgtype for c in conns}, False, tuple(notes))
+
+
+def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connection]:
+    """A bare ``.db3``'s selected connections with their message counts as rosbags' open counts them
+    (``count(messages.id)`` of a left join of ``topics`` and ``messages``): a damaged table or index can make the
+    ordered read return other rows than the table holds, which the count check then names, as on rosbags' own
+    path."""
+    storage = reader.storage
+    if not isinstance(storage, Sqlite3Reader) or storage.dbconn is None:
+        return selected  # a bag folder: its metadata.yaml declares the counts
+    ids = sorted({int(c.id) for c in selected})
+    rows = storage.dbconn.execute(
+        f"SELECT topics.id, count(messages.id) FROM topics LEFT JOIN messages ON topics.id == messages.topic_id "
+        f"WHERE topics.id IN ({','.join('?' * len(ids))}) GROUP BY topics.id", ids).fetchall()
+    counts = {int(cid): int(n) for cid, n in rows}
+    return [c._replace(msgcount=counts.get(int(c.id), 0)) for c in selected]
 
 
 def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:
