@@ -201,6 +201,11 @@ def test_a_sqlite3_row_without_data_is_one_line_on_both_paths(seeds: dict[str, P
         err = capsys.readouterr().err.strip()
         assert exc.value.code == 3, err
         assert err.count("\n") == 0 and POSE in err and "damaged sqlite3 log" in err, err
+    # the follower reads the row as the readers do
+    with pytest.raises(SystemExit) as exc:
+        main(["watch", str(folder), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", "auto"])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 3 and err.count("\n") == 0 and "damaged sqlite3 log" in err and POSE in err, err
 
 
 def test_an_unwanted_message_on_an_undeclared_channel(seeds: dict[str, Path], tmp_path: Path,

@@ -324,9 +324,8 @@ def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | 
             all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))):
         return
     bad = next(r for r in rows if not isinstance(r[1], int) or not isinstance(r[2], bytes | memoryview))
-    what = "log time" if not isinstance(bad[1], int) else "payload"
-    raise LogReadError(f"damaged {fmt} log: a message on {bad[0].topic} has no {what} (a damaged database row)",
-                       path=str(path))
+    raise LogReadError(f"damaged {fmt} log: a message row on {bad[0].topic} has no log time or payload (a damaged "
+                       f"database page)", path=str(path))
 
 
 def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:

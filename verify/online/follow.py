@@ -197,7 +197,11 @@ class SqliteFollower:
         for mid, tid, stamp, data in rows:
             if tid in topics:
                 name, typ = topics[tid]
-                out.append(SalvagedMessage(name, typ, False, int(stamp), bytes(data)))
+                if not isinstance(stamp, int) or not isinstance(data, bytes):
+                    # a damaged page can hold a row whose columns read as NULL (NOT NULL is checked on writes only)
+                    raise LogReadError(f"damaged sqlite3 log: a message row on {name} has no log time or payload (a "
+                                       f"damaged database page)", path=str(self.path))
+                out.append(SalvagedMessage(name, typ, False, stamp, data))
             self.last_id = max(self.last_id, int(mid))
         self.delivered += len(out)
         return out
