@@ -290,3 +290,50 @@ def test_a_bare_db3_whose_ordered_read_misses_a_row_is_refused(seeds: dict[str, 
     monkeypatch.setenv("TUBEMPC_FAST_INGEST", "1")
     with pytest.raises(LogReadError, match=f"declares 301 messages on {POSE} but only 300"):
         read_raw(seeds["db3"], TOPICS)
+
+
+@pytest.mark.parametrize("mode", ["file", "message"])
+def test_compressed_mcap_folders_are_read_by_the_projects_reader(tmp_path: Path, mode: str,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """ROS 2 MCAP bag folders compressed per file (``name.mcap.zstd``) or per message: both read paths return what
+    the format's reference reader (``mcap``) reads from the decompressed storage (payloads decompressed, sorted by
+    log time), and the plain path reads them through the project's MCAP scan, not rosbags' storage."""
+    import io
+
+    import mcap.reader as mcap_reader
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    from verify.ingest import mcapfile
+    from verify.ingest.mcaprecords import zstd
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    string = store.types["std_msgs/msg/String"]
+    folder = tmp_path / "bag"
+    writer = Writer2(folder, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode.FILE if mode == "file" else CompressionMode.MESSAGE,
+                           CompressionFormat.ZSTD)
+    with writer:
+        a = writer.add_connection("/a", "std_msgs/msg/String", typestore=store)
+        b = writer.add_connection("/b", "std_msgs/msg/String", typestore=store)
+        for k in range(50):  # /b's log times out of order: read back sorted by log time
+            writer.write(a, 1_000 + k, bytes(store.serialize_cdr(string(data=f"a{k}"), "std_msgs/msg/String")))
+            writer.write(b, 5_000 - k, bytes(store.serialize_cdr(string(data=f"b{k}"), "std_msgs/msg/String")))
+    (storage,) = [p for p in folder.iterdir() if p.name != "metadata.yaml"]
+    raw = storage.read_bytes()
+    if mode == "file":
+        raw = zstd.decompress(raw)
+    want: dict[str, tuple[list[int], list[bytes]]] = {"/a": ([], []), "/b": ([], [])}
+    for _s, channel, message in mcap_reader.make_reader(io.BytesIO(raw)).iter_messages(log_time_order=True):
+        data = message.data if mode == "file" else zstd.decompress(message.data)
+        want[channel.topic][0].append(message.log_time)
+        want[channel.topic][1].append(data)
+    used: list[Path] = []
+    real = mcapfile._read_scanned
+    monkeypatch.setattr(mcapfile, "_read_scanned", lambda f, *a, **k: used.append(f) or real(f, *a, **k))
+    for fast in ("1", "0"):
+        monkeypatch.setenv("TUBEMPC_FAST_INGEST", fast)
+        got = read_raw(folder, ["/a", "/b"])
+        assert {t: ([int(v) for v in x.log_ns], [bytes(p) for p in x.payloads]) for t, x in got.topics.items()} == want
+    assert used  # the plain path went through the project's scan, not rosbags' storage

@@ -27,6 +27,7 @@ import mmap
 import os
 import stat
 import struct
+import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from operator import itemgetter
@@ -51,6 +52,7 @@ from verify.ingest.mcaprecords import (
     Scan,
     record_messages,
     scan,
+    zstd,
 )
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
@@ -84,7 +86,7 @@ class BagMetadata:
     """What a ROS2 bag folder's metadata.yaml says: storage files, compression, per topic its type and count."""
 
     files: tuple[Path, ...]
-    compression_mode: str | None
+    compression_mode: str | None  # None, "file" or "message" (rosbag2's modes; zstd is the one format rosbags reads)
     types: dict[str, str]
     counts: dict[str, int]
 
@@ -132,6 +134,14 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
     if mode is not None and not isinstance(mode, str):
         raise bad("compression_mode is not a string")
     mode = None if mode is None or mode.lower() == "none" else mode.lower()
+    if mode is not None:
+        fmt = info.get("compression_format")
+        if mode not in ("file", "message"):
+            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
+                               f"writes 'file' or 'message'", path=str(folder))
+        if not isinstance(fmt, str) or fmt.lower() != "zstd":
+            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
+                               f"'zstd' is read", path=str(folder))
     types: dict[str, str] = {}
     counts: dict[str, int] = {}
     entries = info.get("topics_with_message_count", [])
@@ -157,9 +167,53 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
 
 def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
     """The wanted topics of an MCAP file or MCAP bag folder (see the module docstring)."""
-    want = set(wanted)
     meta = read_bag_metadata(path) if path.is_dir() else None
-    files = meta.files if meta is not None else (path,)
+    if meta is None or meta.compression_mode != "file":
+        return _read_files(path, meta, meta.files if meta is not None else (path,), set(wanted), fast=fast)
+    with tempfile.TemporaryDirectory(prefix="tubempc-mcap-") as tmp:
+        files = tuple(_decompressed_file(f, Path(tmp), shown=str(path)) for f in meta.files)
+        return _read_files(path, meta, files, set(wanted), fast=fast)
+
+
+def _decompressed_file(file: Path, tmp: Path, *, shown: str) -> Path:
+    """A storage file of a bag folder written with compression mode 'file' (one zstd stream of the whole MCAP
+    file, ``name.mcap.zstd``) -> the MCAP file, decompressed into ``tmp`` under its own name (``name.mcap``), in
+    pieces (never the whole file in memory)."""
+    out = tmp / (file.name[: -len(".zstd")] if file.name.endswith(".zstd") else file.name)
+    dec = zstd.ZstdDecompressor()
+    try:
+        with file.open("rb") as src, out.open("wb") as dst:
+            while block := src.read(1 << 20):
+                dst.write(dec.decompress(block))
+                while dec.needs_input is False and not dec.eof:
+                    dst.write(dec.decompress(b""))
+        if not dec.eof:
+            raise LogReadError(f"truncated mcap log: storage file {file.name} ends inside its zstd stream",
+                               path=shown)
+    except zstd.ZstdError as err:
+        raise LogReadError(f"unreadable mcap log: storage file {file.name} cannot be decompressed ({err})",
+                           path=shown) from err
+    except OSError as err:
+        raise LogReadError(f"unreadable mcap log: storage file {file.name} cannot be decompressed "
+                           f"({err.strerror or err.__class__.__name__})", path=shown) from err
+    return out
+
+
+def _decompressed_messages(topics: dict[str, McapTopic], shown: str) -> None:
+    """Compression mode 'message': every payload is one zstd frame (rosbag2 compresses each message's data)."""
+    for topic, t in topics.items():
+        out: list[bytes] = []
+        for payload in t.payloads:
+            try:
+                out.append(zstd.decompress(bytes(payload)))
+            except zstd.ZstdError as err:
+                raise LogReadError(f"unreadable mcap log: a message on {topic} cannot be decompressed ({err})",
+                                   path=shown) from err
+        t.payloads = out
+
+
+def _read_files(path: Path, meta: BagMetadata | None, files: tuple[Path, ...], want: set[str], *, fast: bool
+                ) -> McapLog:
     shown = str(path)
     per_file: list[tuple[McapLog, dict[str, int]]] | None = None
     if fast:
@@ -186,6 +240,8 @@ def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
         if want_n > got_n:
             raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
                                     f"can be read", path=shown)
+    if meta is not None and meta.compression_mode == "message":
+        _decompressed_messages(topics, shown)
     return McapLog(topics, available)
 
 

@@ -230,6 +230,9 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
             raise
         if fmt == "sqlite3":
             raise TruncatedLogError(f"{err.reason}; --salvage supports ROS1 and MCAP logs only", path=str(p)) from err
+        if p.is_dir() and read_bag_metadata(p).compression_mode is not None:
+            raise TruncatedLogError(f"{err.reason}; --salvage does not read compressed bag folders", path=str(p)
+                                    ) from err
         with _gc_paused():
             return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
 
@@ -270,7 +273,7 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     own = fast_ingest()
-    if fmt == "mcap" and (not path.is_dir() or read_bag_metadata(path).compression_mode is None):
+    if fmt == "mcap":
         got = read_mcap_log(path, wanted, fast=own)
         out = {topic: RawTopic(topic, t.msgtype, t.has_definition, t.log_ns, t.payloads)
                for topic, t in got.topics.items()}
