@@ -107,8 +107,8 @@ def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) 
     try:
         return _read(storage, connections)
     except (_UnusualError, SpanError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
-            AttributeError, TypeError, MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk
-        return None
+            MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk; numpy: offsets out of range
+        return None  # (a TypeError or AttributeError is a bug of ours: it is not caught here)
 
 
 def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str, TopicMessages] | None:

@@ -352,7 +352,7 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
     try:
         reader = QuickReader(path)
         reader.open()
-    except Exception:  # any failure: rosbags' own open decides and reports
+    except _READ_ERRORS:  # what rosbags' open raises on a damaged log: rosbags' own open then decides and reports
         return None
     try:
         conns = list(reader.connections)
@@ -360,12 +360,12 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
         fast = _read_rosbag2_fast(reader, selected) if selected else None
         if fast is not None:  # the counts rosbags' open declares (its count scan, for the selected topics only)
             selected = _with_counts(reader, selected)
-    except Exception:  # as above
+    except _READ_ERRORS:  # as above
         fast = None
     finally:
         try:
             reader.close()
-        except Exception:  # as above
+        except _READ_ERRORS:  # as above
             fast = None
     if fast is None:
         return None
