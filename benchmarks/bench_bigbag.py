@@ -361,7 +361,8 @@ def measure(kind: str, path: Path) -> dict[str, Any]:
 def best_of(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The fastest run, with the largest peak RSS and the smallest CPU time seen."""
     best = min(runs, key=lambda r: r["wall_s"])
-    return {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs)}
+    return {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
+            "exit_cpu_s": min(r["exit_cpu_s"] for r in runs)}
 
 
 def main() -> None:
@@ -423,12 +424,14 @@ def main() -> None:
               f"{base['wall_s'] / ours['wall_s']:.2f}x | {base['cpu_s'] / ours['cpu_s']:.2f}x | {extra} | "
               f"{ours['verdict']} |")
     print()
-    print("| log | floor: wall s / CPU s | certify_log: wall s / CPU s | ours/floor (wall) | ours CPU/wall |")
-    print("|---|---|---|---|---|")
+    print("| log | floor: wall s / CPU s | certify_log: wall s / CPU s | ours/floor (wall) | ours CPU/wall | "
+          "ours: CPU s after the work (exit, not counted) |")
+    print("|---|---|---|---|---|---|")
     for fmt, _size, _base, ours, _whole in rows:
         fl = floors[fmt]
         print(f"| {fmt} | {fl['wall_s']:.2f} / {fl['cpu_s']:.2f} | {ours['wall_s']:.2f} / {ours['cpu_s']:.2f} | "
-              f"{ours['wall_s'] / fl['wall_s']:.2f}x | {ours['cpu_s'] / ours['wall_s']:.2f} |")
+              f"{ours['wall_s'] / fl['wall_s']:.2f}x | {ours['cpu_s'] / ours['wall_s']:.2f} | "
+              f"{ours['exit_cpu_s']:.2f} |")
     worst_floor = max(o["wall_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
     plain = [o["cpu_s"] / o["wall_s"] for f, _s, _b, o, _w in rows if f in UNCOMPRESSED]
     worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o, _w in rows)

@@ -305,16 +305,18 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
     start, usize = int(chunk.chunk_start_offset), int(chunk.uncompressed_size)
     if os.pread(fd, 4, start + _CHUNK_CRC_AT) != b"\0\0\0\0":
         return False
-    found: list[IntArray] = []
-    for off in chunk.message_index_offsets.values():
-        got = _index_record(region, int(off) - lo)
-        if got is None:
+    starts: set[int] = set()
+    for off in chunk.message_index_offsets.values():  # small per chunk: struct, not numpy
+        rel = int(off) - lo
+        if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
             return False
-        found.append(got[1][:, 1].astype(np.int64))
-    cand_a = np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
-    if cand_a.shape[0] and (int(cand_a[0]) < 0 or int(cand_a[-1]) + RECORD_HEAD > usize):
+        (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
+        if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
+            return False
+        starts.update(struct.unpack_from(f"<{arr_len // 8}Q", region, rel + 15)[1::2])
+    cand = sorted(starts)
+    if cand and cand[-1] + RECORD_HEAD > usize:
         return False
-    cand: list[int] = cand_a.tolist()
     heads: dict[int, tuple[int, int, int]] = {}  # record position -> opcode, content length, first u16 (channel)
     i = 0
     while i < len(cand):  # the heads of the indexed records, nearby ones in one read
