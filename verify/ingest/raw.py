@@ -390,7 +390,7 @@ def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connec
     rows = storage.dbconn.execute(
         f"SELECT topics.id, count(messages.id) FROM topics LEFT JOIN messages ON topics.id == messages.topic_id "
         f"WHERE topics.id IN ({','.join('?' * len(ids))}) GROUP BY topics.id", ids).fetchall()
-    counts = {int(cid): int(n) for cid, n in rows}
+    counts = {int(cid): int(n) for cid, n in rows if isinstance(cid, int) and isinstance(n, int)}
     return [c._replace(msgcount=counts.get(int(c.id), 0)) for c in selected]
 
 
