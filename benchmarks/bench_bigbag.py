@@ -248,8 +248,10 @@ def _floor_ros1(path: Path, wanted: set[str]) -> int:
     read and decompressed (lz4 and bz2 a few ahead in threads, as the certifier's reader does)."""
     import struct
 
-    from verify.ingest.records import WORKERS, in_order
+    from verify.ingest.records import WORKERS, in_order, read_scratch, retain_freed_memory
     from verify.ingest.ros1records import MAGIC, Op, connection_of, decompress, record_at
+
+    retain_freed_memory()  # as our reader does before its first decompression
 
     with path.open("rb") as fh:
         fd = fh.fileno()
@@ -274,9 +276,10 @@ def _floor_ros1(path: Path, wanted: set[str]) -> int:
         def chunk(at: int) -> int:
             first = os.pread(fd, 4096, at)
             rec = record_at(first, 0, len(first), head_only=True)
-            data = os.pread(fd, rec.data_len, at + rec.data_start)
             comp = rec.header.get("compression", b"none").decode()
-            return len(decompress(data, comp))
+            if comp == "none":
+                return len(os.pread(fd, rec.data_len, at + rec.data_start))
+            return len(decompress(read_scratch(fd, at + rec.data_start, rec.data_len), comp))
 
         comp = record_at(os.pread(fd, 4096, chunks[0]), 0, 4096, head_only=True).header.get("compression", b"none")
         workers = 1 if comp == b"none" else WORKERS
@@ -289,7 +292,9 @@ def _floor_mcap(path: Path, wanted: set[str]) -> int:
     from rosbags.rosbag2.storage_mcap import McapReader
 
     from verify.ingest.mcaprecords import decompress
-    from verify.ingest.records import WORKERS, in_order
+    from verify.ingest.records import WORKERS, in_order, read_scratch, retain_freed_memory
+
+    retain_freed_memory()
 
     (file,) = sorted(path.glob("*.mcap"))
     storage = McapReader(file)
@@ -304,7 +309,10 @@ def _floor_mcap(path: Path, wanted: set[str]) -> int:
 
         def chunk(c: Any) -> int:
             at = int(c.chunk_start_offset) + 9 + 28 + 4 + len(c.compression) + 8
-            return len(decompress(os.pread(fd, int(c.compressed_size), at), c.compression, int(c.uncompressed_size)))
+            if not c.compression:
+                return len(os.pread(fd, int(c.compressed_size), at))
+            stored = read_scratch(fd, at, int(c.compressed_size))
+            return len(decompress(stored, c.compression, int(c.uncompressed_size)))
 
         workers = WORKERS if any(c.compression for c in chunks) else 1
         return sum(in_order(chunk, chunks, workers=workers))
