@@ -337,3 +337,20 @@ def test_compressed_mcap_folders_are_read_by_the_projects_reader(tmp_path: Path,
         got = read_raw(folder, ["/a", "/b"])
         assert {t: ([int(v) for v in x.log_ns], [bytes(p) for p in x.payloads]) for t, x in got.topics.items()} == want
     assert used  # the plain path went through the project's scan, not rosbags' storage
+
+
+def test_an_mcap_cut_in_its_summary_is_partial_for_certify_and_watch(seeds: dict[str, Path], tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A file cut after its data section (DataEnd) but before its footer: certify's scan stops in the summary
+    (truncated: --salvage reads every message, partial); watch took DataEnd as the recorder's close and passed it.
+    The follower now waits for the footer as the scan does: both judge it partial (never a pass)."""
+    buf = seeds["mcap-zstd"].read_bytes()
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(buf[: len(buf) - 100])
+    codes = []
+    for argv in (["certify", str(path), "--salvage"], ["watch", str(path), "--time-base", "auto"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*argv, "--scenario", "nexus-sml", "--spec", SPEC])
+        codes.append(exc.value.code)
+        capsys.readouterr()
+    assert codes == [2, 2]

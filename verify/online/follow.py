@@ -86,10 +86,10 @@ class McapFollower:
             pos = len(MCAP_MAGIC)
         try:
             for op, rec, nxt in mcap_walk(buf, pos, len(buf)):
-                if op in (McapOp.FOOTER, McapOp.DATA_END):  # the recorder closed the file
+                if op == McapOp.FOOTER:  # the recorder closed the file (as the scan: its summary was read too)
                     self.finished = True
                 else:
-                    for msg in record_messages(op, rec, self.found, check_crc=False):
+                    for msg in record_messages(op, rec, self.found):  # a chunk's CRC checked, as the scan does
                         if (got := mcap_message(self.found, msg)) is not None:
                             out.append(got)
                 pos = nxt
