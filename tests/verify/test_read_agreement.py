@@ -354,3 +354,20 @@ def test_an_mcap_cut_in_its_summary_is_partial_for_certify_and_watch(seeds: dict
         codes.append(exc.value.code)
         capsys.readouterr()
     assert codes == [2, 2]
+
+
+def test_a_ros1_bag_cut_in_its_index_is_partial_for_certify_and_watch(seeds: dict[str, Path], tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag cut inside its index (after the bag header already points to it): certify reads it as truncated
+    (--salvage: partial); the follower took reaching ``index_pos`` as the recorder's close and passed it. It now
+    waits for the whole index the bag header announces: both judge it partial."""
+    buf = seeds["bag-lz4"].read_bytes()
+    path = tmp_path / "cut.bag"
+    path.write_bytes(buf[: len(buf) - 30])
+    codes = []
+    for argv in (["certify", str(path), "--salvage"], ["watch", str(path), "--time-base", "auto"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*argv, "--scenario", "nexus-sml", "--spec", SPEC])
+        codes.append(exc.value.code)
+        capsys.readouterr()
+    assert codes == [2, 2]

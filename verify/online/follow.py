@@ -159,10 +159,17 @@ class Ros1Follower:
         except (Ros1CutError, Ros1MalformedError, struct.error):
             return
         raw = rec.header.get("index_pos", b"")
-        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8:
+        counts = [rec.header.get(name, b"") for name in ("conn_count", "chunk_count")]
+        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8 and all(len(c) == 4 for c in counts):
             self.stream.index_pos = int(struct.unpack("<Q", raw)[0])
+            self.stream.index_records = sum(int(struct.unpack("<I", c)[0]) for c in counts)
         if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
-            self.stream.closed = True
+            at = self.stream.resume_at  # closed once the whole index is there (the stream checks it)
+            try:
+                self.stream.feed(_read_from(self.path, at), at, [])
+            except _ROS1_DAMAGE as err:
+                raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
+                                   path=str(self.path)) from err
 
     def rest(self) -> list[SalvagedMessage]:
         return _rest_of_walk(walk_ros1(self.path).messages, self.delivered)
