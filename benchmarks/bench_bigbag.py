@@ -13,18 +13,25 @@ and ROS2 sqlite3, written by rosbags' writers. Then, per format, in one run on a
 * ours: ``verify.certify.certify_log`` on the built-in scenario (every check, the certificate and its default
   digest, ``blake3-messages``: of the messages read);
 * ours + file digest: the same with ``digest="blake3"``, the whole file's BLAKE3 computed beside the reading (every
-  byte read once more: shown for what it costs; ``--no-file-digest`` skips it).
+  byte read once more: shown for what it costs; ``--no-file-digest`` skips it);
+* the floor: what any reader of the topics certification reads must do, and nothing else: ROS1 and MCAP, the
+  index (bag index; MCAP summary), then every chunk that holds a wanted topic read and decompressed (lz4 / zstd a
+  few chunks ahead in the same threads as our reader, ``verify.ingest.records.in_order``); sqlite3, one query
+  fetching the wanted topics' rows in log-time order. No record parsing, no decoding, no judging.
 
 Each side runs ``--repeat`` times (default 3), the two sides alternating, and its fastest run is kept (the machine
-is shared: the fastest run is the least disturbed one); the CPU time (user + system, every thread) is reported too.
+is shared: the fastest run is the least disturbed one); the CPU time (user + system, every thread, from the start
+to the end of the measured work, as the child process measures it) is reported too.
 Each measurement runs in its own child process; its wall time is measured inside the child (imports excluded) and
 its peak RSS is the child's ``ru_maxrss`` as the parent reaps it (``os.wait4``: the per-child form of
 ``getrusage(RUSAGE_CHILDREN)``), never the benchmark's own. (Linux carries a parent's peak RSS into a forked child,
 so the logs are written by children too and this process stays at ~30 MB.) Prints one row per format (rosbags
 s / MB, ours s / MB, ratio = rosbags time / ours, and the same for ours + file digest), and last
 ``worst_ratio_vs_rosbags=<min ratio of ours> max_rss_mb=<max over ours> formats=<n>
-worst_ratio_file_digest=<min ratio of ours + file digest>``. Targets: ratio >= 2 everywhere,
-ours' RSS <= 250 MB and within 10 % between --size-gb 1 and 3.
+worst_ratio_file_digest=<min ratio of ours + file digest> worst_cpu_per_wall_uncompressed=<max CPU / wall of ours
+on ros1-none, mcap-none, sqlite3> worst_ratio_vs_floor=<max of ours' wall / the floor's>``, after a second table
+(floor wall / CPU, ours wall / CPU, ours/floor, ours' CPU per wall). Targets: ratio >= 2 everywhere, ours' RSS <=
+250 MB and within 10 % between --size-gb 1 and 3; ours <= 1.25x the floor; CPU <= 1.2x wall uncompressed.
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from typing import Any
 import numpy as np
 
 FORMATS = ("ros1-none", "ros1-lz4", "mcap-none", "mcap-zstd", "sqlite3")
+UNCOMPRESSED = ("ros1-none", "mcap-none", "sqlite3")
 POSE, NOMINAL, CMD = "/qualisys/nexus/pose", "/nexus/nominal_pose", "/nexus/cmd_vel"
 STATUS, META = "/nexus/mpc_status", "/tubempc/metadata"
 CAMERA, SCAN = "/camera/image_raw", "/scan"
@@ -205,7 +213,9 @@ def _child_rosbags(path: Path) -> dict[str, Any]:
                 kept[conn.topic].append((m.header.stamp.sec * 1e9 + m.header.stamp.nanosec, m.pose.position.x,
                                          m.pose.position.y))
     wall = time.perf_counter() - t0
-    return {"wall_s": wall, "counts": {k: len(v) for k, v in kept.items()}, "setup_cpu_s": setup_cpu_s}
+    work_cpu_s = _cpu_s() - setup_cpu_s
+    return {"wall_s": wall, "counts": {k: len(v) for k, v in kept.items()}, "setup_cpu_s": setup_cpu_s,
+            "work_cpu_s": work_cpu_s}
 
 
 def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
@@ -217,12 +227,124 @@ def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
     t0 = time.perf_counter()
     result = certify_log(path, sc) if digest is None else certify_log(path, sc, digest=digest)
     wall = time.perf_counter() - t0
+    work_cpu_s = _cpu_s() - setup_cpu_s
     cert = result.certificate
     dq = cert["data_quality"]
     counts = {POSE: dq["pose"].get("count"), NOMINAL: dq["nominal"].get("count"), CMD: dq["cmd_vel"].get("count")}
     digest = cert.get("log_digest") or cert.get("log_sha256")
     return {"wall_s": wall, "counts": counts, "verdict": cert["verdict"], "digest": digest,
-            "setup_cpu_s": setup_cpu_s}
+            "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s}
+
+
+def _wanted() -> set[str]:
+    from tubempc.scenario import builtin_scenario
+    from verify.ingest.log import wanted_topics
+
+    return wanted_topics(builtin_scenario())
+
+
+def _floor_ros1(path: Path, wanted: set[str]) -> int:
+    """ROS1: the bag header and index (connections, chunk infos), then every chunk that holds a wanted connection,
+    read and decompressed (lz4 and bz2 a few ahead in threads, as the certifier's reader does)."""
+    import struct
+
+    from verify.ingest.records import WORKERS, in_order, read_scratch, retain_freed_memory
+    from verify.ingest.ros1records import MAGIC, Op, connection_of, decompress, record_at
+
+    retain_freed_memory()  # as our reader does before its first decompression
+
+    with path.open("rb") as fh:
+        fd = fh.fileno()
+        size = os.fstat(fd).st_size
+        head = os.pread(fd, 4096, len(MAGIC))
+        bag = record_at(head, 0, len(head))
+        index_pos = struct.unpack("<Q", bag.header["index_pos"])[0]
+        index = os.pread(fd, size - index_pos, index_pos)
+        pos, ids, chunks = 0, set(), []
+        while pos < len(index):
+            rec = record_at(index, pos, len(index))
+            if rec.op == Op.CONNECTION:
+                cid, topic, _typ, _d = connection_of(rec.header, index[rec.data_start : rec.end])
+                if topic in wanted:
+                    ids.add(cid)
+            elif rec.op == Op.CHUNK_INFO:
+                pairs = struct.iter_unpack("<II", index[rec.data_start : rec.end])
+                if any(cid in ids for cid, _n in pairs):
+                    chunks.append(struct.unpack("<Q", rec.header["chunk_pos"])[0])
+            pos = rec.end
+
+        def chunk(at: int) -> int:
+            first = os.pread(fd, 4096, at)
+            rec = record_at(first, 0, len(first), head_only=True)
+            comp = rec.header.get("compression", b"none").decode()
+            if comp == "none":
+                return len(os.pread(fd, rec.data_len, at + rec.data_start))
+            return len(decompress(read_scratch(fd, at + rec.data_start, rec.data_len), comp))
+
+        comp = record_at(os.pread(fd, 4096, chunks[0]), 0, 4096, head_only=True).header.get("compression", b"none")
+        workers = 1 if comp == b"none" else WORKERS
+        return sum(in_order(chunk, sorted(chunks), workers=workers))
+
+
+def _floor_mcap(path: Path, wanted: set[str]) -> int:
+    """MCAP: the summary (chunk indexes), then every chunk that holds a wanted channel, read and decompressed (zstd
+    a few ahead in threads, as the certifier's reader does)."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    from verify.ingest.mcaprecords import decompress
+    from verify.ingest.records import WORKERS, in_order, read_scratch, retain_freed_memory
+
+    retain_freed_memory()
+
+    (file,) = sorted(path.glob("*.mcap"))
+    storage = McapReader(file)
+    storage.open()
+    try:
+        ids = {int(cid) for cid, ch in storage.channels.items() if ch.topic in wanted}
+        chunks = [c for c in storage.chunks if any(c.channel_count.get(cid, 0) for cid in ids)]
+    finally:
+        storage.close()
+    with file.open("rb") as fh:
+        fd = fh.fileno()
+
+        def chunk(c: Any) -> int:
+            at = int(c.chunk_start_offset) + 9 + 28 + 4 + len(c.compression) + 8
+            if not c.compression:
+                return len(os.pread(fd, int(c.compressed_size), at))
+            stored = read_scratch(fd, at, int(c.compressed_size))
+            return len(decompress(stored, c.compression, int(c.uncompressed_size)))
+
+        workers = WORKERS if any(c.compression for c in chunks) else 1
+        return sum(in_order(chunk, chunks, workers=workers))
+
+
+def _floor_sqlite(path: Path, wanted: set[str]) -> int:
+    """sqlite3: the wanted topics' rows (topic, log time, payload) in log-time order, one query."""
+    import sqlite3
+
+    (db,) = sorted(path.glob("*.db3"))
+    con = sqlite3.connect(f"file:{db}?immutable=1", uri=True)
+    try:
+        ids = [r[0] for r in con.execute("SELECT id, name FROM topics") if r[1] in wanted]
+        marks = ",".join("?" * len(ids))
+        rows = con.execute(f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks}) "
+                           f"ORDER BY timestamp", ids).fetchall()
+    finally:
+        con.close()
+    return sum(len(r[2]) for r in rows)
+
+
+def _child_floor(path: Path, fmt: str) -> dict[str, Any]:
+    """The floor: what any reader of the wanted topics must do (read and decompress the chunks that hold them;
+    sqlite3: fetch their rows), nothing else: no parsing of records, no decoding, no judging."""
+    wanted = _wanted()
+    setup_cpu_s = _cpu_s()
+    t0 = time.perf_counter()
+    fn = _floor_ros1 if fmt.startswith("ros1") else _floor_sqlite if fmt == "sqlite3" else _floor_mcap
+    n_bytes = fn(path, wanted)
+    wall = time.perf_counter() - t0
+    work_cpu_s = _cpu_s() - setup_cpu_s
+    return {"wall_s": wall, "bytes": n_bytes, "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s}
 
 
 def measure(kind: str, path: Path) -> dict[str, Any]:
@@ -237,14 +359,18 @@ def measure(kind: str, path: Path) -> dict[str, Any]:
         raise SystemExit(f"{kind} on {path} failed (exit {proc.returncode}): {text[-400:]}")
     got: dict[str, Any] = json.loads(text.strip().splitlines()[-1])
     got["rss_mb"] = usage.ru_maxrss / 1024.0  # Linux: KiB
-    got["cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s")  # the measured work's CPU, all threads
+    # the measured work's CPU, all threads, as the child measured it (RUSAGE_SELF: every thread of the process);
+    # what the child spent after it (freeing, interpreter exit) is kept apart: it is no part of the work
+    got["cpu_s"] = got.pop("work_cpu_s")
+    got["exit_cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s") - got["cpu_s"]
     return got
 
 
 def best_of(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The fastest run, with the largest peak RSS and the smallest CPU time seen."""
     best = min(runs, key=lambda r: r["wall_s"])
-    return {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs)}
+    return {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
+            "exit_cpu_s": min(r["exit_cpu_s"] for r in runs)}
 
 
 def main() -> None:
@@ -263,6 +389,7 @@ def main() -> None:
     if args.child:
         kind, p = args.child
         res = (_child_rosbags(Path(p)) if kind == "rosbags" else
+               _child_floor(Path(p), kind.split(":", 1)[1]) if kind.startswith("floor:") else
                _child_ours(Path(p), "blake3") if kind == "ours+file" else _child_ours(Path(p)))
         print(json.dumps(res))
         return
@@ -273,6 +400,7 @@ def main() -> None:
     args.dir.mkdir(parents=True, exist_ok=True)
     print(f"load average (shared machine): {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     rows: list[tuple[str, float, dict[str, Any], dict[str, Any], dict[str, Any] | None]] = []
+    floors: dict[str, dict[str, Any]] = {}
     for fmt in formats:
         path = args.dir / f"bigbag_{args.size_gb:g}gb_{fmt.replace('-', '_')}{'.bag' if fmt.startswith('ros1') else ''}"
         if not path.exists():  # written by a child: this process stays small (a child's peak RSS starts at ours)
@@ -280,16 +408,17 @@ def main() -> None:
             subprocess.run([sys.executable, __file__, "--write", fmt, str(path), str(args.size_gb)], check=True)
             print(f"wrote {path} ({_size_mb(path):.0f} MB) in {time.perf_counter() - t_w:.0f} s", flush=True)
         _warm(path)
-        kinds = ["rosbags", "ours"] + ([] if args.no_file_digest else ["ours+file"])
+        kinds = ["rosbags", "ours", f"floor:{fmt}"] + ([] if args.no_file_digest else ["ours+file"])
         runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
         for _ in range(args.repeat):
             for kind, got in runs.items():
                 got.append(measure(kind, path))
-        base, ours = best_of(runs["rosbags"]), best_of(runs["ours"])
+        base, ours, floor = best_of(runs["rosbags"]), best_of(runs["ours"]), best_of(runs[f"floor:{fmt}"])
         whole = best_of(runs["ours+file"]) if "ours+file" in runs else None
         if base["counts"] != ours["counts"]:
             print(f"  {fmt}: message counts differ: rosbags {base['counts']}, ours {ours['counts']}")
         rows.append((fmt, _size_mb(path), base, ours, whole))
+        floors[fmt] = floor
         more = "" if whole is None else f", ours + file digest {whole['wall_s']:.2f} s"
         print(f"  {fmt}: rosbags {base['wall_s']:.2f} s, ours {ours['wall_s']:.2f} s{more}", flush=True)
     print(f"| log ({args.size_gb:g} GB) | size MB | rosbags loop: wall s / CPU s / max RSS MB | certify_log: wall s / "
@@ -302,10 +431,23 @@ def main() -> None:
               f"{ours['wall_s']:.2f} / {ours['cpu_s']:.2f} / {ours['rss_mb']:.0f} | "
               f"{base['wall_s'] / ours['wall_s']:.2f}x | {base['cpu_s'] / ours['cpu_s']:.2f}x | {extra} | "
               f"{ours['verdict']} |")
+    print()
+    print("| log | floor: wall s / CPU s | certify_log: wall s / CPU s | ours/floor (wall) | ours CPU/wall | "
+          "ours: CPU s after the work (exit, not counted) |")
+    print("|---|---|---|---|---|---|")
+    for fmt, _size, _base, ours, _whole in rows:
+        fl = floors[fmt]
+        print(f"| {fmt} | {fl['wall_s']:.2f} / {fl['cpu_s']:.2f} | {ours['wall_s']:.2f} / {ours['cpu_s']:.2f} | "
+              f"{ours['wall_s'] / fl['wall_s']:.2f}x | {ours['cpu_s'] / ours['wall_s']:.2f} | "
+              f"{ours['exit_cpu_s']:.2f} |")
+    worst_floor = max(o["wall_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
+    plain = [o["cpu_s"] / o["wall_s"] for f, _s, _b, o, _w in rows if f in UNCOMPRESSED]
     worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o, _w in rows)
     wholes = [b["wall_s"] / w["wall_s"] for _f, _s, b, _o, w in rows if w is not None]
     print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o, _w in rows):.0f} "
-          f"formats={len(rows)}" + (f" worst_ratio_file_digest={min(wholes):.2f}" if wholes else ""))
+          f"formats={len(rows)}" + (f" worst_ratio_file_digest={min(wholes):.2f}" if wholes else "") +
+          (f" worst_cpu_per_wall_uncompressed={max(plain):.2f}" if plain else "") +
+          f" worst_ratio_vs_floor={worst_floor:.2f}")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@ channel are read; a chunk is read at the offsets its chunk index gives (CRC at `
 at ``start + 9 + 40 + len(compression)``), decompressed (none / lz4 / zstd) and checked (size, CRC when non-zero)
 by ``rosbags``' own ``decompress``; its records (opcode u8, length u64, content) are walked from the start to the
 end of the chunk; message records (opcode 5: channel u16, sequence u32, log time u64, publish time u64, payload) of
-the wanted channels with ``message_start_time <= log time <= message_end_time`` (chunk index values) are kept and
+the wanted channels are kept (all of them, whatever their log time: as the scan ``verify.ingest.mcapfile`` and the
+format's reference reader keep them, where rosbags also drops a message outside its chunk's indexed time range) and
 sorted stably by log time; the chunks are merged by (log time, chunk offset). Hence the order is (log time, chunk
 offset, record position).
 
@@ -43,7 +44,16 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
-from verify.ingest.mcaprecords import CHUNK_FIXED, MESSAGE_HEAD, RECORD_HEAD, Op, zstd
+from verify.ingest.mcaprecords import (
+    CHUNK_FIXED,
+    MESSAGE_HEAD,
+    RECORD_HEAD,
+    MalformedError,
+    Op,
+    Scan,
+    record_messages,
+    zstd,
+)
 from verify.ingest.records import (
     MCAP,
     WORKERS,
@@ -97,8 +107,8 @@ def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) 
     try:
         return _read(storage, connections)
     except (_UnusualError, SpanError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
-            AttributeError, TypeError, MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk
-        return None
+            MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk; numpy: offsets out of range
+        return None  # (a TypeError or AttributeError is a bug of ours: it is not caught here)
 
 
 def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str, TopicMessages] | None:
@@ -108,6 +118,7 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
     if not chunks:
         return None  # unindexed file: rosbags scans the data section (and checks the order); not reproduced here
     topic_of = {int(c.id): c.topic for c in connections}
+    known = {int(cid): str(ch.topic) for cid, ch in storage.channels.items()}  # every channel of the summary
     wanted = set(topic_of)
     # the chunks rosbags reads, merged by chunk offset on equal log times
     selected = sorted((c for c in chunks if any(c.channel_count.get(cid, 0) for cid in wanted)),
@@ -121,12 +132,12 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         fd = fh.fileno()
         size = os.fstat(fd).st_size
         # chunks are read (and decompressed) a few ahead in threads, split here in chunk order
-        whole = _sparse(fd, size, selected, wanted)
+        whole = _sparse(fd, size, selected, wanted, known)
         if whole is not None:
             batches: Iterable[tuple[IntArray, IntArray, IntArray, IntArray, U8Array]] = [whole]
         else:
             workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
-            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted), selected, workers=workers)
+            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted, known), selected, workers=workers)
         for channel, log_ns, starts, lens, u8 in batches:
             for t in topics:
                 mine = np.isin(channel, channels_of[t]) if len(topics) > 1 else slice(None)
@@ -159,13 +170,13 @@ def _decompress(data: bytes | memoryview, compression: str, usize: int, crc: int
     return rosbags_decompress(bytes(data), compression, usize, crc)
 
 
-def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
+def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], known: dict[int, str]
                     ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
     """The wanted messages of one chunk in rosbags' order: channel, log time, payload start and length in the
     returned bytes (the decompressed chunk, or only its wanted records: ``_sparse``)."""
     start = int(chunk.chunk_start_offset)
     usize = int(chunk.uncompressed_size)
-    if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted)) is not None:
+    if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted, known)) is not None:
         return sparse  # only its wanted records read
     (crc,) = struct.unpack("<I", _pread(fd, size, start + _CHUNK_CRC_AT, 4))
     at, csize = start + _CHUNK_DATA_AT + len(chunk.compression), int(chunk.compressed_size)
@@ -178,14 +189,16 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     u8 = np.frombuffer(raw, dtype=np.uint8)
     hints = _index_hints(fd, size, chunk, usize)
     pos, op, length = _walk(raw, u8, hints)
+    _parse_others(raw, pos, op, length, known)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]
     if np.any(length < _MSG_HEAD):
         raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
     channel = _read_u(u8, pos + 9, 2)
+    if not np.all(np.isin(channel, np.fromiter(known, dtype=np.int64, count=len(known)))):
+        raise _UnusualError("a message on a channel the summary does not declare")  # the scan refuses it
     log_ns = _read_u(u8, pos + 9 + 6, 8)
-    lo, hi = int(chunk.message_start_time), int(chunk.message_end_time)
-    keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted))) & (log_ns >= lo) & (log_ns <= hi)
+    keep = np.isin(channel, np.fromiter(wanted, dtype=np.int64, count=len(wanted)))
     pos, length, channel, log_ns = pos[keep], length[keep], channel[keep], log_ns[keep]
     if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
         perm = np.argsort(log_ns, kind="stable")  # rosbags: sorted(..., key=timestamp), stable
@@ -193,7 +206,7 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int]
     return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
 
 
-def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
+def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int], known: dict[int, str]
             ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array] | None:
     """The wanted channels' message records of uncompressed chunks whose records are not all wanted, read message
     by message: the message index records of every chunk (one read per chunk) give each wanted message's file
@@ -207,7 +220,7 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
     if not chunks or any(c.compression for c in chunks):
         return None
     pairs: list[npt.NDArray[np.uint64]] = []  # per (chunk, channel): its message index entries (log time, offset)
-    meta: list[tuple[int, int, int, int, int, int]] = []  # ... and channel, count, base, limit, start, end time
+    meta: list[tuple[int, int, int, int]] = []  # ... and channel, count, base, limit
     try:
         for chunk in chunks:
             counts = {int(cid): int(n) for cid, n in chunk.channel_count.items()}
@@ -221,22 +234,23 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             region = os.pread(fd, n, lo)
             base = int(chunk.chunk_start_offset) + _CHUNK_DATA_AT
             limit = base + int(chunk.uncompressed_size)
+            if not _chunk_chains(fd, chunk, region, lo, base, known=known):
+                return None
             for cid in mine:
                 got = _index_record(region, int(chunk.message_index_offsets[cid]) - lo)
                 if got is None or got[0] != cid:
                     return None
                 pairs.append(got[1])
-                meta.append((cid, got[1].shape[0], base, limit, int(chunk.message_start_time),
-                             int(chunk.message_end_time)))
+                meta.append((cid, got[1].shape[0], base, limit))
         flat = np.concatenate(pairs)
         if np.any(flat >= np.uint64(2**63)):
             return None
-        m = np.array(meta, dtype=np.int64).reshape(-1, 6)
+        m = np.array(meta, dtype=np.int64).reshape(-1, 4)
         k = m[:, 1]
         at = flat[:, 1].astype(np.int64) + np.repeat(m[:, 2], k)
         order = np.argsort(at, kind="stable")
         at, log_ns, chan = at[order], flat[:, 0].astype(np.int64)[order], np.repeat(m[:, 0], k)[order]
-        lim, lo_t, hi_t = (np.repeat(m[:, j], k)[order] for j in (3, 4, 5))
+        lim = np.repeat(m[:, 3], k)[order]
         if at.shape[0] > 1 and np.any(np.diff(at) == 0):
             return None
         u8, pos = read_records(fd, 0, size, at, MCAP, limits=lim)
@@ -247,12 +261,96 @@ def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int]
             return None
     except (SpanError, _UnusualError, KeyError, OSError):
         return None
-    keep = (log_ns >= lo_t) & (log_ns <= hi_t)
-    pos, length, chan, log_ns = pos[keep], length[keep], chan[keep], log_ns[keep]
     if log_ns.shape[0] > 1 and np.any(np.diff(log_ns) < 0):
         perm = np.argsort(log_ns, kind="stable")
         pos, length, chan, log_ns = pos[perm], length[perm], chan[perm], log_ns[perm]
     return chan, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
+
+
+#: records inside a chunk that the scan parses besides messages: a damaged one stops the scan, so the fast read
+#: parses them too (and declines when one does not parse)
+_PARSED_OPS = (int(Op.SCHEMA), int(Op.CHANNEL), int(Op.STATISTICS))
+
+
+def _parse_others(raw: bytes, pos: IntArray, op: IntArray, length: IntArray, known: dict[int, str]) -> None:
+    """Parse a walked chunk's schema, channel and statistics records as the scan does (``_UnusualError`` when one
+    is malformed, or a channel's topic is not the summary's: the scan then reads the file and decides)."""
+    for k in np.flatnonzero(np.isin(op, _PARSED_OPS)).tolist():
+        at = int(pos[k]) + RECORD_HEAD
+        if not _parses(int(op[k]), memoryview(raw)[at : at + int(length[k])], known):
+            raise _UnusualError("a malformed record in a chunk")
+
+
+def _parses(op: int, content: memoryview, known: dict[int, str]) -> bool:
+    """Whether a schema, channel or statistics record parses as the scan parses it, and a channel's topic is the
+    one the summary gives its id (the scan takes a channel's first record, which may be this one)."""
+    found = Scan({}, {})
+    try:
+        record_messages(op, content, found)
+    except (MalformedError, struct.error):
+        return False
+    return all(known.get(cid) == ch.topic for cid, ch in found.channels.items())
+
+
+_HEAD_CLUSTER_B = 4096  # record heads closer than this are read in one pread
+
+
+def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, *, known: dict[int, str]) -> bool:
+    """Whether an uncompressed chunk read message by message is one the scan reads without stopping: no CRC to
+    check (a chunk with one is read whole and checked), every record from the chunk's start on ends where the next
+    begins and the last exactly at the chunk's end, message records hold their fixed fields, and its schema,
+    channel and statistics records parse. Only record heads are read (the message index of every channel gives
+    where each message record starts; the records between them are stepped over one by one), not the unwanted
+    payloads. False: read the chunk whole instead."""
+    start, usize = int(chunk.chunk_start_offset), int(chunk.uncompressed_size)
+    if os.pread(fd, 4, start + _CHUNK_CRC_AT) != b"\0\0\0\0":
+        return False
+    starts: set[int] = set()
+    for off in chunk.message_index_offsets.values():  # small per chunk: struct, not numpy
+        rel = int(off) - lo
+        if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
+            return False
+        (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
+        if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
+            return False
+        starts.update(struct.unpack_from(f"<{arr_len // 8}Q", region, rel + 15)[1::2])
+    cand = sorted(starts)
+    if cand and cand[-1] + RECORD_HEAD > usize:
+        return False
+    heads: dict[int, tuple[int, int, int]] = {}  # record position -> opcode, content length, first u16 (channel)
+    i = 0
+    while i < len(cand):  # the heads of the indexed records, nearby ones in one read
+        j = i
+        while j + 1 < len(cand) and cand[j + 1] - cand[i] < _HEAD_CLUSTER_B:
+            j += 1
+        n = cand[j] - cand[i] + RECORD_HEAD + 2
+        piece = os.pread(fd, n, base + cand[i])
+        if len(piece) != n:
+            return False
+        for k in range(i, j + 1):
+            r = cand[k] - cand[i]
+            heads[cand[k]] = struct.unpack_from("<BQH", piece, r)
+        i = j + 1
+    pos = 0
+    while pos < usize:
+        head = heads.get(pos)
+        if head is None:
+            raw = os.pread(fd, RECORD_HEAD + 2, base + pos)
+            if len(raw) != RECORD_HEAD + 2:
+                return False
+            head = struct.unpack("<BQH", raw)
+        op, n, channel = head
+        end = pos + RECORD_HEAD + n
+        if end > usize:
+            return False
+        if op == _OP_MESSAGE:
+            if n < _MSG_HEAD or channel not in known:
+                return False  # the scan refuses a message on a channel the file never declares
+        elif op in _PARSED_OPS and not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
+            return False
+        heads.pop(pos, None)
+        pos = end
+    return pos == usize and not heads  # every indexed record was a record of the walk
 
 
 def _read_u(u8: U8Array, at: IntArray, width: int) -> IntArray:

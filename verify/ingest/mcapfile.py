@@ -27,6 +27,7 @@ import mmap
 import os
 import stat
 import struct
+import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from operator import itemgetter
@@ -40,7 +41,19 @@ from rosbags.rosbag2.storage_mcap import McapReader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
-from verify.ingest.mcaprecords import FOOTER_RECORD, MAGIC, CutError, MalformedError, Op, Scan, scan
+from verify.ingest.mcaprecords import (
+    CHUNK_FIXED,
+    FOOTER_RECORD,
+    MAGIC,
+    RECORD_HEAD,
+    CutError,
+    MalformedError,
+    Op,
+    Scan,
+    record_messages,
+    scan,
+    zstd,
+)
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
@@ -73,7 +86,7 @@ class BagMetadata:
     """What a ROS2 bag folder's metadata.yaml says: storage files, compression, per topic its type and count."""
 
     files: tuple[Path, ...]
-    compression_mode: str | None
+    compression_mode: str | None  # None, "file" or "message" (rosbag2's modes; zstd is the one format rosbags reads)
     types: dict[str, str]
     counts: dict[str, int]
 
@@ -121,6 +134,14 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
     if mode is not None and not isinstance(mode, str):
         raise bad("compression_mode is not a string")
     mode = None if mode is None or mode.lower() == "none" else mode.lower()
+    if mode is not None:
+        fmt = info.get("compression_format")
+        if mode not in ("file", "message"):
+            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
+                               f"writes 'file' or 'message'", path=str(folder))
+        if not isinstance(fmt, str) or fmt.lower() != "zstd":
+            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
+                               f"'zstd' is read", path=str(folder))
     types: dict[str, str] = {}
     counts: dict[str, int] = {}
     entries = info.get("topics_with_message_count", [])
@@ -146,14 +167,58 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
 
 def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
     """The wanted topics of an MCAP file or MCAP bag folder (see the module docstring)."""
-    want = set(wanted)
     meta = read_bag_metadata(path) if path.is_dir() else None
-    files = meta.files if meta is not None else (path,)
+    if meta is None or meta.compression_mode != "file":
+        return _read_files(path, meta, meta.files if meta is not None else (path,), set(wanted), fast=fast)
+    with tempfile.TemporaryDirectory(prefix="tubempc-mcap-") as tmp:
+        files = tuple(_decompressed_file(f, Path(tmp), shown=str(path)) for f in meta.files)
+        return _read_files(path, meta, files, set(wanted), fast=fast)
+
+
+def _decompressed_file(file: Path, tmp: Path, *, shown: str) -> Path:
+    """A storage file of a bag folder written with compression mode 'file' (one zstd stream of the whole MCAP
+    file, ``name.mcap.zstd``) -> the MCAP file, decompressed into ``tmp`` under its own name (``name.mcap``), in
+    pieces (never the whole file in memory)."""
+    out = tmp / (file.name[: -len(".zstd")] if file.name.endswith(".zstd") else file.name)
+    dec = zstd.ZstdDecompressor()
+    try:
+        with file.open("rb") as src, out.open("wb") as dst:
+            while block := src.read(1 << 20):
+                dst.write(dec.decompress(block))
+                while dec.needs_input is False and not dec.eof:
+                    dst.write(dec.decompress(b""))
+        if not dec.eof:
+            raise LogReadError(f"truncated mcap log: storage file {file.name} ends inside its zstd stream",
+                               path=shown)
+    except zstd.ZstdError as err:
+        raise LogReadError(f"unreadable mcap log: storage file {file.name} cannot be decompressed ({err})",
+                           path=shown) from err
+    except OSError as err:
+        raise LogReadError(f"unreadable mcap log: storage file {file.name} cannot be decompressed "
+                           f"({err.strerror or err.__class__.__name__})", path=shown) from err
+    return out
+
+
+def _decompressed_messages(topics: dict[str, McapTopic], shown: str) -> None:
+    """Compression mode 'message': every payload is one zstd frame (rosbag2 compresses each message's data)."""
+    for topic, t in topics.items():
+        out: list[bytes] = []
+        for payload in t.payloads:
+            try:
+                out.append(zstd.decompress(bytes(payload)))
+            except zstd.ZstdError as err:
+                raise LogReadError(f"unreadable mcap log: a message on {topic} cannot be decompressed ({err})",
+                                   path=shown) from err
+        t.payloads = out
+
+
+def _read_files(path: Path, meta: BagMetadata | None, files: tuple[Path, ...], want: set[str], *, fast: bool
+                ) -> McapLog:
     shown = str(path)
     per_file: list[tuple[McapLog, dict[str, int]]] | None = None
     if fast:
         got = [_read_indexed(f, want) for f in files]
-        per_file = None if any(g is None for g in got) else [g for g in got if g is not None]
+        per_file = None if any(g is None or _short(g) for g in got) else [g for g in got if g is not None]
     if per_file is None:
         per_file = [_read_scanned(f, want, shown, named=meta is not None) for f in files]
     topics: dict[str, McapTopic] = {}
@@ -175,7 +240,18 @@ def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
         if want_n > got_n:
             raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
                                     f"can be read", path=shown)
+    if meta is not None and meta.compression_mode == "message":
+        _decompressed_messages(topics, shown)
     return McapLog(topics, available)
+
+
+def _short(got: tuple[McapLog, dict[str, int]] | None) -> bool:
+    """Whether the indexed read of a file holds fewer messages on a topic than the file declares: a damaged file,
+    which the scan reads (and refuses, or salvages, saying where and why) as the plain path does."""
+    if got is None:
+        return False
+    log, counts = got
+    return any(n > (len(log.topics[t].payloads) if t in log.topics else 0) for t, n in counts.items())
 
 
 def _concat(a: McapTopic, b: McapTopic) -> McapTopic:
@@ -210,7 +286,7 @@ def _read_indexed(file: Path, want: set[str]) -> tuple[McapLog, dict[str, int]] 
     except _ROSBAGS_OPEN_ERRORS:
         return None
     try:
-        if not _summary_is_complete(storage):
+        if not _summary_is_complete(storage) or not _records_chain(file, storage):
             return None
         conns = [c for c in storage.connections if c.topic in want]
         if any(c.msgtype == _SCHEMALESS for c in conns):
@@ -270,6 +346,81 @@ def _summary_is_complete(storage: McapReader) -> bool:
         return False
     # messages outside the chunks (or missing from their message indexes) are counted by the statistics
     return int(storage.statistics.message_count) == indexed
+
+
+#: top-level records whose content the scan parses (``mcaprecords.record_messages``); every other record (indexes,
+#: attachments, metadata, summary offsets) is only stepped over
+_PARSED = frozenset({Op.SCHEMA, Op.CHANNEL, Op.MESSAGE, Op.STATISTICS})
+
+
+def _records_chain(file: Path, storage: McapReader) -> bool:
+    """Whether the file's top-level records are what the scan reads without stopping, as far as it can be told
+    without reading the chunks' contents: from the header on, every record's length ends by the file's end and the
+    next record follows it, up to the footer; schema, channel, message and statistics records parse; each chunk's
+    fixed fields and compression string fit its record; and every chunk of the chunk index is a chunk record of that
+    length where the index puts it. The indexed reader reads the chunks at the index's offsets, so a damaged record
+    length, or a damaged record between the chunks, would otherwise be read past where the scan (the plain read, and
+    salvage) stops. What this does not check is inside the chunks the indexed reader does not read (their
+    decompression and CRC, and the records of an uncompressed chunk it reads message by message)."""
+    chunks = {int(c.chunk_start_offset): c for c in storage.chunks}
+    seen = 0
+    found = Scan({}, {})
+    try:
+        with file.open("rb") as fh:
+            fd = fh.fileno()
+            size = os.fstat(fd).st_size
+            pos = len(MAGIC)
+            while True:
+                head = os.pread(fd, RECORD_HEAD + CHUNK_FIXED + 4, pos)
+                if len(head) < RECORD_HEAD:
+                    return False
+                op = head[0]
+                (length,) = struct.unpack_from("<Q", head, 1)
+                nxt = pos + RECORD_HEAD + length
+                if nxt > size:
+                    return False
+                if op == Op.FOOTER:
+                    return seen == len(chunks) and _same_channels(found, storage)
+                if op == Op.CHUNK:
+                    info = chunks.get(pos)
+                    if info is None or int(info.chunk_length) != RECORD_HEAD + length:
+                        return False
+                    seen += 1
+                    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
+                    if len(fixed) < CHUNK_FIXED + 4:
+                        return False
+                    (usize,) = struct.unpack_from("<Q", fixed, 16)
+                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
+                    if CHUNK_FIXED + 4 + name_len + 8 > length:
+                        return False
+                    at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
+                    name = os.pread(fd, name_len, at - name_len)
+                    (stored,) = struct.unpack("<Q", os.pread(fd, 8, at))
+                    if CHUNK_FIXED + 4 + name_len + 8 + stored > length:
+                        return False
+                    # the chunk as the index describes it (the indexed reader reads it by the index)
+                    if (usize, stored, name) != (int(info.uncompressed_size), int(info.compressed_size),
+                                                 str(info.compression).encode()):
+                        return False
+                elif op in _PARSED:
+                    content = os.pread(fd, length, pos + RECORD_HEAD)
+                    if len(content) != length:
+                        return False
+                    record_messages(op, memoryview(content), found)
+                pos = nxt
+    except (OSError, struct.error, MalformedError, ValueError, MemoryError, OverflowError):
+        return False
+
+
+def _same_channels(found: Scan, storage: McapReader) -> bool:
+    """Whether the channels the scan takes (the first record of each id, wherever it is) are those rosbags took
+    from the summary: same topic and same schema name."""
+    for cid, ch in found.channels.items():
+        theirs = storage.channels.get(cid)
+        schema = found.schemas.get(ch.schema_id)
+        if theirs is None or theirs.topic != ch.topic or schema is None or theirs.schema != schema.name:
+            return False
+    return True
 
 
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:

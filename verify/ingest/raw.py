@@ -230,6 +230,9 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
             raise
         if fmt == "sqlite3":
             raise TruncatedLogError(f"{err.reason}; --salvage supports ROS1 and MCAP logs only", path=str(p)) from err
+        if p.is_dir() and read_bag_metadata(p).compression_mode is not None:
+            raise TruncatedLogError(f"{err.reason}; --salvage does not read compressed bag folders", path=str(p)
+                                    ) from err
         with _gc_paused():
             return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
 
@@ -270,7 +273,7 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     own = fast_ingest()
-    if fmt == "mcap" and (not path.is_dir() or read_bag_metadata(path).compression_mode is None):
+    if fmt == "mcap":
         got = read_mcap_log(path, wanted, fast=own)
         out = {topic: RawTopic(topic, t.msgtype, t.has_definition, t.log_ns, t.payloads)
                for topic, t in got.topics.items()}
@@ -309,10 +312,23 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
                 raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
         _check_counts(path, fmt, selected, out)
         return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
+    _check_rows(path, fmt, rows)
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
     _check_counts(path, fmt, selected, out)
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
+
+
+def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | memoryview]]) -> None:
+    """Every row a reader yields has an integer log time and a payload: a damaged sqlite3 page can hold a message
+    row whose columns read as NULL (its NOT NULL constraint is only checked when rows are written), which rosbags
+    yields as it is."""
+    if all(map(int.__instancecheck__, map(itemgetter(1), rows))) and \
+            all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))):
+        return
+    bad = next(r for r in rows if not isinstance(r[1], int) or not isinstance(r[2], bytes | memoryview))
+    raise LogReadError(f"damaged {fmt} log: a message row on {bad[0].topic} has no log time or payload (a damaged "
+                       f"database page)", path=str(path))
 
 
 def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:
@@ -336,18 +352,20 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
     try:
         reader = QuickReader(path)
         reader.open()
-    except Exception:  # any failure: rosbags' own open decides and reports
+    except _READ_ERRORS:  # what rosbags' open raises on a damaged log: rosbags' own open then decides and reports
         return None
     try:
         conns = list(reader.connections)
         selected = [c for c in conns if c.topic in wanted]
         fast = _read_rosbag2_fast(reader, selected) if selected else None
-    except Exception:  # as above
+        if fast is not None:  # the counts rosbags' open declares (its count scan, for the selected topics only)
+            selected = _with_counts(reader, selected)
+    except _READ_ERRORS:  # as above
         fast = None
     finally:
         try:
             reader.close()
-        except Exception:  # as above
+        except _READ_ERRORS:  # as above
             fast = None
     if fast is None:
         return None
@@ -358,6 +376,22 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
             raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
     _check_counts(path, "sqlite3", selected, out)
     return RawLog(str(path), "sqlite3", False, out, {c.topic: c.msgtype for c in conns}, False, tuple(notes))
+
+
+def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connection]:
+    """A bare ``.db3``'s selected connections with their message counts as rosbags' open counts them
+    (``count(messages.id)`` of a left join of ``topics`` and ``messages``): a damaged table or index can make the
+    ordered read return other rows than the table holds, which the count check then names, as on rosbags' own
+    path."""
+    storage = reader.storage
+    if not isinstance(storage, Sqlite3Reader) or storage.dbconn is None:
+        return selected  # a bag folder: its metadata.yaml declares the counts
+    ids = sorted({int(c.id) for c in selected})
+    rows = storage.dbconn.execute(
+        f"SELECT topics.id, count(messages.id) FROM topics LEFT JOIN messages ON topics.id == messages.topic_id "
+        f"WHERE topics.id IN ({','.join('?' * len(ids))}) GROUP BY topics.id", ids).fetchall()
+    counts = {int(cid): int(n) for cid, n in rows if isinstance(cid, int) and isinstance(n, int)}
+    return [c._replace(msgcount=counts.get(int(c.id), 0)) for c in selected]
 
 
 def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:

@@ -210,6 +210,8 @@ def _chunk_infos(f: _File, pos: int, count: int) -> list[tuple[int, int, frozens
         if _u32(header.get("ver", b""), "ver") != 1:
             raise _UnusualError("chunk info version")
         n = _u32(header["count"], "count")
+        if n and any(len(header.get(name, b"")) != 8 for name in ("start_time", "end_time")):
+            raise _UnusualError("chunk info without its time fields")  # rosbags refuses its index
         if dlen != 8 * n:
             raise _UnusualError("chunk info length")
         ids = frozenset(np.frombuffer(f.read(start, dlen), dtype="<u4")[0::2].tolist())

@@ -150,6 +150,7 @@ class Ros1Stream:
     pos: int = len(MAGIC)
     connections: dict[int, tuple[str, str, bool]] = field(default_factory=dict)
     index_pos: int = 0
+    index_records: int = 0  # connection + chunk info records the bag header says its index holds
     closed: bool = False
     chunk: _Chunk | None = None
 
@@ -171,7 +172,8 @@ class Ros1Stream:
                         break
                     continue
                 if self.index_pos and self.pos >= self.index_pos:
-                    self.closed = True
+                    # closed once its whole index is there (an index still being written, or cut, is not a close)
+                    self.closed = self._index_complete(buf, base)
                     break
                 if self.pos >= end:
                     break
@@ -185,11 +187,25 @@ class Ros1Stream:
                     if len(raw) != 8:
                         raise MalformedError("bag header without a u64 index_pos")
                     self.index_pos = int(struct.unpack("<Q", raw)[0])
+                    self.index_records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
                 elif rec.op == Op.CONNECTION:
                     self._connection(rec, buf)
                 self.pos = base + rec.end
         except CutError:
             pass
+
+    def _index_complete(self, buf: bytes | memoryview, base: int) -> bool:
+        """Whether the index the bag header announces (its connection and chunk info records) is complete in
+        ``buf`` (the file's bytes from ``base``)."""
+        pos = self.index_pos - base
+        if pos < 0:
+            return True  # read before: the stream only reaches the index once
+        for _ in range(self.index_records):
+            rec = record_at(buf, pos, len(buf))  # CutError: not all written yet
+            if rec.op not in (Op.CONNECTION, Op.CHUNK_INFO):
+                raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
+            pos = rec.end
+        return True
 
     def _connection(self, rec: Record, buf: bytes | memoryview) -> None:
         cid, topic, typ, has_def = connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])

@@ -86,10 +86,10 @@ class McapFollower:
             pos = len(MCAP_MAGIC)
         try:
             for op, rec, nxt in mcap_walk(buf, pos, len(buf)):
-                if op in (McapOp.FOOTER, McapOp.DATA_END):  # the recorder closed the file
+                if op == McapOp.FOOTER:  # the recorder closed the file (as the scan: its summary was read too)
                     self.finished = True
                 else:
-                    for msg in record_messages(op, rec, self.found, check_crc=False):
+                    for msg in record_messages(op, rec, self.found):  # a chunk's CRC checked, as the scan does
                         if (got := mcap_message(self.found, msg)) is not None:
                             out.append(got)
                 pos = nxt
@@ -159,10 +159,17 @@ class Ros1Follower:
         except (Ros1CutError, Ros1MalformedError, struct.error):
             return
         raw = rec.header.get("index_pos", b"")
-        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8:
+        counts = [rec.header.get(name, b"") for name in ("conn_count", "chunk_count")]
+        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8 and all(len(c) == 4 for c in counts):
             self.stream.index_pos = int(struct.unpack("<Q", raw)[0])
+            self.stream.index_records = sum(int(struct.unpack("<I", c)[0]) for c in counts)
         if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
-            self.stream.closed = True
+            at = self.stream.resume_at  # closed once the whole index is there (the stream checks it)
+            try:
+                self.stream.feed(_read_from(self.path, at), at, [])
+            except _ROS1_DAMAGE as err:
+                raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
+                                   path=str(self.path)) from err
 
     def rest(self) -> list[SalvagedMessage]:
         return _rest_of_walk(walk_ros1(self.path).messages, self.delivered)
@@ -197,7 +204,11 @@ class SqliteFollower:
         for mid, tid, stamp, data in rows:
             if tid in topics:
                 name, typ = topics[tid]
-                out.append(SalvagedMessage(name, typ, False, int(stamp), bytes(data)))
+                if not isinstance(stamp, int) or not isinstance(data, bytes):
+                    # a damaged page can hold a row whose columns read as NULL (NOT NULL is checked on writes only)
+                    raise LogReadError(f"damaged sqlite3 log: a message row on {name} has no log time or payload (a "
+                                       f"damaged database page)", path=str(self.path))
+                out.append(SalvagedMessage(name, typ, False, stamp, data))
             self.last_id = max(self.last_id, int(mid))
         self.delivered += len(out)
         return out
