@@ -187,3 +187,25 @@ def test_reserved_words_are_not_atoms() -> None:
         Atom("U")
     with pytest.raises(ValueError, match="not an atomic proposition"):
         Atom("1a")
+
+
+# ---- qualified atoms (a robot's own atom in a multi-robot scenario: ``husky.dock``) ----------------------------
+@pytest.mark.parametrize("text", ["G (husky.dock -> F[0,5] jackal.stopped)", "G !(a.door & b.door)",
+                                  "husky.dock U[0,3] close_ab", "F[0,60] (a.dock & b.dock)"])
+def test_qualified_atoms_parse_and_round_trip(text: str) -> None:
+    f = parse(text)
+    assert parse(str(f)) == f
+    qualified = {a for a in atoms(f) if "." in a}
+    assert qualified and all(Atom(a).qualifier and Atom(a).local_name for a in qualified)
+
+
+def test_qualified_atom_parts() -> None:
+    a = Atom("husky.dock")
+    assert (a.qualifier, a.local_name, str(a)) == ("husky", "dock", "husky.dock")
+    assert (Atom("dock").qualifier, Atom("dock").local_name) == (None, "dock")
+
+
+@pytest.mark.parametrize("text", ["a.b.c", "a.", ".a", "a.F", "G.x", "a . b"])
+def test_malformed_qualified_atoms_are_refused(text: str) -> None:
+    with pytest.raises(SpecSyntaxError):
+        parse(text)
