@@ -171,6 +171,13 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
+    if sc.robots:  # several robots in one log: verify.fleet reads each robot and judges them jointly
+        from verify.fleet import certify_fleet_log
+
+        result: CertifyResult = certify_fleet_log(log_path, sc, spec=spec, time_base=time_base, salvage=salvage,
+                                                  time0_ns=time0_ns, digest=digest, checks=checks,
+                                                  clock_offsets=clock_offsets)
+        return result
     selection = select_checks(sc, checks)
     formula_text = str(formula_of(sc, spec))
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
@@ -183,6 +190,9 @@ def certify_data(log: LogData, scenario: Scenario | str | Path, *, spec: str | N
     """Judge streams already in memory (e.g. a simulated run, never written) exactly as ``certify_log`` judges the
     streams it reads from a file: same checks, same margins, same verdicts."""
     sc = resolve_scenario(scenario)
+    if sc.robots:
+        raise ScenarioInputError(f"scenario {sc.name!r} names robots {', '.join(sc.robot_names)}: judge each robot's "
+                                 "streams together (verify.fleet.certify_fleet_data)")
     selection = select_checks(sc, checks)
     return _judge(log, sc, formula_text=str(formula_of(sc, spec)), selection=selection)
 

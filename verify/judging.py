@@ -72,9 +72,11 @@ def formula_of(scenario: Scenario, spec: str | None) -> Formula:
     """The formula to judge (``spec``, else the scenario's); ``SpecError`` (exit 3) when it is malformed or one of
     its atoms labels no region and names no signal of the scenario."""
     formula = parse_spec(spec if spec is not None else scenario.spec)
-    problem = scenario.atom_problem(formula) if scenario.robots or any("." in a for a in atoms(formula)) else None
-    if problem:
-        raise SpecError(f"formula {formula}: {problem}")
+    if scenario.robots or any("." in a for a in atoms(formula)):
+        problem = scenario.atom_problem(formula)
+        if problem:
+            raise SpecError(f"formula {formula}: {problem}")
+        return formula
     known = {lab for r in scenario.regions for lab in r.labels} | set(scenario.signals)
     unknown = sorted(atoms(formula) - known)
     if unknown:
