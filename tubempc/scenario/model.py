@@ -360,6 +360,8 @@ class FleetRobot(_Frozen):
     max_speed: PositiveFloat | None = None  # m/s; default: the norm of the linear input bounds
     inputs: InputLimits
     signals: dict[AtomName, SignalSpec] = Field(default_factory=dict)
+    rate_hz: Annotated[float, Field(ge=MOCAP_RATE_HZ[0], le=MOCAP_RATE_HZ[1], allow_inf_nan=False)] | None = None
+    # ^ the pose topic's expected rate (dropout detection); default: mocap.rate_hz
 
     @field_validator("topics", mode="before")
     @classmethod
@@ -588,6 +590,8 @@ class Scenario(_Frozen):
                      "inputs": r.inputs.model_dump(mode="json"),
                      "topics": r.topics.model_dump(mode="json"),
                      "signals": {k: v.model_dump(mode="json") for k, v in r.signals.items()}})
+        if r.rate_hz is not None:
+            data["mocap"] = {**data.get("mocap", {}), "rate_hz": r.rate_hz}
         return Scenario.model_validate(data)
 
     # ---- fields only the planner and the controller need ------------------------------------------------------
@@ -772,6 +776,8 @@ class Scenario(_Frozen):
                     robot.pop("max_speed", None)
                 if not robot.get("signals"):
                     robot.pop("signals", None)
+                if robot.get("rate_hz") is None:
+                    robot.pop("rate_hz", None)
         for key in ("nominal", "cmd_vel"):
             if "topics" in data and data["topics"].get(key) is None:
                 data["topics"].pop(key, None)
