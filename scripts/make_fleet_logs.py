@@ -27,7 +27,8 @@ TIME0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
 
 def _kit() -> ModuleType:
     spec = importlib.util.spec_from_file_location("any_robot_logs", FsPath(__file__).parent / "make_any_robot_logs.py")
-    assert spec is not None and spec.loader is not None
+    assert spec is not None
+    assert spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -69,7 +70,7 @@ class RobotLog:
 
     def times(self) -> np.ndarray:
         end = self.end_s if self.end_s is not None else self.path.knots[-1][0]
-        n = int(math.floor((end - self.start_s) * self.rate_hz + 1e-9)) + 1
+        n = math.floor((end - self.start_s) * self.rate_hz + 1e-9) + 1
         t = self.start_s + np.arange(n) / self.rate_hz
         keep = np.ones(n, dtype=bool)
         for a, b in self.dropouts:

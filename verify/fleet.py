@@ -25,15 +25,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.mitl import atoms
+from tubempc.mitl import Formula, atoms
 from tubempc.scenario import FleetRobot, Scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult
 from verify.geometry import label_margins, step_bound_m
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
-from verify.ingest.fields import outside_span
-from verify.judging import EXIT_CODES, formula_of, judge_formula, overall_verdict
+from verify.ingest.fields import SignalStream, outside_span
+from verify.judging import EXIT_CODES, FormulaJudgement, formula_of, judge_formula, overall_verdict
 from verify.monitor.engine import Truth
 from verify.selection import Selection, select_checks
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
@@ -41,7 +41,8 @@ from verify.semantics.timed_run import parse_spec
 from verify.semantics.trajectory import interleave, trajectory_positions
 from verify.signals import SignalBounds, signal_bounds, signal_summary
 
-__all__ = ["PairSeparation", "certify_fleet_data", "certify_fleet_log", "read_fleet", "separation_bounds"]
+__all__ = ["JointJudgement", "PairSeparation", "certify_fleet_data", "certify_fleet_log", "check_separation",
+           "judge_fleet", "judge_joint", "read_fleet", "robot_track", "separation_bounds"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -90,9 +91,14 @@ def certify_fleet_data(logs: Mapping[str, LogData], sc: Scenario, *, spec: str |
     return judge_fleet(logs, sc, formula_text=str(formula_of(sc, spec)), checks=checks, selection=selection)
 
 
+def robot_track(r: FleetRobot, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray) -> RobotTrack:
+    """A robot's judged pose samples with its disc and the bound on its motion between them."""
+    return RobotTrack(r.name, t_ns, x_m, y_m, r.radius, step_bound_m(t_ns, x_m, y_m, r.max_speed_mps))
+
+
 def _track(r: FleetRobot, log: LogData) -> RobotTrack:
     p = log.pose
-    return RobotTrack(r.name, p.t_ns, p.x_m, p.y_m, r.radius, step_bound_m(p.t_ns, p.x_m, p.y_m, r.max_speed_mps))
+    return robot_track(r, p.t_ns, p.x_m, p.y_m)
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
@@ -186,8 +192,8 @@ def check_separation(pairs: list[PairSeparation], joint_t: IntArray, t0: int) ->
     return CheckResult("separation", "pass", least if np.isfinite(least) else None, None, details)
 
 
-def _joint_atoms(sc: Scenario, used: frozenset[str], logs: Mapping[str, LogData], tracks: Mapping[str, RobotTrack],
-                 joint_t: IntArray) -> dict[str, tuple[SignalBounds, str]]:
+def _joint_atoms(sc: Scenario, used: frozenset[str], streams: Mapping[str, SignalStream],
+                 tracks: Mapping[str, RobotTrack], joint_t: IntArray) -> dict[str, tuple[SignalBounds, str]]:
     out: dict[str, tuple[SignalBounds, str]] = {}
     for a in sorted(used):
         if a in sc.proximity:
@@ -199,8 +205,7 @@ def _joint_atoms(sc: Scenario, used: frozenset[str], logs: Mapping[str, LogData]
         who, what = a.split(".", 1)
         robot = sc.fleet_robot(who)
         if what in robot.signals:
-            stream = logs[who].signals[what]
-            out[a] = (signal_bounds(stream, joint_t), robot.signals[what].unit or "field unit")
+            out[a] = (signal_bounds(streams[a], joint_t), robot.signals[what].unit or "field unit")
         else:
             t = tracks[who]
             margin = label_margins(t.x_m, t.y_m, sc.robot_scenario(who), {what})[what]
@@ -234,6 +239,53 @@ def _digest(logs: Mapping[str, LogData]) -> tuple[str, str]:
     return hashlib.sha256(blob).hexdigest(), f"sha256 of each robot's {first.digest_algorithm}"
 
 
+@dataclasses.dataclass(frozen=True, slots=True)
+class JointJudgement:
+    """The robots judged together: the joint checks (spec_trajectory when asked, separation when the scenario has
+    it), the formula's judgement, the joint axis and span, each pair's separation bounds, and the problems that keep
+    the joint run from passing (a robot observed long outside the joint span)."""
+
+    checks: tuple[CheckResult, ...]
+    judged: FormulaJudgement
+    joint_t: IntArray
+    span: tuple[int, int] | None
+    pairs: list[PairSeparation]
+    problems: dict[str, str]
+
+
+def judge_joint(sc: Scenario, formula: Formula, tracks: Mapping[str, RobotTrack],
+                streams: Mapping[str, SignalStream], t0: int, *, spec: bool = True) -> JointJudgement:
+    """The formula and the separation over the joint run (certify and the online monitor's ``close`` alike).
+    ``streams``: the robots' signal streams by qualified atom (``jackal.slow``)."""
+    from verify.certify import formula_check
+
+    problems: dict[str, str] = {}
+    joint_t, span = joint_axis(list(tracks.values()))
+    if span is not None:
+        hold = 1.5 * max((float(np.median(np.diff(t.t_ns))) if t.t_ns.size > 1 else 0.0) for t in tracks.values())
+        for name, t in tracks.items():
+            s = t.span_ns
+            if s is not None and (span[0] - s[0] > hold or s[1] - span[1] > hold):
+                problems[f"robot {name}"] = (
+                    f"observed {_rel_s(s[0] - t0)}-{_rel_s(s[1] - t0)} s, but every robot only "
+                    f"{_rel_s(span[0] - t0)}-{_rel_s(span[1] - t0)} s: the formula and the separation are judged "
+                    "over the joint span only")
+    elif any(t.span_ns is not None for t in tracks.values()):
+        problems["robots"] = "no stretch in which every robot was observed: nothing is judged jointly"
+    joint_rel = joint_t - t0
+    bounds = _joint_atoms(sc, atoms(formula), streams, tracks, joint_t)
+    v_max = max(r.max_speed_mps for r in sc.robots)
+    nan = np.full(joint_t.shape[0], np.nan)
+    judged = judge_formula(formula, joint_rel, nan, nan, sc, time0_ns=t0, max_speed_mps=v_max, joint_atoms=bounds)
+    pairs = separation_bounds(sc, tracks, joint_t)
+    results: list[CheckResult] = []
+    if spec:
+        results.append(formula_check(judged.whole, t0, _atom_margins(bounds)))
+    if sc.separation is not None:
+        results.append(check_separation(pairs, joint_t, t0))
+    return JointJudgement(tuple(results), judged, joint_t, span, pairs, problems)
+
+
 def judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
                 checks: Sequence[str] | None = None, selection: Selection | None = None) -> Any:
     """Judge the robots' streams (one time 0) against the fleet scenario; returns a ``CertifyResult``."""
@@ -243,7 +295,7 @@ def judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
 
 def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
                  checks: Sequence[str] | None, selection: Selection | None) -> Any:
-    from verify.certify import CertifyResult, _check_entry, _judge, _jsonable, formula_check
+    from verify.certify import CertifyResult, _check_entry, _jsonable, _judge
 
     t0 = min(log.time0_ns for log in logs.values())
     logs = {k: (v if v.time0_ns == t0 else dataclasses.replace(v, time0_ns=t0)) for k, v in logs.items()}
@@ -276,29 +328,13 @@ def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str
                         "they are not judged and the run cannot pass")
 
     # ---- the joint run ----------------------------------------------------------------------------------------
-    joint_t, span = joint_axis(list(tracks.values()))
-    if span is not None:
-        hold = 1.5 * max((float(np.median(np.diff(t.t_ns))) if t.t_ns.size > 1 else 0.0) for t in tracks.values())
-        for name, t in tracks.items():
-            s = t.span_ns
-            if s is not None and (span[0] - s[0] > hold or s[1] - span[1] > hold):
-                problems[f"robot {name}"] = (
-                    f"observed {_rel_s(s[0] - t0)}-{_rel_s(s[1] - t0)} s, but every robot only "
-                    f"{_rel_s(span[0] - t0)}-{_rel_s(span[1] - t0)} s: the formula and the separation are judged "
-                    "over the joint span only")
-    elif any(t.span_ns is not None for t in tracks.values()):
-        problems["robots"] = "no stretch in which every robot was observed: nothing is judged jointly"
+    streams = {f"{r.name}.{k}": v for r in sc.robots for k, v in logs[r.name].signals.items()}
+    joint = judge_joint(sc, formula, tracks, streams, t0, spec="spec" in selection)
+    problems.update(joint.problems)
+    judged, span, joint_t, pairs = joint.judged, joint.span, joint.joint_t, joint.pairs
     joint_rel = joint_t - t0
-    bounds = _joint_atoms(sc, used, logs, tracks, joint_t)
     v_max = max(r.max_speed_mps for r in sc.robots)
-    nan = np.full(joint_t.shape[0], np.nan)
-    judged = judge_formula(formula, joint_rel, nan, nan, sc, time0_ns=t0, max_speed_mps=v_max, joint_atoms=bounds)
-    pairs = separation_bounds(sc, tracks, joint_t)
-    results: list[CheckResult] = []
-    if "spec" in selection:
-        results.append(formula_check(judged.whole, t0, _atom_margins(bounds)))
-    if sc.separation is not None:
-        results.append(check_separation(pairs, joint_t, t0))
+    results = list(joint.checks)
     end_s = max((float(t.t_ns[-1] - t0) * 1e-9 for t in tracks.values() if t.t_ns.size), default=0.0)
     entries = [_check_entry(c, t0, end_s) for c in results]
     robots_out: list[dict[str, Any]] = []

@@ -297,7 +297,7 @@ class _Context:
     """What the explanations need beside the values: sample times, the scenario, the signal streams."""
 
     def __init__(self, scenario: Scenario, t_ns: IntArray, time0_ns: int, streams: Mapping[str, SignalStream],
-                 max_speed_mps: float, joint_units: Mapping[str, str] | None = None) -> None:
+                 max_speed_mps: float, *, joint_units: Mapping[str, str] | None = None) -> None:
         self.scenario = scenario
         self.joint_units = dict(joint_units or {})  # atoms given as bounds on a joint run (robots' atoms)
         self.t_ns = t_ns  # relative

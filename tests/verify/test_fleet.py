@@ -96,7 +96,7 @@ def test_separation_that_may_have_been_broken_between_samples_is_inconclusive(tm
     delay = 0.5 + 0.97 * math.sqrt(2)
     b_late = KIT.Path(((0.0, 5.0, 0.5), (delay, 5.0, 0.5), (delay + 5.0, 5.0, 5.5), (10.0, 5.0, 5.5)))
     log = _three_robots(tmp_path, A_CROSS, b_late)
-    t, margin = _dense(A_CROSS, b_late, 0.3, RADII["a"] + RADII["b"])
+    _, margin = _dense(A_CROSS, b_late, 0.3, RADII["a"] + RADII["b"])
     assert 0 < margin.min() < 0.1  # never violated, but close
     cert = certify_log(log, _scenario("G !(a.door & b.door)")).certificate
     sep = _check(cert, "separation")
@@ -151,7 +151,8 @@ def test_walkthrough_per_robot_checks_timed_runs_and_quality() -> None:
     assert cert["verdict"] == "pass"
     names = [c["name"] for c in cert["checks"]]
     assert names[:2] == ["spec_trajectory", "separation"]
-    assert {"husky/obstacle_clearance", "husky/workspace", "jackal/obstacle_clearance", "jackal/workspace"} <= set(names)
+    assert {"husky/obstacle_clearance", "husky/workspace", "jackal/obstacle_clearance",
+            "jackal/workspace"} <= set(names)
     assert {e["robot"] for e in cert["timed_run"]} == {"husky", "jackal"}
     dock = [e for e in cert["timed_run"] if e["region"].startswith("dock")]
     assert [(e["robot"], e["region"]) for e in dock] == [("husky", "dock_a"), ("jackal", "dock_b")]
