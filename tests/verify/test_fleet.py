@@ -178,3 +178,40 @@ def test_unqualified_atom_is_refused_naming_the_robots(tmp_path: Path) -> None:
     log = _three_robots(tmp_path, A_CROSS, B_CROSS)
     with pytest.raises(SpecError, match=r"unqualified atom\(s\) door in a scenario with robots a, b, c"):
         certify_log(log, _scenario("G !a.door"), spec="G !door")
+
+
+def _same(cert: dict[str, Any], result: Any) -> None:
+    assert result.verdict == cert["verdict"]
+    online = {c.name: c for c in result.checks}
+    assert set(online) == {c["name"] for c in cert["checks"]}
+    for c in cert["checks"]:
+        o = online[c["name"]]
+        assert o.verdict == c["verdict"], c["name"]
+        if c["first_violation_time"] is not None:
+            assert o.first_violation_ns is not None
+            assert round((o.first_violation_ns - cert["time0_ns"]) * 1e-9, 9) == c["first_violation_time"]
+        if c["margin"] is not None and o.margin is not None:
+            assert o.margin == pytest.approx(c["margin"], abs=1e-9), c["name"]
+
+
+@pytest.mark.parametrize("case", ["walkthrough", "crossing", "doorway"])
+def test_online_close_equals_certify(case: str, tmp_path: Path) -> None:
+    from verify.fleet import read_fleet
+    from verify.online.fleet import FleetMonitor, feed_fleet_logs
+
+    if case == "walkthrough":
+        log = ROOT / "logs" / "two_robots.bag"
+        sc = scenario_from_dict(__import__("yaml").safe_load(
+            (ROOT / "docs" / "examples" / "two-robots-warehouse.yaml").read_text()))
+    elif case == "crossing":
+        log, sc = _three_robots(tmp_path, A_CROSS, B_CROSS), _scenario("G !(a.door & c.door)")
+    else:
+        log = _three_robots(tmp_path, KIT.Path(((0.0, 2.0, 2.5), (6.0, 8.0, 2.5), (10.0, 8.0, 2.5))),
+                            KIT.Path(((0.0, 2.5, 3.5), (6.0, 8.5, 3.5), (10.0, 8.5, 3.5))))
+        sc = _scenario("G !(a.door & b.door) & F[0,9] c.dock")
+    cert = certify_log(log, sc).certificate
+    monitor = FleetMonitor(sc)
+    decisions = feed_fleet_logs(monitor, read_fleet(log, sc))
+    _same(cert, monitor.close())
+    # a robot's check decided online is told with its robot's name and a time from the fleet's time 0
+    assert all("/" in d.name for d in decisions)
