@@ -215,3 +215,22 @@ def test_online_close_equals_certify(case: str, tmp_path: Path) -> None:
     _same(cert, monitor.close())
     # a robot's check decided online is told with its robot's name and a time from the fleet's time 0
     assert all("/" in d.name for d in decisions)
+
+
+def test_batch_and_compare_read_a_fleet_certificate(tmp_path: Path) -> None:
+    from tubempc.compare.metrics import certificate_metrics
+    from verify.certificate import Certificate
+    from verify.certify import write_certificate
+
+    result = certify_log(ROOT / "logs" / "two_robots.bag", ROOT / "docs" / "examples" / "two-robots-warehouse.yaml")
+    path = write_certificate(result, tmp_path)
+    cert = Certificate.model_validate_json(path.read_text())
+    metrics = certificate_metrics(cert)
+    # each robot's timed run is its own: no transition from one robot's region to the other's
+    assert metrics["entry_s.jackal/dock_b"].number == pytest.approx(24.6)
+    assert "transition_s.husky/door->dock_a" in metrics
+    transitions = [k for k in metrics if k.startswith("transition_s.")]
+    assert transitions
+    assert all(k.startswith(("transition_s.husky/", "transition_s.jackal/")) for k in transitions)
+    assert metrics["check.husky/obstacle_clearance.verdict"].verdict == "pass"
+    assert metrics["check.separation.margin"].number == pytest.approx(cert.check("separation").margin)
