@@ -143,7 +143,7 @@ def check_explanation(entry: Mapping[str, Any]) -> str | None:
     if verdict == "fail":
         at = entry.get("first_violation_time")
         where = f" at {at:.2f} s" if isinstance(at, int | float) else ""
-        what = [f"{k} {entry[k]}" for k in ("region", "component") if entry.get(k) is not None]
+        what = [f"{k} {entry[k]}" for k in ("region", "component", "pair") if entry.get(k) is not None]
         margin = entry.get("margin")
         how = (f"margin {margin:.4g} {entry.get('margin_unit') or ''}".rstrip() if isinstance(margin, int | float)
                else f"no finite margin ({entry.get('margin_reason')})")
