@@ -234,3 +234,17 @@ def test_batch_and_compare_read_a_fleet_certificate(tmp_path: Path) -> None:
     assert all(k.startswith(("transition_s.husky/", "transition_s.jackal/")) for k in transitions)
     assert metrics["check.husky/obstacle_clearance.verdict"].verdict == "pass"
     assert metrics["check.separation.margin"].number == pytest.approx(cert.check("separation").margin)
+
+
+def test_watch_judges_a_fleet_log_as_certify(tmp_path: Path) -> None:
+    from verify.online.fleet import FleetMonitor
+    from verify.online.watch import watch_log
+
+    log = _three_robots(tmp_path, A_CROSS, B_CROSS)
+    sc = _scenario("G !(a.door & b.door)")
+    res = watch_log(log, FleetMonitor(sc))
+    cert = certify_log(log, sc).certificate
+    _same(cert, res.result)
+    assert res.finished and res.result.verdict == "fail"
+    assert {d.name for d in res.decisions} >= {"separation", "spec_trajectory", "a/workspace", "c/workspace"}
+    assert any("final  separation FAIL" in line for line in res.result.state.final_lines())

@@ -13,6 +13,7 @@ pushed: until then they are open ("inconclusive so far"), never decided early.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -23,7 +24,7 @@ import numpy as np
 
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario
-from verify.certify import resolve_scenario
+from verify.certify import MARGIN_UNITS, resolve_scenario
 from verify.checks import CheckResult
 from verify.errors import ScenarioInputError
 from verify.fleet import judge_joint, robot_track
@@ -34,7 +35,32 @@ from verify.online.monitor import Decision, OnlineMonitor
 from verify.online.signalfeed import SignalFeed
 from verify.selection import select_checks
 
-__all__ = ["FleetMonitor", "FleetResult", "feed_fleet_logs"]
+__all__ = ["FleetMonitor", "FleetResult", "FleetState", "RobotFeed", "feed_fleet_logs"]
+
+
+@dataclass(frozen=True, slots=True)
+class FleetState:
+    """The fleet's state: open until ``close`` (the joint checks are decided there), then every check's result."""
+
+    closed: bool
+    checks: tuple[CheckResult, ...] = ()
+    t0_ns: int | None = None
+
+    @property
+    def all_decided(self) -> bool:
+        return self.closed
+
+    def final_lines(self) -> list[str]:
+        """At the end: one line per check with its final verdict, margin and first violation."""
+        out = []
+        for c in self.checks:
+            margin = "" if c.margin is None or not math.isfinite(c.margin) else f" margin {c.margin:+.4g}"
+            unit = str(c.details.get("margin_unit") or MARGIN_UNITS.get(c.name.rsplit("/", 1)[-1], ""))
+            unit = unit if margin else ""
+            at = ("" if c.first_violation_ns is None or self.t0_ns is None else
+                  f" (violated at {(c.first_violation_ns - self.t0_ns) * 1e-9:.2f} s)")
+            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{' ' + unit if unit else ''}{at}")
+        return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +70,7 @@ class FleetResult:
     verdict: str
     verdict_reason: str | None
     checks: tuple[CheckResult, ...]
+    state: FleetState = FleetState(closed=True)
 
     @property
     def exit_code(self) -> int:
@@ -75,6 +102,30 @@ class FleetMonitor:
             r.name: ([], [], [], []) for r in sc.robots}
         self.t0_ns: int | None = None
         self._result: FleetResult | None = None
+        self._final_decisions: list[Decision] = []
+
+    def robot_feed(self, robot: str) -> RobotFeed:
+        """One robot's push interface (that of ``OnlineMonitor``), for a reader that feeds one robot's topics."""
+        return RobotFeed(self, robot)
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Samples pushed, over every robot."""
+        out: dict[str, int] = {}
+        for m in self.monitors.values():
+            for k, v in m.counts.items():
+                out[k] = out.get(k, 0) + v
+        return out
+
+    def state(self) -> FleetState:
+        if self._result is not None:
+            return self._result.state
+        return FleetState(closed=False, t0_ns=self.t0_ns)
+
+    @property
+    def final_decisions(self) -> list[Decision]:
+        """The decisions made by ``close``: each robot's checks still open, then the joint checks."""
+        return list(self._final_decisions)
 
     # ---- input ----------------------------------------------------------------------------------------------------
     def push_pose(self, robot: str, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
@@ -142,8 +193,46 @@ class FleetMonitor:
         problems.update(joint.problems)
         every = [*joint.checks, *checks]
         verdict, why = overall_verdict([(c.name, c.verdict) for c in every], partial=partial, problems=problems)
-        self._result = FleetResult(verdict, why, tuple(every))
+        end_s = max(((int(t.t_ns[-1]) - t0) * 1e-9 for t in tracks.values() if t.t_ns.size), default=0.0)
+        self._final_decisions = [d for r in sc.robot_names
+                                 for d in self._renamed(r, self.monitors[r].final_decisions)]
+        for c in joint.checks:
+            first = None if c.first_violation_ns is None else round((c.first_violation_ns - t0) * 1e-9, 9)
+            self._final_decisions.append(Decision(c.name, c.verdict, round(first if first is not None else end_s, 9),
+                                                  c.margin, first, c.details.get("margin_unit")))
+        self._result = FleetResult(verdict, why, tuple(every), FleetState(True, tuple(every), self.t0_ns))
         return self._result
+
+
+class RobotFeed:
+    """One robot's side of a ``FleetMonitor`` with ``OnlineMonitor``'s push interface (``verify.online.watch``
+    decodes each robot's topics with its one-robot scenario and pushes them here)."""
+
+    def __init__(self, fleet: FleetMonitor, robot: str) -> None:
+        self.fleet = fleet
+        self.robot = robot
+        self.scenario = fleet.scenario.robot_scenario(robot)
+
+    @property
+    def signal_names(self) -> tuple[str, ...]:
+        """This robot's signals the formula uses."""
+        return tuple(sorted(k.split(".", 1)[1] for k in self.fleet._feeds if k.startswith(f"{self.robot}.")))
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return self.fleet.monitors[self.robot].counts
+
+    def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
+        self.fleet.push_pose(self.robot, t_ns, x_m, y_m, yaw_rad)
+
+    def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
+        self.fleet.push_nominal(self.robot, t_ns, x_m, y_m, yaw_rad)
+
+    def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
+        self.fleet.push_cmd(self.robot, t_ns, u1, u2, u3)
+
+    def push_signal(self, name: str, t_ns: int, value: float) -> None:
+        self.fleet.push_signal(self.robot, name, t_ns, value)
 
 
 def feed_fleet_logs(monitor: FleetMonitor, logs: Mapping[str, LogData]) -> list[Decision]:
