@@ -29,6 +29,7 @@ from tubempc.mitl import Formula, atoms
 from tubempc.scenario import FleetRobot, Scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult
+from verify.errors import MissingTopicError
 from verify.geometry import label_margins, step_bound_m
 from verify.ingest import LogData, read_log
 from verify.ingest.digest import DEFAULT_DIGEST
@@ -57,8 +58,11 @@ def read_fleet(log_path: str | Path, sc: Scenario, *, time_base: str = "auto", s
     out: dict[str, LogData] = {}
     base = time_base
     for r in sc.robots:
-        out[r.name] = read_log(log_path, sc.robot_scenario(r.name), time_base=base, salvage=salvage,
-                               time0_ns=time0_ns, digest=digest, clock_offsets=clock_offsets)
+        try:
+            out[r.name] = read_log(log_path, sc.robot_scenario(r.name), time_base=base, salvage=salvage,
+                                   time0_ns=time0_ns, digest=digest, clock_offsets=clock_offsets)
+        except MissingTopicError as err:  # name the robot whose topic is missing
+            raise MissingTopicError(f"robot {r.name}: {err.reason}", path=err.path) from err
         base = out[r.name].time_base if time_base == "auto" else time_base
     if time0_ns is None:
         t0 = min(log.time0_ns for log in out.values())

@@ -248,3 +248,12 @@ def test_watch_judges_a_fleet_log_as_certify(tmp_path: Path) -> None:
     assert res.finished and res.result.verdict == "fail"
     assert {d.name for d in res.decisions} >= {"separation", "spec_trajectory", "a/workspace", "c/workspace"}
     assert any("final  separation FAIL" in line for line in res.result.state.final_lines())
+
+
+def test_a_robot_whose_pose_topic_is_missing_is_named(tmp_path: Path) -> None:
+    from verify.errors import MissingTopicError
+
+    log = KIT.write_fleet_log(tmp_path / "two.bag", [KIT.RobotLog(A_CROSS, "/a/pose", "pose", 10.0),
+                                                     KIT.RobotLog(B_CROSS, "/b/odom", "odom", 7.0)])
+    with pytest.raises(MissingTopicError, match=r"robot c: pose topic /c/pose is absent"):
+        certify_log(log, _scenario("G !(a.door & b.door)"))
