@@ -75,7 +75,7 @@ def scenario_validate(path: str, log: Path | None) -> None:
     Then one line per warning of the (lenient) certifier, and what keeps the (strict) planner from using the
     scenario, if anything: each names the field."""
     from tubempc.errors import ScenarioError
-    from tubempc.scenario import load_scenario
+    from tubempc.scenario import Scenario, load_scenario
 
     s = load_scenario(path)
     if log is not None:
@@ -85,7 +85,8 @@ def scenario_validate(path: str, log: Path | None) -> None:
         problems = scenario_problems(s, log)
         if problems:
             raise ScenarioError(f"cannot certify {log}: {'; '.join(problems)}", source=path)
-        for name, one in ([(r.name, s.robot_scenario(r.name)) for r in s.robots] or [(None, s)]):
+        each: list[tuple[str | None, Scenario]] = [(r.name, s.robot_scenario(r.name)) for r in s.robots]
+        for name, one in each or [(None, s)]:
             data = read_log(log, one)
             every = data.pose_samples
             findings = data_findings(one, every.t_ns, every.x_m, every.y_m, data.time0_ns)
