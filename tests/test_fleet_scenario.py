@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -71,3 +73,25 @@ def test_a_robot_needs_its_pose_topic_and_a_fleet_two_robots() -> None:
         scenario_from_dict(_data(robots=robots))
     with pytest.raises(ScenarioError, match="two robots or more"):
         scenario_from_dict(_data(robots=_data()["robots"][:1], spec="F husky.dock", proximity={}))
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "tubempc", *args], capture_output=True, text=True, timeout=300,
+                          check=False, cwd=ROOT)
+
+
+def test_cli_unqualified_atom_is_one_line_exit_3() -> None:
+    out = _cli("certify", "logs/two_robots.bag", "--scenario", str(EXAMPLE), "--spec", "F[0,40] dock")
+    assert out.returncode == 3
+    assert out.stderr.strip().count("\n") == 0 and "Traceback" not in out.stderr
+    assert "unqualified atom(s) dock in a scenario with robots husky, jackal" in out.stderr
+
+
+def test_cli_validate_with_the_log_checks_each_robot() -> None:
+    out = _cli("scenario", "validate", str(EXAMPLE), "--log", "logs/two_robots.bag")
+    assert out.returncode == 0, out.stderr
+    assert "(robot husky): pose /husky/pose, 1501 samples" in out.stdout
+    assert "(robot jackal): pose /jackal/odom, 601 samples" in out.stdout
+    wrong = _cli("scenario", "validate", str(EXAMPLE), "--log", "logs/diffdrive_odom.bag")
+    assert wrong.returncode == 3
+    assert "robots.husky: topics.pose: /husky/pose is absent" in wrong.stderr

@@ -257,3 +257,24 @@ def test_a_robot_whose_pose_topic_is_missing_is_named(tmp_path: Path) -> None:
                                                      KIT.RobotLog(B_CROSS, "/b/odom", "odom", 7.0)])
     with pytest.raises(MissingTopicError, match=r"robot c: pose topic /c/pose is absent"):
         certify_log(log, _scenario("G !(a.door & b.door)"))
+
+
+def test_pair_separation_and_proximity_atoms(tmp_path: Path) -> None:
+    log = _three_robots(tmp_path, A_CROSS, B_CROSS)
+    data = _scenario("G !a.door").to_dict()
+    data["spec"] = "G !near"
+    data["separation"] = {"min_m": 0.3, "pairs": [{"robots": ["b", "a"], "min_m": 0.0}]}
+    data["proximity"] = {"near": {"robots": ["a", "b"], "within_m": 1.0}}
+    cert = certify_log(log, scenario_from_dict(data)).certificate
+    # the pair's own min_m (0: the discs must not overlap) applies to a-b; they overlap, so it still fails
+    sep = _check(cert, "separation")
+    pairs = {tuple(p["robots"]): p for p in sep["pairs"]}
+    assert pairs[("a", "b")]["min_m"] == 0.0 and pairs[("a", "c")]["min_m"] == 0.3
+    t, margin0 = _dense(A_CROSS, B_CROSS, 0.0, RADII["a"] + RADII["b"])
+    assert margin0.min() <= sep["margin"] < 0
+    # near: the discs within 1 m of each other; G !near fails when they first come that close
+    spec = _check(cert, "spec_trajectory")
+    first_near = float(t[np.argmax(margin0 <= 1.0)])
+    assert spec["verdict"] == "fail"
+    assert first_near <= spec["first_violation_time"] <= first_near + 1 / 7
+    assert cert["fleet"]["proximity"] == {"near": {"robots": ["a", "b"], "within_m": 1.0}}
