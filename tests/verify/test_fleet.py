@@ -278,3 +278,11 @@ def test_pair_separation_and_proximity_atoms(tmp_path: Path) -> None:
     assert spec["verdict"] == "fail"
     assert first_near <= spec["first_violation_time"] <= first_near + 1 / 7
     assert cert["fleet"]["proximity"] == {"near": {"robots": ["a", "b"], "within_m": 1.0}}
+
+
+def test_scenario_checks_select_each_robots_checks() -> None:
+    data = __import__("yaml").safe_load((ROOT / "docs" / "examples" / "two-robots-warehouse.yaml").read_text())
+    cert = certify_log(ROOT / "logs" / "two_robots.bag", scenario_from_dict({**data, "checks": ["workspace"]})
+                       ).certificate
+    assert [c["name"] for c in cert["checks"]] == ["separation", "husky/workspace", "jackal/workspace"]
+    assert cert["checks_source"] == "scenario checks"

@@ -583,7 +583,7 @@ class Scenario(_Frozen):
         disc, input model, topics and signals (its formula: ``true``; the fleet's formula is judged jointly)."""
         r = self.fleet_robot(name)
         data = self.to_dict()
-        for key in ("robots", "separation", "proximity", "checks"):
+        for key in ("robots", "separation", "proximity"):
             data.pop(key, None)
         data.update({"name": f"{self.name}/{r.name}", "spec": "true",
                      "robot": {"radius": r.radius, **({"max_speed": r.max_speed} if r.max_speed is not None else {})},
