@@ -191,8 +191,7 @@ def check_separation(pairs: list[PairSeparation], joint_t: IntArray, t0: int) ->
         return CheckResult("separation", "fail", min(m for _, m, _ in fails), at + t0, details)
     if undecided:
         return CheckResult("separation", "inconclusive", None, None,
-                           {**details, "reason": "; ".join(undecided) + ": samples closer together there would "
-                                                                        "decide it"})
+                           {**details, "reason": "; ".join(undecided)})
     return CheckResult("separation", "pass", least if np.isfinite(least) else None, None, details)
 
 

@@ -129,6 +129,7 @@ _DECIDE = (
     ("no cmd_vel logged", "log the applied commands on topics.cmd_vel"),
     ("no samples", "a log with pose samples"),
     ("the robot may have crossed", "samples closer together there (or a lower speed bound) would decide it"),
+    ("may have come closer than", "samples of both robots closer together there would decide it"),
     ("NaN", "usable values there would decide it"),
     ("pose sample(s) without a usable nominal", "a nominal sample within half a MoCap period of each pose sample"),
 )

@@ -102,6 +102,7 @@ def test_separation_that_may_have_been_broken_between_samples_is_inconclusive(tm
     sep = _check(cert, "separation")
     assert sep["verdict"] == "inconclusive" and cert["verdict"] == "inconclusive"
     assert "a-b may have come closer than 0.3 m" in sep["reason"]
+    assert sep["explanation"].endswith("samples of both robots closer together there would decide it")
     # with a smaller min_m the same run passes, and the stated margin is a lower bound of the true one
     cert = certify_log(log, _scenario("G !(a.door & b.door)", min_m=0.05)).certificate
     sep = _check(cert, "separation")
