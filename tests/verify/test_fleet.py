@@ -287,3 +287,16 @@ def test_scenario_checks_select_each_robots_checks() -> None:
                        ).certificate
     assert [c["name"] for c in cert["checks"]] == ["separation", "husky/workspace", "jackal/workspace"]
     assert cert["checks_source"] == "scenario checks"
+
+
+def test_a_robot_observed_alone_for_long_makes_the_run_inconclusive(tmp_path: Path) -> None:
+    a = KIT.Path(((0.0, 1.0, 5.0), (10.0, 6.0, 5.0)))
+    b = KIT.Path(((0.0, 1.0, 1.0), (10.0, 3.0, 1.0)))
+    log = KIT.write_fleet_log(tmp_path / "late.bag", [
+        KIT.RobotLog(a, "/a/pose", "pose", 10.0), KIT.RobotLog(b, "/b/odom", "odom", 7.0),
+        KIT.RobotLog(C_SLOW, "/c/pose", "pose", 30.0, start_s=3.0)])
+    cert = certify_log(log, _scenario("G !(a.door & b.door)")).certificate
+    assert all(c["verdict"] == "pass" for c in cert["checks"] if c["name"] != "c/workspace")
+    assert cert["fleet"]["joint_span_s"] == [3.0, 10.0]
+    assert cert["verdict"] == "inconclusive"
+    assert "robot a: observed 0.0-10.0 s, but every robot only 3.0-10.0 s" in cert["verdict_reason"]
