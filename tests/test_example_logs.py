@@ -15,7 +15,8 @@ from verify.errors import TruncatedLogError
 
 LOGS = Path(__file__).resolve().parent.parent / "logs"
 #: logs of robots other than the Nexus, judged against their own scenario (the README says which)
-OWN_SCENARIO = {"diffdrive_odom.bag": LOGS.parent / "docs" / "examples" / "diffdrive-room.yaml"}
+OWN_SCENARIO = {"diffdrive_odom.bag": LOGS.parent / "docs" / "examples" / "diffdrive-room.yaml",
+                "two_robots.bag": LOGS.parent / "docs" / "examples" / "two-robots-warehouse.yaml"}
 
 
 def _documented() -> dict[str, tuple[str, int]]:

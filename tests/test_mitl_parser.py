@@ -190,7 +190,8 @@ def test_reserved_words_are_not_atoms() -> None:
 
 
 _TABLE_CORPUS = ("a", "!a & b | c -> d", "G(a -> F[0,5] b)", "a U[1,2) b U c", "X[0,1] □◇ a", "(a", "a &", "a b",
-                 "F[1,2 a", "a $ b", "U a", "G inf", "F[-1,2] a", "a ∧ b ∨ ¬c → d", "F[.5,∞) a")
+                 "F[1,2 a", "a $ b", "U a", "G inf", "F[-1,2] a", "a ∧ b ∨ ¬c → d", "F[.5,∞) a",
+                 "G !(a.door & b.door)", "a.b.c", "a.")
 
 
 def _tree_or_error(parser: object, text: str) -> object:
@@ -240,3 +241,25 @@ def test_parser_loads_tables_instead_of_building_the_grammar(monkeypatch: pytest
         assert repr(mod._parser().parse("G(a -> F[0,5] b)")).startswith("Tree('always'")
     finally:
         mod._parser.cache_clear()
+
+
+# ---- qualified atoms (a robot's own atom in a multi-robot scenario: ``husky.dock``) ----------------------------
+@pytest.mark.parametrize("text", ["G (husky.dock -> F[0,5] jackal.stopped)", "G !(a.door & b.door)",
+                                  "husky.dock U[0,3] close_ab", "F[0,60] (a.dock & b.dock)"])
+def test_qualified_atoms_parse_and_round_trip(text: str) -> None:
+    f = parse(text)
+    assert parse(str(f)) == f
+    qualified = {a for a in atoms(f) if "." in a}
+    assert qualified and all(Atom(a).qualifier and Atom(a).local_name for a in qualified)
+
+
+def test_qualified_atom_parts() -> None:
+    a = Atom("husky.dock")
+    assert (a.qualifier, a.local_name, str(a)) == ("husky", "dock", "husky.dock")
+    assert (Atom("dock").qualifier, Atom("dock").local_name) == (None, "dock")
+
+
+@pytest.mark.parametrize("text", ["a.b.c", "a.", ".a", "a.F", "G.x", "a . b"])
+def test_malformed_qualified_atoms_are_refused(text: str) -> None:
+    with pytest.raises(SpecSyntaxError):
+        parse(text)

@@ -23,14 +23,15 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 __all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
-           "NotChecked", "ObligationEntry", "TimedRunEntry", "TubeInfo", "UnknownEntry", "UnusableLog", "Verdict",
-           "certificate_schema", "certify_json_schema"]
+           "FleetInfo", "NotChecked", "ObligationEntry", "RobotEntry", "TimedRunEntry", "TubeInfo", "UnknownEntry",
+           "UnusableLog", "Verdict", "certificate_schema", "certify_json_schema"]
 
 #: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
 #: 4: per-obligation results; a failed check's margin may be null with margin_reason; decided_at and explanation
-CERTIFICATE_VERSION = 4
-CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v4.json"
-CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v4.json"
+#: 5: several robots in one log: ``robots`` and ``fleet``, timed-run entries name their robot
+CERTIFICATE_VERSION = 5
+CERTIFICATE_SCHEMA_ID = "https://tubempc.invalid/schema/certificate-v5.json"
+CERTIFY_JSON_SCHEMA_ID = "https://tubempc.invalid/schema/certify-json-v5.json"
 
 
 class Verdict(StrEnum):
@@ -135,6 +136,7 @@ class TimedRunEntry(BaseModel):
 
     region: str
     time: float
+    robot: str | None = Field(default=None, description="the robot (several robots in one log; absent for one)")
 
 
 class TubeInfo(BaseModel):
@@ -143,6 +145,39 @@ class TubeInfo(BaseModel):
     radius_m: float
     noise_tolerance_m: float
     noise_tolerance_rule: str
+
+
+class RobotEntry(BaseModel):
+    """One robot of a multi-robot scenario: where its poses came from, its disc and speed bound, its own checks
+    (named ``robot/check`` under ``checks``), its timed run and the quality of its streams."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    pose_source: Any = Field(description="topic and type the robot's poses were read from")
+    radius_m: float
+    speed_bound_mps: float
+    input_model: str
+    span_s: tuple[float, float] | None = Field(description="[first, last] pose sample of this robot (s)")
+    checks: list[str] = Field(description="this robot's checks (names under checks)")
+    timed_run: list[TimedRunEntry]
+    samples: dict[str, Any]
+    data_quality: dict[str, Any]
+    log_digest: str = Field(description="digest of the messages read for this robot (or of the log's bytes)")
+    signals: dict[str, Any] | None = Field(default=None, description="per signal atom of this robot")
+
+
+class FleetInfo(BaseModel):
+    """How the robots were judged together: the joint span (every robot observed), the separation asked for."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    robots: list[str]
+    joint_span_s: tuple[float, float] | None = Field(description="[start, end] of the stretch every robot was "
+                                                                 "observed in (s); the formula and the separation "
+                                                                 "are judged over it; null: no such stretch")
+    separation: dict[str, Any] | None = Field(description="min_m for every pair and the pairs' own")
+    proximity: dict[str, Any] = Field(description="proximity atoms: robots and within_m")
 
 
 class NotChecked(BaseModel):
@@ -159,7 +194,7 @@ class Certificate(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", title="tubempc certificate")
 
-    certificate_version: Literal[4] = Field(description="bumped on every change of this schema")
+    certificate_version: Literal[5] = Field(description="bumped on every change of this schema")
     verdict: Verdict = Field(description="fail if any check fails; else inconclusive if any check is inconclusive "
                                          "or the log is partial; else pass")
     verdict_reason: str | None = Field(default=None, description="why a run without a violation is not a pass")
@@ -197,6 +232,9 @@ class Certificate(BaseModel):
     signals: dict[str, Any] | None = Field(default=None, description="per signal atom: topic, field, samples, range")
     data_quality: dict[str, Any]
     generator: dict[str, Any] | None = Field(default=None, description="the log's own metadata (simulated runs)")
+    robots: list[RobotEntry] | None = Field(default=None, description="several robots in one log: each robot")
+    fleet: FleetInfo | None = Field(default=None, description="several robots in one log: how they were judged "
+                                                              "together")
 
     def check(self, name: str) -> CheckEntry | None:
         return next((c for c in self.checks if c.name == name), None)
@@ -212,8 +250,14 @@ class Certificate(BaseModel):
         """The JSON-ready dict (optional fields that are null are left out)."""
         out = self.model_dump(mode="json", exclude={
             k for k in ("verdict_reason", "log_sha256", "time_base_requested", "time_base_note", "tube",
-                        "clock_findings", "signals", "generator")
+                        "clock_findings", "signals", "generator", "robots", "fleet")
             if getattr(self, k) is None})
+        for entry in [*out["timed_run"], *(e for r in out.get("robots") or [] for e in r["timed_run"])]:
+            if entry.get("robot") is None:
+                entry.pop("robot", None)
+        for robot in out.get("robots") or []:
+            if robot.get("signals") is None:
+                robot.pop("signals", None)
         for check in out["checks"]:
             for key in ("subformula", "reason", "margin_reason", "decided_at", "explanation"):
                 if check.get(key) is None:

@@ -35,6 +35,7 @@ from verify.judging import (
     POSITION_ROUNDING_M,
     TUBE_TOLERANCE_RULE,
     FormulaJudgement,
+    ObligationResult,
     check_explanation,
     formula_of,
     judge_formula,
@@ -170,6 +171,13 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
+    if sc.robots:  # several robots in one log: verify.fleet reads each robot and judges them jointly
+        from verify.fleet import certify_fleet_log
+
+        result: CertifyResult = certify_fleet_log(log_path, sc, spec=spec, time_base=time_base, salvage=salvage,
+                                                  time0_ns=time0_ns, digest=digest, checks=checks,
+                                                  clock_offsets=clock_offsets)
+        return result
     selection = select_checks(sc, checks)
     formula_text = str(formula_of(sc, spec))
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
@@ -182,6 +190,9 @@ def certify_data(log: LogData, scenario: Scenario | str | Path, *, spec: str | N
     """Judge streams already in memory (e.g. a simulated run, never written) exactly as ``certify_log`` judges the
     streams it reads from a file: same checks, same margins, same verdicts."""
     sc = resolve_scenario(scenario)
+    if sc.robots:
+        raise ScenarioInputError(f"scenario {sc.name!r} names robots {', '.join(sc.robot_names)}: judge each robot's "
+                                 "streams together (verify.fleet.certify_fleet_data)")
     selection = select_checks(sc, checks)
     return _judge(log, sc, formula_text=str(formula_of(sc, spec)), selection=selection)
 
@@ -206,6 +217,30 @@ def _atom_margins(sc: Scenario, x_m: np.ndarray, y_m: np.ndarray, labels: set[st
                      "relative_min": _num(lo / scale) if lo is not None and scale > 0 else None,
                      "relative_max": _num(hi / scale) if hi is not None and scale > 0 else None}
     return dict(sorted(out.items()))
+
+
+def _rel(t_ns: int | None) -> float | None:
+    return None if t_ns is None else round(t_ns * 1e-9, 9)
+
+
+def formula_check(whole: ObligationResult, t0: int, atom_margins: dict[str, dict[str, Any]]) -> CheckResult:
+    """The spec_trajectory check: the whole formula's obligation, told as a check (one robot or a joint run)."""
+    rel = _rel
+    return CheckResult(
+        # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
+        "spec_trajectory", whole.verdict, whole.margin,
+        whole.first_violation_ns + t0 if whole.first_violation_ns is not None else None,
+        {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
+                      "bounded by the speed bound)",
+         "guaranteed_margin_m": _num(whole.lo), "optimistic_margin_m": _num(whole.hi),
+         "margin_unit": whole.margin_unit, "margin_atom": whole.margin_atom, "margin_time": rel(whole.margin_time_ns),
+         "margin_reason": whole.margin_reason, "decided_at": rel(whole.decided_ns),
+         "explanation": whole.explanation,
+         "atom_margins": atom_margins,
+         **({"subformula": whole.subformula, "reason": whole.reason,
+             "time": rel(whole.first_violation_ns) if whole.verdict == "fail" else
+             (whole.unknown.from_s if whole.unknown is not None else None)}
+            if whole.verdict != "pass" else {})})
 
 
 def _judge(log: LogData, sc: Scenario, *, formula_text: str,
@@ -235,24 +270,7 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     obligations = list(judged.entries)
     whole = obligations[0]  # the spec_trajectory check is the whole formula's obligation, told twice
 
-    def rel(t_ns: int | None) -> float | None:
-        return None if t_ns is None else round(t_ns * 1e-9, 9)
-
-    spec_traj = CheckResult(
-        # pass: the guaranteed robustness; fail: the optimistic one (violated by at least that much)
-        "spec_trajectory", whole.verdict, whole.margin,
-        whole.first_violation_ns + t0 if whole.first_violation_ns is not None else None,
-        {"semantics": "trajectory (disc intersects unsafe regions / inside other regions; motion between samples "
-                      "bounded by the speed bound)",
-         "guaranteed_margin_m": _num(whole.lo), "optimistic_margin_m": _num(whole.hi),
-         "margin_unit": whole.margin_unit, "margin_atom": whole.margin_atom, "margin_time": rel(whole.margin_time_ns),
-         "margin_reason": whole.margin_reason, "decided_at": rel(whole.decided_ns),
-         "explanation": whole.explanation,
-         "atom_margins": _atom_margins(sc, pose.x_m, pose.y_m, used - set(streams), streams),
-         **({"subformula": whole.subformula, "reason": whole.reason,
-             "time": rel(whole.first_violation_ns) if whole.verdict == "fail" else
-             (whole.unknown.from_s if whole.unknown is not None else None)}
-            if whole.verdict != "pass" else {})})
+    spec_traj = formula_check(whole, t0, _atom_margins(sc, pose.x_m, pose.y_m, used - set(streams), streams))
 
     names = [r.name for r in sc.regions]
     inside = containment(pose.x_m, pose.y_m, sc)

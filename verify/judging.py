@@ -45,7 +45,7 @@ from verify.monitor.engine import UNTIL_ROBUSTNESS_LIMIT, Explanation, explain, 
 from verify.semantics.analysis import decided_times, margin_source
 from verify.semantics.timed_run import parse_spec
 from verify.semantics.trajectory import reported_margin, trajectory_values
-from verify.signals import signal_bounds
+from verify.signals import SignalBounds, signal_bounds
 
 __all__ = ["EXIT_CODES", "POSITION_ROUNDING_M", "TUBE_TOLERANCE_RULE", "FormulaJudgement", "ObligationResult",
            "Unknown", "check_explanation", "formula_of", "judge_formula", "margin_entry", "overall_verdict",
@@ -72,6 +72,11 @@ def formula_of(scenario: Scenario, spec: str | None) -> Formula:
     """The formula to judge (``spec``, else the scenario's); ``SpecError`` (exit 3) when it is malformed or one of
     its atoms labels no region and names no signal of the scenario."""
     formula = parse_spec(spec if spec is not None else scenario.spec)
+    if scenario.robots or any("." in a for a in atoms(formula)):
+        problem = scenario.atom_problem(formula)
+        if problem:
+            raise SpecError(f"formula {formula}: {problem}")
+        return formula
     known = {lab for r in scenario.regions for lab in r.labels} | set(scenario.signals)
     unknown = sorted(atoms(formula) - known)
     if unknown:
@@ -124,6 +129,7 @@ _DECIDE = (
     ("no cmd_vel logged", "log the applied commands on topics.cmd_vel"),
     ("no samples", "a log with pose samples"),
     ("the robot may have crossed", "samples closer together there (or a lower speed bound) would decide it"),
+    ("may have come closer than", "samples of both robots closer together there would decide it"),
     ("NaN", "usable values there would decide it"),
     ("pose sample(s) without a usable nominal", "a nominal sample within half a MoCap period of each pose sample"),
 )
@@ -138,7 +144,7 @@ def check_explanation(entry: Mapping[str, Any]) -> str | None:
     if verdict == "fail":
         at = entry.get("first_violation_time")
         where = f" at {at:.2f} s" if isinstance(at, int | float) else ""
-        what = [f"{k} {entry[k]}" for k in ("region", "component") if entry.get(k) is not None]
+        what = [f"{k} {entry[k]}" for k in ("region", "component", "pair") if entry.get(k) is not None]
         margin = entry.get("margin")
         how = (f"margin {margin:.4g} {entry.get('margin_unit') or ''}".rstrip() if isinstance(margin, int | float)
                else f"no finite margin ({entry.get('margin_reason')})")
@@ -292,8 +298,9 @@ class _Context:
     """What the explanations need beside the values: sample times, the scenario, the signal streams."""
 
     def __init__(self, scenario: Scenario, t_ns: IntArray, time0_ns: int, streams: Mapping[str, SignalStream],
-                 max_speed_mps: float) -> None:
+                 max_speed_mps: float, *, joint_units: Mapping[str, str] | None = None) -> None:
         self.scenario = scenario
+        self.joint_units = dict(joint_units or {})  # atoms given as bounds on a joint run (robots' atoms)
         self.t_ns = t_ns  # relative
         self.time0_ns = time0_ns
         self.streams = streams
@@ -303,6 +310,8 @@ class _Context:
     def unit(self, atom: str | None) -> str | None:
         if atom is None:
             return None
+        if atom in self.joint_units:
+            return self.joint_units[atom]
         if atom in self.streams:
             return self.streams[atom].spec.unit or "field unit"
         return "m"
@@ -313,13 +322,17 @@ class _Context:
 
 
 def judge_formula(formula: Formula, t_rel_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario, *,
-                  time0_ns: int, max_speed_mps: float, streams: Mapping[str, SignalStream] | None = None
-                  ) -> FormulaJudgement:
+                  time0_ns: int, max_speed_mps: float, streams: Mapping[str, SignalStream] | None = None,
+                  joint_atoms: Mapping[str, tuple[SignalBounds, str]] | None = None) -> FormulaJudgement:
     """Evaluate ``formula`` once on the pose samples (relative ns, strictly increasing) and read off the whole
-    formula's and every obligation's result. ``streams``: the signal atoms' data (absolute times)."""
+    formula's and every obligation's result. ``streams``: the signal atoms' data (absolute times).
+    ``joint_atoms``: atoms already bounded at these samples and gaps, with their unit (the robots' atoms of a joint
+    run, ``verify.semantics.joint``)."""
     used = atoms(formula)
     sig_streams = {k: v for k, v in (streams or {}).items() if k in used}
-    ctx = _Context(scenario, t_rel_ns, time0_ns, sig_streams, max_speed_mps)
+    joint = {k: v for k, v in (joint_atoms or {}).items() if k in used}
+    ctx = _Context(scenario, t_rel_ns, time0_ns, sig_streams, max_speed_mps,
+                   joint_units={k: unit for k, (_, unit) in joint.items()})
     conjuncts = split_obligations(formula)
     if t_rel_ns.size == 0:
         empty_i, empty_f = np.zeros(0, dtype=np.int64), np.zeros(0)
@@ -335,6 +348,7 @@ def judge_formula(formula: Formula, t_rel_ns: IntArray, x_m: FloatArray, y_m: Fl
                                 if len(conjuncts) > 1 else (), empty_i, empty_f)
     abs_t = t_rel_ns + time0_ns
     bounds = {k: signal_bounds(v, abs_t) for k, v in sig_streams.items()}
+    bounds.update({k: b for k, (b, _) in joint.items()})
     tv = trajectory_values(formula, t_rel_ns, x_m, y_m, scenario, max_speed_mps=max_speed_mps, signals=bounds)
     decided = decided_times(formula, tv.pos, tv.values)
     big_until = tv.pos.size > UNTIL_ROBUSTNESS_LIMIT and any(isinstance(g, Until) for g in subformulas(formula))
@@ -447,6 +461,8 @@ def _unknown_atom(atom: str, sub: str, i: int, tv: Any, ctx: _Context) -> Unknow
     from_s, to_s = _s(from_ns), _s(to_ns)
     if atom in ctx.streams:
         return _unknown_signal(atom, sub, i, from_s=from_s, to_s=to_s, tv=tv, ctx=ctx)
+    if atom in ctx.joint_units:
+        return _unknown_joint(atom, sub, from_s=from_s, to_s=to_s, ctx=ctx)
     regions = ctx.regions(atom)
     if pos.is_point[i]:
         return Unknown(sub, atom, from_s, to_s,
@@ -503,3 +519,18 @@ def _unknown_signal(atom: str, sub: str, i: int, *, from_s: float, to_s: float, 
                    f"{spec.field} is on both sides of {spec.op} {spec.value} between the pose samples around "
                    f"{from_s:.2f} s (or a message in between is missing: {period})",
                    "pose samples closer together there would decide it")
+
+
+def _unknown_joint(atom: str, sub: str, *, from_s: float, to_s: float, ctx: _Context) -> Unknown:
+    """An atom of a joint run (a robot's own atom, or a proximity atom) that the robots' samples leave open."""
+    if "." in atom:
+        who, what = atom.split(".", 1)
+        regions = ctx.regions(what)
+        subject = (f"robot {who} may have crossed the boundary of {regions} between its own samples (or was not "
+                   f"observed there)" if not regions.startswith("no region") else
+                   f"{who}'s signal {what} is on both sides of its threshold or not known there")
+        return Unknown(sub, atom, from_s, to_s, subject,
+                       f"samples of {who} closer together there (or a lower speed bound) would decide it")
+    return Unknown(sub, atom, from_s, to_s,
+                   "the robots may have crossed the proximity distance between their samples (or were not observed)",
+                   "samples of both robots closer together there would decide it")

@@ -28,7 +28,7 @@ from typing import Any, Protocol
 import pandas as pd
 
 from tubempc.scenario import Scenario
-from verify.certificate import Certificate, CheckEntry, ObligationEntry
+from verify.certificate import Certificate, CheckEntry, ObligationEntry, TimedRunEntry
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
@@ -241,8 +241,8 @@ def _quality_heading(rows: Sequence[tuple[str, Any]]) -> str:
 def _figure_groups(figures: Sequence[FigureSpec]) -> dict[str, list[FigureSpec]]:
     groups: dict[str, list[FigureSpec]] = {"map": [], "states": [], "quality": []}
     for fig in figures:
-        key = ("map" if fig.stem in ("workspace", "obligations", "clearance") else
-               "quality" if fig.stem == "sampling" else "states")
+        key = ("map" if fig.stem.startswith(("workspace", "obligations", "clearance", "separation")) else
+               "quality" if fig.stem.startswith("sampling") else "states")
         groups[key].append(fig)
     return groups
 
@@ -301,8 +301,13 @@ def markdown_report(result: CertifyResultLike, scenario: Scenario, figures: list
     lines += [*figs("map"), "### Timed run", ""]
     run = cert.timed_run
     if run:
-        lines += ["| # | region | entered at |", "|---|---|---|"]
-        lines += [f"| {i} | {_md(e.region)} | {_md(fmt_time(e.time))} |" for i, e in enumerate(run)]
+        if cert.robots:  # several robots: each entry names its robot
+            lines += ["| # | robot | region | entered at |", "|---|---|---|---|"]
+            lines += [f"| {i} | {_md(e.robot)} | {_md(e.region)} | {_md(fmt_time(e.time))} |"
+                      for i, e in enumerate(run)]
+        else:
+            lines += ["| # | region | entered at |", "|---|---|---|"]
+            lines += [f"| {i} | {_md(e.region)} | {_md(fmt_time(e.time))} |" for i, e in enumerate(run)]
     else:
         lines.append("The robot disc was never fully inside a region.")
     lines += ["", "## States and inputs", "", *figs("states"), "## Data quality", ""]
@@ -390,8 +395,12 @@ def html_report(result: CertifyResultLike, scenario: Scenario, figures: list[Fig
     parts += [*figs("map"), "<h3>Timed run</h3>"]
     run = cert.timed_run
     if run:
-        parts.append('<table class="timed-run"><tr><th>#</th><th>region</th><th>entered at</th></tr>')
-        parts += [f"<tr><td>{i}</td><td>{_e(e.region)}</td><td>{_e(fmt_time(e.time))}</td></tr>"
+        def robot(e: TimedRunEntry) -> str:
+            return f"<td>{_e(e.robot)}</td>" if cert.robots else ""
+
+        parts.append('<table class="timed-run"><tr><th>#</th>' + ("<th>robot</th>" if cert.robots else "")
+                     + "<th>region</th><th>entered at</th></tr>")
+        parts += [f"<tr><td>{i}</td>{robot(e)}<td>{_e(e.region)}</td><td>{_e(fmt_time(e.time))}</td></tr>"
                   for i, e in enumerate(run)]
         parts.append("</table>")
     else:
@@ -446,9 +455,15 @@ def write_reports(result: CertifyResultLike, scenario: Scenario, out_dir: str | 
     """
     out = Path(out_dir)
     cert = typed(result)
-    figures = render_figures(cert, scenario, trajectory=result.trajectory, nominal=result.nominal,
-                             inputs=result.inputs, robustness=result.robustness,
-                             judgement=getattr(result, "formula", None), workers=figure_workers)
+    if cert.robots:  # several robots: one path per robot, separation, per-robot panels (verify.fleet_figures)
+        from verify.fleet_figures import render_fleet_figures
+
+        figures = render_fleet_figures(cert, scenario, getattr(result, "columns", {}),
+                                       judgement=getattr(result, "formula", None))
+    else:
+        figures = render_figures(cert, scenario, trajectory=result.trajectory, nominal=result.nominal,
+                                 inputs=result.inputs, robustness=result.robustness,
+                                 judgement=getattr(result, "formula", None), workers=figure_workers)
     written: dict[str, Path] = {}
     try:
         out.mkdir(parents=True, exist_ok=True)

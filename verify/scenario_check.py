@@ -88,6 +88,13 @@ def scenario_problems(sc: Scenario, path: str | Path) -> list[str]:
     """Every reason the scenario cannot be used to certify the log at ``path`` (empty: it can)."""
     p = Path(path)
     available = read_raw(p, []).available
+    if sc.robots:  # several robots: each robot's topics and signals, named by robot
+        out: list[str] = []
+        for r in sc.robots:
+            rsc = sc.robot_scenario(r.name)
+            out += [f"robots.{r.name}: {problem}" for problem in _topic_problems(rsc, available)
+                    + _signal_problems(rsc, p, available)]
+        return out
     return _topic_problems(sc, available) + _signal_problems(sc, p, available)
 
 

@@ -42,7 +42,7 @@ def test_published_schema_is_the_models() -> None:
 def test_written_certificate_validates_and_round_trips(certificate: dict[str, Any]) -> None:
     jsonschema.validate(certificate, certificate_schema())
     model = Certificate.model_validate(certificate)
-    assert model.certificate_version == CERTIFICATE_VERSION == 4
+    assert model.certificate_version == CERTIFICATE_VERSION == 5
     assert model.verdict is Verdict.FAIL and model.to_json_dict() == certificate
     clearance = model.check("obstacle_clearance")
     assert clearance is not None and clearance.details["region"] == "R8"

@@ -75,7 +75,7 @@ def scenario_validate(path: str, log: Path | None) -> None:
     Then one line per warning of the (lenient) certifier, and what keeps the (strict) planner from using the
     scenario, if anything: each names the field."""
     from tubempc.errors import ScenarioError
-    from tubempc.scenario import load_scenario
+    from tubempc.scenario import Scenario, load_scenario
 
     s = load_scenario(path)
     if log is not None:
@@ -85,14 +85,17 @@ def scenario_validate(path: str, log: Path | None) -> None:
         problems = scenario_problems(s, log)
         if problems:
             raise ScenarioError(f"cannot certify {log}: {'; '.join(problems)}", source=path)
-        data = read_log(log, s)
-        every = data.pose_samples
-        findings = data_findings(s, every.t_ns, every.x_m, every.y_m, data.time0_ns)
-        span_s = (every.t_ns[-1] - every.t_ns[0]) * 1e-9 if every.t_ns.size else 0.0
-        say(f"{path}: ok with {log}: pose {data.pose_source.get('topic', s.topics.pose)}, "
-            f"{every.t_ns.shape[0]} samples over {span_s:.3f} s")
-        for finding in findings:
-            say(f"{path}: warning: {finding}")
+        each: list[tuple[str | None, Scenario]] = [(r.name, s.robot_scenario(r.name)) for r in s.robots]
+        for name, one in each or [(None, s)]:
+            data = read_log(log, one)
+            every = data.pose_samples
+            findings = data_findings(one, every.t_ns, every.x_m, every.y_m, data.time0_ns)
+            span_s = (every.t_ns[-1] - every.t_ns[0]) * 1e-9 if every.t_ns.size else 0.0
+            who = f" (robot {name})" if name else ""
+            say(f"{path}: ok with {log}{who}: pose {data.pose_source.get('topic', one.topics.pose)}, "
+                f"{every.t_ns.shape[0]} samples over {span_s:.3f} s")
+            for finding in findings:
+                say(f"{path}: warning: {finding}" if name is None else f"{path}: warning: {name}: {finding}")
     say(f"{path}: ok: scenario {s.name!r}, {len(s.regions)} regions "
         f"({len(s.unsafe_regions)} unsafe), spec {s.formula}, sha256 {s.sha256()[:16]}")
     for warning in s.certification_warnings():

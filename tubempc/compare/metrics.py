@@ -151,14 +151,17 @@ def _check_derived(cert: Certificate) -> dict[str, MetricValue]:
 
 
 def _timed_run(cert: Certificate) -> dict[str, MetricValue]:
+    """Entry and transition times; several robots: each robot's own run (``entry_s.husky/dock``)."""
     out: dict[str, MetricValue] = {}
-    run = cert.timed_run
-    for entry in run:
-        out.setdefault(f"entry_s.{entry.region}", MetricValue(number=entry.time, unit="s"))
-    for prev, nxt in itertools.pairwise(run):
-        if prev.region != nxt.region:
-            out.setdefault(f"transition_s.{prev.region}->{nxt.region}",
-                           MetricValue(number=nxt.time - prev.time, unit="s"))
+    robots = sorted({e.robot for e in cert.timed_run if e.robot is not None})
+    runs = [(f"{r}/", [e for e in cert.timed_run if e.robot == r]) for r in robots] or [("", list(cert.timed_run))]
+    for prefix, run in runs:
+        for entry in run:
+            out.setdefault(f"entry_s.{prefix}{entry.region}", MetricValue(number=entry.time, unit="s"))
+        for prev, nxt in itertools.pairwise(run):
+            if prev.region != nxt.region:
+                out.setdefault(f"transition_s.{prefix}{prev.region}->{nxt.region}",
+                               MetricValue(number=nxt.time - prev.time, unit="s"))
     return out
 
 

@@ -159,17 +159,34 @@ def _prec(f: Formula) -> int:
     return _PREC_UNARY
 
 
+def _plain_name(name: str) -> bool:
+    return bool(name) and (name[0].isalpha() or name[0] == "_") and all(c.isalnum() or c == "_" for c in name) \
+        and name.isascii()
+
+
 @dataclass(frozen=True, slots=True)
 class Atom:
     name: str
 
     def __post_init__(self) -> None:
-        if not self.name or not (self.name[0].isalpha() or self.name[0] == "_") or not all(
-            c.isalnum() or c == "_" for c in self.name
-        ) or not self.name.isascii():
+        parts = self.name.split(".") if isinstance(self.name, str) else [""]
+        if len(parts) > 2 or not all(_plain_name(p) for p in parts):
             raise ValueError(f"name={self.name!r} is not an atomic proposition name")
-        if self.name in _RESERVED:
+        reserved = [p for p in parts if p in _RESERVED]
+        if reserved and len(parts) == 1:
             raise ValueError(f"name={self.name!r} is a reserved word of the MITL grammar")
+        if reserved:
+            raise ValueError(f"name={self.name!r}: {reserved[0]!r} is a reserved word of the MITL grammar")
+
+    @property
+    def qualifier(self) -> str | None:
+        """``husky`` for the qualified atom ``husky.dock`` (a robot's own atom); None for a plain atom."""
+        return self.name.split(".", 1)[0] if "." in self.name else None
+
+    @property
+    def local_name(self) -> str:
+        """``dock`` for ``husky.dock``; the name itself for a plain atom."""
+        return self.name.rsplit(".", 1)[-1]
 
     def __str__(self) -> str:
         return self.name

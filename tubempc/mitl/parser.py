@@ -72,7 +72,7 @@ _GRAMMAR = r"""
       | _always interval? unary     -> always
       | LPAR impl RPAR              -> group
 
-atom: NAME | TRUE | FALSE
+atom: NAME | QNAME | TRUE | FALSE
 
 interval: (LSQB | LPAR) NUMBER COMMA (NUMBER | INF | INF_SYMBOL) (RSQB | RPAR)
 
@@ -95,6 +95,7 @@ RSQB: "]"
 COMMA: ","
 NUMBER: /[0-9]+(\.[0-9]*)?|\.[0-9]+/
 NAME: /[A-Za-z_][A-Za-z0-9_]*/
+QNAME.2: /[A-Za-z_][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_]*/
 
 %import common.WS
 %ignore WS
@@ -102,6 +103,7 @@ NAME: /[A-Za-z_][A-Za-z0-9_]*/
 
 _HUMAN_NAMED = {
     "NAME": "an atomic proposition",
+    "QNAME": "an atomic proposition",
     "NUMBER": "a number",
     "$END": "end of input",
 }

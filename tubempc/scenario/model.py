@@ -24,12 +24,16 @@ __all__ = [
     "DEFAULT_TOPICS",
     "DisturbanceSpec",
     "DynamicsSpec",
+    "FleetRobot",
     "InputLimits",
     "MocapSpec",
     "MpcSpec",
+    "ProximitySpec",
     "Region",
     "RobotSpec",
     "Scenario",
+    "SeparationPair",
+    "SeparationSpec",
     "SignalSpec",
     "Topics",
     "TubeSpec",
@@ -343,6 +347,59 @@ class MocapSpec(_Frozen):
     noise_std: NonNegFloat = 0.0  # metres, optional simulated MoCap noise
 
 
+AtomName = Annotated[str, Field(pattern=_ATOM_PATTERN)]
+
+
+class FleetRobot(_Frozen):
+    """One robot of a multi-robot scenario (``robots:``): its name (the qualifier of its atoms, ``husky.dock``), its
+    topics, its disc, its input model and its own signal atoms. Workspace, regions and formula are shared."""
+
+    name: AtomName
+    topics: Topics
+    radius: PositiveFloat
+    max_speed: PositiveFloat | None = None  # m/s; default: the norm of the linear input bounds
+    inputs: InputLimits
+    signals: dict[AtomName, SignalSpec] = Field(default_factory=dict)
+    rate_hz: Annotated[float, Field(ge=MOCAP_RATE_HZ[0], le=MOCAP_RATE_HZ[1], allow_inf_nan=False)] | None = None
+    # ^ the pose topic's expected rate (dropout detection); default: mocap.rate_hz
+
+    @field_validator("topics", mode="before")
+    @classmethod
+    def _pose_named(cls, v: Any) -> Any:
+        if isinstance(v, dict) and "pose" not in v:
+            raise ValueError("name the robot's pose topic (topics.pose)")
+        return v
+
+    @property
+    def max_speed_mps(self) -> float:
+        return self.max_speed if self.max_speed is not None else self.inputs.linear_speed_mps
+
+
+class SeparationPair(_Frozen):
+    robots: tuple[AtomName, AtomName]
+    min_m: NonNegFloat
+
+
+class SeparationSpec(_Frozen):
+    """The least distance the robot discs keep (metres between their edges): ``min_m`` for every pair, or the
+    pair's own in ``pairs``."""
+
+    min_m: NonNegFloat
+    pairs: tuple[SeparationPair, ...] = ()
+
+
+class ProximitySpec(_Frozen):
+    """A proximity atom: holds while the discs of the two robots are within ``within_m`` of each other (metres
+    between their edges); its margin is ``within_m`` minus that distance."""
+
+    robots: tuple[AtomName, AtomName]
+    within_m: NonNegFloat
+
+
+#: top-level fields a multi-robot scenario gives per robot instead (under ``robots:``)
+_PER_ROBOT_FIELDS = ("robot", "inputs", "topics", "signals")
+
+
 class Scenario(_Frozen):
     """A whole mission: workspace, regions, robot, limits, tube and MPC parameters, the MITL spec, topics.
 
@@ -367,6 +424,27 @@ class Scenario(_Frozen):
     checks: tuple[CheckName, ...] | None = None  # certifier checks to run (default: every check whose data is named)
     signals: dict[Annotated[str, Field(pattern=_ATOM_PATTERN)], SignalSpec] = Field(default_factory=dict)
     clock_offsets: dict[str, FiniteFloat] = Field(default_factory=dict)  # topic -> seconds added to its header
+    robots: tuple[FleetRobot, ...] = ()  # several robots in one log (empty: the one robot above)
+    separation: SeparationSpec | None = None
+    proximity: dict[AtomName, ProximitySpec] = Field(default_factory=dict)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fleet_fields(cls, data: Any) -> Any:
+        """A multi-robot scenario gives robot, inputs, topics and signals per robot; ``robot`` and ``inputs`` then
+        read the largest robot's disc and the first robot's input model (for code that reads one robot)."""
+        if not isinstance(data, dict) or not data.get("robots"):
+            return data
+        robots = data["robots"]
+        given = [k for k in _PER_ROBOT_FIELDS if k in data]
+        if given:
+            raise ValueError(f"{', '.join(given)}: a scenario with robots: gives these per robot (robots[i].radius, "
+                             ".inputs, .topics, .signals)")
+        if not isinstance(robots, list | tuple) or not all(isinstance(r, dict) for r in robots):
+            return data
+        radii = [r.get("radius") for r in robots if isinstance(r.get("radius"), int | float)]
+        return {**data, "robot": {"radius": max(radii) if radii else robots[0].get("radius")},
+                "inputs": robots[0].get("inputs")}
 
     @field_validator("spec")
     @classmethod
@@ -405,10 +483,13 @@ class Scenario(_Frozen):
         if clash:
             raise ValueError(f"signals: {', '.join(clash)} is also a region label (an atom has one meaning)")
         known |= set(self.signals)
-        unknown = sorted(atoms(self.formula) - known)
-        if unknown:
-            raise ValueError(f"spec: atomic proposition(s) {', '.join(unknown)} label no region and name no signal "
-                             f"(known: {', '.join(sorted(known)) or 'none'})")
+        if self.robots:
+            self._check_fleet(known)
+        elif self.separation is not None or self.proximity:
+            raise ValueError("separation and proximity need a robots: block (two robots or more)")
+        problem = self.atom_problem(self.formula)
+        if problem:
+            raise ValueError(f"spec: {problem}")
         if self.initial_region_name is not None and self.region(self.initial_region_name).unsafe:
             raise ValueError(f"initial_region: {self.initial_region_name} is unsafe")
         x0, y0, x1, y1 = self.workspace.bounds
@@ -421,6 +502,97 @@ class Scenario(_Frozen):
             raise ValueError(f"workspace: {x1 - x0:g} m x {y1 - y0:g} m cannot contain the robot disc of radius "
                              f"{eta:g} m{hint}")
         return self
+
+    def _check_fleet(self, labels: set[str]) -> None:
+        names = [r.name for r in self.robots]
+        if len(names) < 2:
+            raise ValueError("robots: name two robots or more (one robot: give robot, inputs and topics instead)")
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"robots: duplicate robot name(s) {', '.join(dupes)}")
+        poses = [r.topics.pose for r in self.robots if r.topics.tf_child_frame is None]
+        same = sorted({p for p in poses if poses.count(p) > 1})
+        if same:
+            raise ValueError(f"robots: pose topic(s) {', '.join(same)} named by two robots")
+        for i, r in enumerate(self.robots):
+            clash = sorted(labels & set(r.signals))
+            if clash:
+                raise ValueError(f"robots[{i}].signals: {', '.join(clash)} is also a region label (an atom has one "
+                                 "meaning)")
+        pairs = [(f"proximity.{k}", p.robots) for k, p in self.proximity.items()]
+        if self.separation is not None:
+            pairs += [(f"separation.pairs[{i}]", p.robots) for i, p in enumerate(self.separation.pairs)]
+        for where, (a, b) in pairs:
+            for n in (a, b):
+                if n not in names:
+                    raise ValueError(f"{where}: {n!r} is not one of the robots ({', '.join(names)})")
+            if a == b:
+                raise ValueError(f"{where}: name two different robots")
+        clash = sorted((labels | set(names)) & set(self.proximity))
+        if clash:
+            raise ValueError(f"proximity: {', '.join(clash)} is also a region label or a robot name (an atom has "
+                             "one meaning)")
+
+    @property
+    def robot_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.robots)
+
+    def fleet_robot(self, name: str) -> FleetRobot:
+        for r in self.robots:
+            if r.name == name:
+                return r
+        raise KeyError(f"robot={name!r} is not in scenario {self.name!r}")
+
+    def atom_problem(self, formula: Formula) -> str | None:
+        """Why ``formula``'s atoms are not all meaningful in this scenario (None: they are). One robot: each atom
+        labels a region or names a signal. Several robots: each is a robot's own atom ``robot.label`` or
+        ``robot.signal``, or a proximity atom; an unqualified region label or signal is refused naming the
+        robots."""
+        labels = {lab for r in self.regions for lab in r.labels}
+        used = atoms(formula)
+        if not self.robots:
+            known = labels | set(self.signals)
+            qualified = sorted(a for a in used if "." in a)
+            if qualified:
+                return (f"qualified atom(s) {', '.join(qualified)} need a robots: block (this scenario has one "
+                        "robot: write the atom without the robot's name)")
+            unknown = sorted(used - known)
+            if unknown:
+                return (f"atomic proposition(s) {', '.join(unknown)} label no region and name no signal "
+                        f"(known: {', '.join(sorted(known)) or 'none'})")
+            return None
+        robots = {r.name: r for r in self.robots}
+        listing = ", ".join(robots)
+        plain = sorted(a for a in used if "." not in a and a not in self.proximity)
+        if plain:
+            return (f"unqualified atom(s) {', '.join(plain)} in a scenario with robots {listing}: name the robot "
+                    f"({' or '.join(f'{r}.{plain[0]}' for r in robots)})")
+        bad: list[str] = []
+        for a in sorted(used - set(self.proximity)):
+            who, what = a.split(".", 1)
+            if who not in robots:
+                bad.append(f"{a} ({who} is not one of the robots {listing})")
+            elif what not in labels and what not in robots[who].signals:
+                bad.append(f"{a} ({what} labels no region and names no signal of {who})")
+        if bad:
+            return f"atomic proposition(s) {'; '.join(bad)}"
+        return None
+
+    def robot_scenario(self, name: str) -> Scenario:
+        """The one-robot scenario of robot ``name``: the shared workspace, regions, limits and clocks with its own
+        disc, input model, topics and signals (its formula: ``true``; the fleet's formula is judged jointly)."""
+        r = self.fleet_robot(name)
+        data = self.to_dict()
+        for key in ("robots", "separation", "proximity"):
+            data.pop(key, None)
+        data.update({"name": f"{self.name}/{r.name}", "spec": "true",
+                     "robot": {"radius": r.radius, **({"max_speed": r.max_speed} if r.max_speed is not None else {})},
+                     "inputs": r.inputs.model_dump(mode="json"),
+                     "topics": r.topics.model_dump(mode="json"),
+                     "signals": {k: v.model_dump(mode="json") for k, v in r.signals.items()}})
+        if r.rate_hz is not None:
+            data["mocap"] = {**data.get("mocap", {}), "rate_hz": r.rate_hz}
+        return Scenario.model_validate(data)
 
     # ---- fields only the planner and the controller need ------------------------------------------------------
     def _required(self, field: str) -> ScenarioError:
@@ -456,6 +628,9 @@ class Scenario(_Frozen):
         missing fields, a unicycle input model, polygon shapes, overlapping regions, regions that do not fit inside
         the workspace or cannot contain the robot. Empty for a scenario the planner can abstract."""
         out: list[tuple[str, str]] = []
+        if self.robots:
+            out.append(("robots", "the planner and the controller are single-robot: a scenario with robots: is for "
+                                  "certification"))
         for field, value in (("disturbance", self.disturbance_spec), ("tube", self.tube_spec),
                              ("mpc", self.mpc_spec), ("initial_region", self.initial_region_name)):
             if value is None:
@@ -585,13 +760,28 @@ class Scenario(_Frozen):
         for key in ("disturbance", "tube", "mpc", "initial_region", "checks"):
             if data.get(key) is None:
                 data.pop(key, None)
-        for key in ("signals", "clock_offsets"):
+        for key in ("signals", "clock_offsets", "robots", "proximity"):
             if not data.get(key):
                 data.pop(key, None)
+        if data.get("separation") is None:
+            data.pop("separation", None)
+        if self.robots:  # given per robot: the top-level robot and inputs are derived, topics unused
+            for key in ("robot", "inputs", "topics"):
+                data.pop(key, None)
+            for robot in data["robots"]:
+                for key in ("nominal", "cmd_vel"):
+                    if robot["topics"].get(key) is None:
+                        robot["topics"].pop(key, None)
+                if robot.get("max_speed") is None:
+                    robot.pop("max_speed", None)
+                if not robot.get("signals"):
+                    robot.pop("signals", None)
+                if robot.get("rate_hz") is None:
+                    robot.pop("rate_hz", None)
         for key in ("nominal", "cmd_vel"):
-            if data["topics"].get(key) is None:
+            if "topics" in data and data["topics"].get(key) is None:
                 data["topics"].pop(key, None)
-        if data["inputs"]["model"] == "holonomic" and data["inputs"]["lateral_tolerance"] == 0.001:
+        if "inputs" in data and data["inputs"]["model"] == "holonomic" and data["inputs"]["lateral_tolerance"] == 0.001:
             del data["inputs"]["model"], data["inputs"]["lateral_tolerance"]
         for shape in (data["workspace"], *data["regions"]):
             for key in ("x", "y", "center", "radius", "polygon"):

@@ -58,7 +58,12 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
 
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None
-    monitor = OnlineMonitor(sc, spec=spec, checks=checks)
+    if sc.robots:  # several robots: one monitor per robot, the joint checks at the end (verify.online.fleet)
+        from verify.online.fleet import FleetMonitor
+
+        monitor: OnlineMonitor | FleetMonitor = FleetMonitor(sc, spec=spec, checks=checks)
+    else:
+        monitor = OnlineMonitor(sc, spec=spec, checks=checks)
 
     def show(d: object) -> None:
         click.echo(d.line())  # type: ignore[attr-defined]

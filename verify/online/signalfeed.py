@@ -102,6 +102,10 @@ class SignalFeed:
             self._estimated_at = self.messages
         return self._period_ns
 
+    def stream(self) -> SignalStream:
+        """Every message kept, with the final hold (a feed never judged keeps them all: ``verify.online.fleet``)."""
+        return self._stream(self.period_ns(final=True))
+
     def _stream(self, period_ns: int) -> SignalStream:
         return SignalStream(self.name, self.spec, np.asarray(self.t, dtype=np.int64),
                             np.asarray(self.v, dtype=np.float64), period_ns, "online", follows_pose=self.follows_pose)

@@ -38,6 +38,7 @@ from verify.ingest.raw import RawTopic, check_log_path
 from verify.ingest.readerrors import READ_ERRORS, in_words, one_type_per_topic
 from verify.ingest.salvage import SalvagedMessage
 from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
+from verify.online.fleet import FleetMonitor, FleetResult, RobotFeed
 from verify.online.follow import log_bytes, open_follower
 from verify.online.monitor import Decision, OnlineMonitor, OnlineResult
 
@@ -50,7 +51,7 @@ AUTO_PROBE = 50
 
 @dataclass(slots=True)
 class WatchResult:
-    result: OnlineResult
+    result: OnlineResult | FleetResult
     decisions: list[Decision]
     finished: bool  # the recorder closed the log
     stop_reason: str
@@ -65,7 +66,8 @@ class WatchResult:
 class _Feeder:
     """Decodes the messages of one poll and pushes them, stream by stream in stamp order, into the monitor."""
 
-    def __init__(self, monitor: OnlineMonitor, scenario: Scenario, ros1: bool, time_base: str, path: Path) -> None:
+    def __init__(self, monitor: OnlineMonitor | RobotFeed, scenario: Scenario, ros1: bool, time_base: str,
+                 path: Path) -> None:
         self.monitor = monitor
         self.scenario = scenario
         self.ros1 = ros1
@@ -223,7 +225,8 @@ class _Feeder:
             self._last_stamp = int(stamps[-1])
 
 
-def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False, idle_timeout_s: float = 10.0,
+def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow: bool = False,
+              idle_timeout_s: float = 10.0,
               poll_s: float = 0.2, time_base: str = "header",
               on_decision: Callable[[Decision], None] | None = None) -> WatchResult:
     """Judge the log at ``path`` as it grows (see the module docstring); never modifies it."""
@@ -238,7 +241,13 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
         raise LogReadError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}", path=str(p))
     check_log_path(p)
     follower = open_follower(p)
-    feeder = _Feeder(monitor, monitor.scenario, follower.format == "ros1", time_base, p)
+    ros1 = follower.format == "ros1"
+    # several robots: one feeder per robot (its topics, under its one-robot scenario), all into the fleet monitor
+    if isinstance(monitor, FleetMonitor):
+        robots = [monitor.robot_feed(name) for name in monitor.scenario.robot_names]
+        feeders = [_Feeder(f, f.scenario, ros1, time_base, p) for f in robots]
+    else:
+        feeders = [_Feeder(monitor, monitor.scenario, ros1, time_base, p)]
     decisions: list[Decision] = []
     count = 0
 
@@ -262,7 +271,8 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
         msgs = read(follower.poll)
         if msgs:
             count += len(msgs)
-            feeder.feed(msgs)
+            for feeder in feeders:
+                feeder.feed(msgs)
             report(monitor.update())
         if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes (and mtime)
             last_bytes, last_growth = now_bytes, time.monotonic()
@@ -283,20 +293,23 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
     if not follower.finished:
         extra = read(follower.rest)  # what --salvage reads beyond the complete chunks (a cut uncompressed chunk)
         count += len(extra)
-        feeder.feed(extra, final=True)
+        for feeder in feeders:
+            feeder.feed(extra, final=True)
         notes.append("the log was not closed by its recorder: judged as --salvage judges it (partial)")
     else:
-        feeder.feed([], final=True)
-    notes += [n for n in (feeder.base_note, feeder.auto_findings()) if n]
-    if feeder.pose_topic is None or monitor.counts["pose"] == 0:
-        have = ", ".join(sorted(feeder.seen_topics)) or "no topics"
-        raise MissingTopicError(f"pose topic {monitor.scenario.topics.pose} is absent; the log has: {have}",
-                                path=str(p))
-    for topic, fields in feeder.signals.items():
-        if topic not in feeder.seen_topics:
+        for feeder in feeders:
+            feeder.feed([], final=True)
+    for feeder in feeders:
+        notes += [n for n in (feeder.base_note, feeder.auto_findings()) if n and n not in notes]
+        if feeder.pose_topic is None or feeder.monitor.counts["pose"] == 0:
             have = ", ".join(sorted(feeder.seen_topics)) or "no topics"
-            raise MissingTopicError(f"signal {fields[0][0]}: topic {topic} (field {fields[0][1]}) is absent from the "
-                                    f"log; the log has: {have}", path=str(p))
+            raise MissingTopicError(f"pose topic {feeder.scenario.topics.pose} is absent; the log has: {have}",
+                                    path=str(p))
+        for topic, fields in feeder.signals.items():
+            if topic not in feeder.seen_topics:
+                have = ", ".join(sorted(feeder.seen_topics)) or "no topics"
+                raise MissingTopicError(f"signal {fields[0][0]}: topic {topic} (field {fields[0][1]}) is absent "
+                                        f"from the log; the log has: {have}", path=str(p))
     result = monitor.close(partial=not follower.finished)
     report(monitor.final_decisions)
     return WatchResult(result, decisions, follower.finished, reason, count, notes)
