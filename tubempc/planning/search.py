@@ -41,6 +41,7 @@ from tubempc.planning.exact import exact_search
 from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
 from tubempc.planning.reference_semantics import LassoRun, holds
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
+from tubempc.planning.zones import DEFAULT_ZONE_STATES, zone_search
 
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
            "find_run"]
@@ -50,6 +51,7 @@ SILENT, OBSERVED = "silent", "observed"
 DWELL_MODES = (SILENT, OBSERVED)
 FAST = "first attempt, proved optimal by the exact search"
 EXACT = "exact search"
+ZONE = "zone search, proved optimal by the exact search"
 _DIAGNOSIS_STATES = 100_000  # per conjunct set checked while naming the obligation (undecided: named nothing)
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
@@ -93,13 +95,14 @@ def _intervals(formula: Formula) -> list[Interval]:
 
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
              max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT,
-             first_attempt: bool = True, optimal: bool = True) -> SearchResult:
+             first_attempt: bool = True, optimal: bool = True, zones: bool = True) -> SearchResult:
     """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring).
 
     ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` (a wait adds no
     position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run).
-    ``first_attempt=False`` skips the fast event-driven stage (the exact search alone decides; same answer, usually
-    slower); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
+    ``first_attempt=False`` skips the fast first stage (the exact search alone decides; same answer, usually
+    slower); ``zones=False`` makes the first stage of observed dwells the event-driven search instead of the zone
+    search (``tubempc.planning.zones``; the explicit-state first attempt, kept as the baseline and the oracle); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
     exists (a satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a
     run, that run is returned with ``method`` saying that its optimality is not proved. Raises
     ``NoAcceptingRunError`` only when the exact search proves that no run exists, and ``SearchLimitError`` when a
@@ -132,18 +135,14 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
         if result is not None:
             states = len(result[4].region)
     else:
-        # a fast first attempt (event-driven waits, pruning by dominance); it may miss runs or find a late one, so
-        # the exact search (delay transitions) runs below its cost: it finds a cheaper run or proves there is none
+        # a fast first attempt (zones for observed dwells, else event-driven waits with pruning by dominance); it
+        # may miss runs or find a late one, so the exact search (delay transitions) runs below its cost: it finds
+        # a cheaper run or proves there is none
         fast: Found | None = None
+        proved = FAST
         if first_attempt:
-            try:
-                fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
-            except SearchLimitError:
-                fast = None
-        if fast is not None:
-            states += len(fast[4].region)
-            if not holds(formula, fast[0], labels):
-                fast = None  # never trust the first attempt's answer unchecked
+            fast, states, proved = _first_attempt(wts, aut, formula, init, labels, names=names, cls=cls, idx=idx,
+                                                  silent=silent, zones=zones, max_states=max_states)
         bound = math.inf if fast is None else float(_cost(fast[0]) / tick)
         exact: Found | None = None
         if fast is None or optimal:
@@ -160,7 +159,7 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
                 method = f"first attempt; optimality not proved (the exact search reached {max_states} states)"
                 exact_states = max_states
             else:
-                method = FAST if exact is None and fast is not None else EXACT
+                method = proved if exact is None and fast is not None else EXACT
             states += exact_states
             exact_s = time.perf_counter() - exact_start
         else:
@@ -175,6 +174,31 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
                         seconds=time.perf_counter() - start, waits_s=tuple(w * tick for w in waits),
                         closing_wait_s=closing * tick, dwell=(dwell if wait else "none"), automaton=aut,
                         product=prod, region_names=tuple(names), method=method, exact_s=exact_s)
+
+
+def _first_attempt(wts: nx.DiGraph, aut: TimedAutomaton, formula: Formula, init: str,
+                   labels: dict[str, tuple[str, ...]], *, names: list[str], cls: list[int], idx: dict[str, int],
+                   silent: bool, zones: bool, max_states: int) -> tuple[Found | None, int, str]:
+    """The first attempt's run (re-checked by the reference semantics; None if it fails or none was found), the
+    states it created and how a run of it is called once the exact search proves it optimal. Observed dwells:
+    the zone search (``zones.zone_search``), then the event-driven search if the zone search found nothing."""
+    states = 0
+    if zones and not silent:
+        found, created = zone_search(aut, names, cls, _adjacency(wts, names, idx, aut.tick), idx[init],
+                                     max_states=min(max_states, DEFAULT_ZONE_STATES))
+        states += created
+        if found is not None and holds(formula, found[0], labels):
+            return found, states, ZONE
+    try:
+        fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
+    except SearchLimitError:
+        return None, states, FAST
+    if fast is None:
+        return None, states, FAST
+    states += len(fast[4].region)
+    if not holds(formula, fast[0], labels):
+        return None, states, FAST  # never trust the first attempt's answer unchecked
+    return fast, states, FAST
 
 
 def _cost(run: LassoRun) -> Fraction:
