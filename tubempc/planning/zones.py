@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import operator
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -168,27 +169,78 @@ class ZoneSearch:
         self.dist = _distances(aut, frozenset(i for i, n in enumerate(nodes) if n.kind in (EV, UNT)), cls, adj)
         self.cuts = [sorted({c for c in (self.reach[i], self.hi_in[i], self.hi_in[i] + 1, self.caps[i])
                              if 1 <= c < INF}) for i in range(len(nodes))]
+        self.below = [self._descendants(i) for i in range(len(nodes))]  # nodes a copy of node i can anchor
+        self._class_memo: dict[tuple[tuple[tuple[int, ...], ...], int, int], list[tuple[int, int]]] = {}
         self.states: list[_Sym] = []
-        self.passed: dict[tuple[int, tuple[tuple[int, ...], ...]], list[Dbm]] = {}
+        # per region and skeleton: the zones explored (flattened) and the same with time allowed to grow
+        self.passed: dict[tuple[int, tuple[tuple[int, ...], ...]], list[tuple[tuple[int, ...], tuple[int, ...]]]] = {}
+        self._progress_memo: dict[tuple[tuple[tuple[int, ...], ...], tuple[int, ...], int],
+                                  list[tuple[tuple[frozenset[int], ...], frozenset[int]]]] = {}
         self.heap: list[tuple[int, int, int, int]] = []  # (priority, -least time, order, state)
         self.slow = max([n.cap for n in nodes] + [1])
         self.horizon = 2 * max([w for row in adj for _, w in row] + [1])
 
-    # ---- symbolic steps -------------------------------------------------------------------------------------
-    def _classes(self, group: tuple[int, ...]) -> list[tuple[int, int]]:
-        """Age intervals of a clock on which every obligation of its group behaves alike."""
-        cuts = sorted({c for nid in group for c in self.cuts[nid]} | {1})
-        return [(a, (cuts[k + 1] - 1) if k + 1 < len(cuts) else INF) for k, a in enumerate(cuts)]
+    def _descendants(self, nid: int) -> frozenset[int]:
+        out: set[int] = set()
+        stack = list(self.aut.nodes[nid].children)
+        while stack:
+            c = stack.pop()
+            if c not in out:
+                out.add(c)
+                stack.extend(self.aut.nodes[c].children)
+        return frozenset(out)
 
-    def _pieces(self, d: Dbm, groups: tuple[tuple[int, ...], ...]) -> list[tuple[Dbm, tuple[tuple[int, int], ...]]]:
+    # ---- symbolic steps -------------------------------------------------------------------------------------
+    def _classes(self, groups: tuple[tuple[int, ...], ...], g: int, cls: int) -> list[tuple[int, int]]:
+        """Age intervals of clock ``g`` on which every obligation of its group behaves alike at a position of
+        ``cls``: the cuts of its nodes' constants, with neighbouring intervals merged where the progression is the
+        same and no other copy of a node could be subsumed by it (whether a copy is in its window matters only
+        then). Memoised per skeleton, clock and label class."""
+        key = (groups, g, cls)
+        hit = self._class_memo.get(key)
+        if hit is not None:
+            return hit
+        group = groups[g]
+        cuts = sorted({c for nid in group for c in self.cuts[nid]} | {1})
+        raw = [(a, (cuts[k + 1] - 1) if k + 1 < len(cuts) else INF) for k, a in enumerate(cuts)]
+        others = {nid for h, grp in enumerate(groups) if h != g for nid in grp}
+        spawn = set().union(*(self.below[nid] for grp in groups for nid in grp))
+        modes = self.aut.subsumption_modes
+        relevant = [nid for nid in group if modes[nid] and (nid in others or nid in spawn)]
+        out: list[tuple[int, int]] = []
+        last: object = None
+        for a, b in raw:
+            sig = (self._behaviour(group, a, cls), tuple(a >= self.reach[nid] for nid in relevant))
+            if out and sig == last:
+                out[-1] = (out[-1][0], b)
+            else:
+                out.append((a, b))
+                last = sig
+        self._class_memo[key] = out
+        return out
+
+    def _behaviour(self, group: tuple[int, ...], age: int, cls: int) -> tuple[object, ...]:
+        """What processing the group at ``age`` does: per node, per disjunct, whether its copy stays and what it
+        anchors (or None when it fails)."""
+        out: list[object] = []
+        for nid in group:
+            a = min(age, self.caps[nid])
+            part = self.aut.expand(nid, a, cls)
+            out.append(tuple(sorted((any(n == nid and x == a for n, x in disj),
+                                     tuple(sorted(n for n, x in disj if not (n == nid and x == a))))
+                                    for disj in part)))
+        return tuple(out)
+
+    def _pieces(self, d: Dbm, groups: tuple[tuple[int, ...], ...], cls: int
+                ) -> list[tuple[Dbm, tuple[tuple[int, int], ...]]]:
         """The zone split by the age classes of every clock: (piece, class of each clock)."""
         out: list[tuple[Dbm, tuple[tuple[int, int], ...]]] = [(d, ())]
-        for g, group in enumerate(groups):
+        for g in range(len(groups)):
             x = 2 + g
             nxt: list[tuple[Dbm, tuple[tuple[int, int], ...]]] = []
             for piece, chosen in out:
                 lo_z, hi_z = -piece[0][x], piece[x][0]
-                for a, b in self._classes(group):
+                for a, b in self._classes(groups, g, cls):
                     if b < lo_z or a > hi_z:
                         continue
                     p = [row[:] for row in piece]
@@ -200,7 +252,16 @@ class ZoneSearch:
 
     def _progress(self, groups: tuple[tuple[int, ...], ...], ages: list[int], cls: int
                   ) -> list[tuple[tuple[frozenset[int], ...], frozenset[int]]]:
-        """Disjuncts after processing every obligation at representative ages: nodes kept per clock, new nodes."""
+        """Disjuncts after processing every obligation at representative ages (one per age class, so the result
+        is memoised per skeleton, classes and label class): nodes kept per clock, new nodes."""
+        key = (groups, tuple(ages), cls)
+        hit = self._progress_memo.get(key)
+        if hit is None:
+            hit = self._progress_memo[key] = self._progress_uncached(groups, ages, cls)
+        return hit
+
+    def _progress_uncached(self, groups: tuple[tuple[int, ...], ...], ages: list[int], cls: int
+                           ) -> list[tuple[tuple[frozenset[int], ...], frozenset[int]]]:
         aut = self.aut
         acc: list[tuple[tuple[frozenset[int], ...], frozenset[int]]] = [
             (tuple(frozenset() for _ in groups), frozenset())]
@@ -239,8 +300,8 @@ class ZoneSearch:
         k = s.depth + 1
         base: tuple[Constraint, ...] = ((s.depth, k, lo, hi),)
         made: list[int] = []
-        for piece, chosen in self._pieces(delay(s.dbm, lo, hi), s.groups):
-            ages = [max(a, -piece[0][2 + g]) for g, (a, _) in enumerate(chosen)]
+        for piece, chosen in self._pieces(delay(s.dbm, lo, hi), s.groups, cj):
+            ages = [a for a, _ in chosen]
             cons = base + tuple((s.born[g], k, a, b) for g, (a, b) in enumerate(chosen))
             for kept, new in self._progress(s.groups, ages, cj):
                 sub = self._subsume(kept, new, ages)
@@ -312,9 +373,12 @@ class ZoneSearch:
         extrapolate(d, m)
         key = (j, tuple(groups))
         olds = self.passed.setdefault(key, [])
-        if any(included(d, up_t(o)) for o in olds):
+        flat = tuple(itertools.chain.from_iterable(d))
+        if any(all(map(operator.le, flat, o_up)) for _, o_up in olds):
             return None
-        olds.append(d)
+        flat_up = tuple(itertools.chain.from_iterable(up_t(d)))
+        olds[:] = [o for o in olds if not all(map(operator.le, o[0], flat_up))]  # now dominated by the new zone
+        olds.append((flat, flat_up))
         sid = len(self.states)
         dwells = s.dwells + 1 if kind == DWELL else 0
         self.states.append(_Sym(j, tuple(groups), tuple(born), d, k, parent, kind, dwells, cons + tuple(extra)))
@@ -466,9 +530,10 @@ class ZoneSearch:
             self.states.append(s)
             heapq.heappush(self.heap, (self.priority(s), 0, next(counter), len(self.states) - 1))
         best: tuple[int, list[_Sym], list[int], list[State], int | None] | None = None
+        floor = min(entry[0] for entry in self.heap)  # no run costs less (the exact search's lower bound)
         while self.heap:
             f, _, _, sid = heapq.heappop(self.heap)
-            if best is not None and f >= best[0] + self.horizon:
+            if best is not None and (f >= best[0] + self.horizon or best[0] <= floor):
                 break
             cand = self.candidate(sid)
             if cand is not None and (best is None or cand[0] < best[0]):
