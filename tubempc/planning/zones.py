@@ -176,7 +176,7 @@ class ZoneSearch:
         self.passed: dict[tuple[int, tuple[tuple[int, ...], ...]], list[tuple[tuple[int, ...], tuple[int, ...]]]] = {}
         self._progress_memo: dict[tuple[tuple[tuple[int, ...], ...], tuple[int, ...], int],
                                   list[tuple[tuple[frozenset[int], ...], frozenset[int]]]] = {}
-        self.heap: list[tuple[int, int, int, int]] = []  # (priority, -least time, order, state)
+        self.heap: list[tuple[int, int, int, int, int]] = []  # (priority, root windows pending, -least time, order, state)
         self.slow = max([n.cap for n in nodes] + [1])
         self.horizon = 2 * max([w for row in adj for _, w in row] + [1])
 
@@ -369,10 +369,13 @@ class ZoneSearch:
                     if not constrain(d, x, 0, bound):
                         return None
                     extra.append((born[g], k, 0, bound))
-        m = [0, INF, *(max(self.caps[n] for n in grp) - 1 for grp in groups)]
-        extrapolate(d, m)
         key = (j, tuple(groups))
         olds = self.passed.setdefault(key, [])
+        flat = tuple(itertools.chain.from_iterable(d))
+        if any(all(map(operator.le, flat, o_up)) for _, o_up in olds):
+            return None  # covered before extrapolation (which only adds equivalent ages): no need to extrapolate
+        m = [0, INF, *(max(self.caps[n] for n in grp) - 1 for grp in groups)]
+        extrapolate(d, m)
         flat = tuple(itertools.chain.from_iterable(d))
         if any(all(map(operator.le, flat, o_up)) for _, o_up in olds):
             return None
@@ -385,6 +388,10 @@ class ZoneSearch:
         return sid
 
     # ---- priority, candidates, concretisation --------------------------------------------------------------
+    def pending_roots(self, s: _Sym) -> int:
+        """Root windows still pending (ties of the priority go to the state that met more of them)."""
+        return sum(1 for grp in s.groups for nid in grp if nid in self.roots)
+
     def priority(self, s: _Sym) -> int:
         """Least time in the zone raised by the exact search's lower bound (root windows, WTS distances)."""
         d = s.dbm
@@ -458,10 +465,17 @@ class ZoneSearch:
         Returns (cost in ticks, path, times, explicit states, loop entry index or None for the dwell loop)."""
         s = self.states[sid]
         dwell_ok = not any(self.existential[nid] for grp in s.groups for nid in grp)
+        if not dwell_ok:
+            cur = s.parent
+            while cur >= 0:
+                a = self.states[cur]
+                if a.region == s.region and a.groups == s.groups:
+                    break
+                cur = a.parent
+            else:
+                return None  # no earlier position with this region and skeleton: no lasso closes here
         path = self.path(sid)
         same = [k for k in range(len(path) - 1) if path[k].region == s.region and path[k].groups == s.groups]
-        if not dwell_ok and not same:
-            return None
         times = self.times(sid)
         if times is None:
             return None
@@ -528,11 +542,11 @@ class ZoneSearch:
             d: Dbm = [[0] * (2 + len(groups)) for _ in range(2 + len(groups))]
             s = _Sym(r0, groups, (0,) * len(groups), d, 0, -1, "start", 0, ())
             self.states.append(s)
-            heapq.heappush(self.heap, (self.priority(s), 0, next(counter), len(self.states) - 1))
+            heapq.heappush(self.heap, (self.priority(s), 0, 0, next(counter), len(self.states) - 1))
         best: tuple[int, list[_Sym], list[int], list[State], int | None] | None = None
         floor = min(entry[0] for entry in self.heap)  # no run costs less (the exact search's lower bound)
         while self.heap:
-            f, _, _, sid = heapq.heappop(self.heap)
+            f, _, _, _, sid = heapq.heappop(self.heap)
             if best is not None and (f >= best[0] + self.horizon or best[0] <= floor):
                 break
             cand = self.candidate(sid)
@@ -543,7 +557,7 @@ class ZoneSearch:
                 cand = self.candidate(v)
                 if cand is not None and (best is None or cand[0] < best[0]):
                     best = cand
-                heapq.heappush(self.heap, (self.priority(sv), -sv.dbm[0][_T], next(counter), v))
+                heapq.heappush(self.heap, (self.priority(sv), self.pending_roots(sv), -sv.dbm[0][_T], next(counter), v))
             if len(self.states) > self.max_states:
                 break
         return None if best is None else self.found(best, names)
