@@ -544,6 +544,8 @@ class ZoneSearch:
             self.states.append(s)
             heapq.heappush(self.heap, (self.priority(s), 0, 0, next(counter), len(self.states) - 1))
         best: tuple[int, list[_Sym], list[int], list[State], int | None] | None = None
+        if not self.heap:
+            return None  # the first position already violates the formula
         floor = min(entry[0] for entry in self.heap)  # no run costs less (the exact search's lower bound)
         while self.heap:
             f, _, _, _, sid = heapq.heappop(self.heap)
