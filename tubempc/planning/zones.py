@@ -69,9 +69,9 @@ def close(d: Dbm) -> bool:
                 continue
             di = d[i]
             for j in range(n):
-                v = dik + dk[j]
-                if v < di[j]:
-                    di[j] = v
+                dkj = dk[j]
+                if dkj < INF and dik + dkj < di[j]:
+                    di[j] = dik + dkj
     return all(d[i][i] >= 0 for i in range(n))
 
 
