@@ -10,7 +10,8 @@ Both apply to the default silent waits; the paper case is also timed with observ
 ``--dwell observed``: every random row and ``G(mission_1 -> F[10,20] mission_2) & F[50,60] mission_1`` on the
 built-in scenario <= 2 s each, with the zone search as the first stage; each row also times the explicit-state
 (event-driven) first stage in the same process (``zones=False``, same exact stage) and prints the ratio, and checks
-that both give the same cost; the last line gives the worst row of each and their ratio. Random workspaces use the synthetic straight-line
+that both give the same cost; the last line gives the worst row of each and their ratio.
+Random workspaces use the synthetic straight-line
 oracle (``tubempc.planning.synthetic``). Every row also prints the cost of exactness: the time spent in the exact
 search (delay transitions, A* below the first attempt's cost: the proof that no cheaper run exists), its share
 of the search, and how the run was established.

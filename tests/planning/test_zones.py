@@ -13,7 +13,7 @@ from tubempc.planning import holds
 from tubempc.planning.automaton import compile_formula, tick_of
 from tubempc.planning.zones import INF, Dbm, close, constrain, delay, extrapolate, included, up_t, zone_search
 
-RANGE = range(0, 9)
+RANGE = range(9)
 
 
 def zone(bounds: dict[tuple[int, int], int], n: int = 3) -> Dbm:

@@ -102,11 +102,12 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run).
     ``first_attempt=False`` skips the fast first stage (the exact search alone decides; same answer, usually
     slower); ``zones=False`` makes the first stage of observed dwells the event-driven search instead of the zone
-    search (``tubempc.planning.zones``; the explicit-state first attempt, kept as the baseline and the oracle); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
-    exists (a satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a
-    run, that run is returned with ``method`` saying that its optimality is not proved. Raises
-    ``NoAcceptingRunError`` only when the exact search proves that no run exists, and ``SearchLimitError`` when a
-    search reaches ``max_states`` product states first."""
+    search (``tubempc.planning.zones``; the explicit-state first attempt, kept as the baseline and the oracle);
+    ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run exists (a
+    satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a run, that
+    run is returned with ``method`` saying that its optimality is not proved. Raises ``NoAcceptingRunError`` only
+    when the exact search proves that no run exists, and ``SearchLimitError`` when a search reaches ``max_states``
+    product states first."""
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()

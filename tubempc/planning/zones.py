@@ -93,8 +93,7 @@ def constrain(d: Dbm, i: int, j: int, c: int) -> bool:
             if djb >= INF:
                 continue
             v = dai + c + djb
-            if v < da[b]:
-                da[b] = v
+            da[b] = min(da[b], v)
     return True
 
 
@@ -176,7 +175,8 @@ class ZoneSearch:
         self.passed: dict[tuple[int, tuple[tuple[int, ...], ...]], list[tuple[tuple[int, ...], tuple[int, ...]]]] = {}
         self._progress_memo: dict[tuple[tuple[tuple[int, ...], ...], tuple[int, ...], int],
                                   list[tuple[tuple[frozenset[int], ...], frozenset[int]]]] = {}
-        self.heap: list[tuple[int, int, int, int, int]] = []  # (priority, root windows pending, -least time, order, state)
+        # (priority, root windows pending, -least time, order, state)
+        self.heap: list[tuple[int, int, int, int, int]] = []
         self.slow = max([n.cap for n in nodes] + [1])
         self.horizon = 2 * max([w for row in adj for _, w in row] + [1])
 
@@ -292,10 +292,10 @@ class ZoneSearch:
             steps.append((s.region, 1, INF, DWELL))
         out: list[int] = []
         for j, lo, hi, kind in steps:
-            out.extend(self._step(sid, s, j, lo, hi, kind))
+            out.extend(self._step(sid, s, j=j, lo=lo, hi=hi, kind=kind))
         return out
 
-    def _step(self, sid: int, s: _Sym, j: int, lo: int, hi: int, kind: str) -> list[int]:
+    def _step(self, sid: int, s: _Sym, *, j: int, lo: int, hi: int, kind: str) -> list[int]:
         cj = self.cls[j]
         k = s.depth + 1
         base: tuple[Constraint, ...] = ((s.depth, k, lo, hi),)
@@ -308,7 +308,7 @@ class ZoneSearch:
                 if sub is None:
                     continue
                 kept2, new2 = sub
-                made_id = self._make(sid, s, j, kind, piece, kept2, new2, cons)
+                made_id = self._make(sid, s, j=j, kind=kind, piece=piece, kept=kept2, new=new2, cons=cons)
                 if made_id is not None:
                     made.append(made_id)
         return made
@@ -338,7 +338,7 @@ class ZoneSearch:
         out = [frozenset(n for n in nodes if n not in drop.get(c, ())) for c, nodes in enumerate(clocks)]
         return tuple(out[:-1]), out[-1]
 
-    def _make(self, parent: int, s: _Sym, j: int, kind: str, piece: Dbm, kept: tuple[frozenset[int], ...],
+    def _make(self, parent: int, s: _Sym, *, j: int, kind: str, piece: Dbm, kept: tuple[frozenset[int], ...],
               new: frozenset[int], cons: tuple[Constraint, ...]) -> int | None:
         k = s.depth + 1
         keep_idx = [g for g, nodes in enumerate(kept) if nodes]
@@ -365,7 +365,7 @@ class ZoneSearch:
                 if dist >= INF:
                     return None
                 if self.hi_in[nid] < INF:
-                    bound = self.hi_in[nid] - max(dist, 1)
+                    bound = self.hi_in[nid] - max(int(dist), 1)
                     if not constrain(d, x, 0, bound):
                         return None
                     extra.append((born[g], k, 0, bound))
@@ -446,7 +446,7 @@ class ZoneSearch:
         """The explicit automaton along the path at the given times: per position, each state reached and the
         state it came from at the previous position (every disjunct followed)."""
         aut, cls = self.aut, self.cls
-        layers: list[dict[State, State | None]] = [{obl: None for obl in aut.initial(cls[path[0].region])}]
+        layers: list[dict[State, State | None]] = [dict.fromkeys(aut.initial(cls[path[0].region]))]
         for k in range(1, len(path)):
             dt = times[k] - times[k - 1]
             layer: dict[State, State | None] = {}
@@ -496,9 +496,9 @@ class ZoneSearch:
                     covered = all(any(aut.accepting(o)[b] for o in chain[k + 1:]) for b in range(nb))
                     if covered:
                         best = (times[k], path, times, chain, k)
-            if dwell_ok and (best is None or times[-1] < best[0]):
-                if all(aut.accepting(obl)) and obl in aut.step(obl, self.slow, self.cls[s.region]):
-                    best = (times[-1], path, times, chain, None)
+            if (dwell_ok and (best is None or times[-1] < best[0]) and all(aut.accepting(obl))
+                    and obl in aut.step(obl, self.slow, self.cls[s.region])):
+                best = (times[-1], path, times, chain, None)
         return best
 
     def found(self, cand: tuple[int, list[_Sym], list[int], list[State], int | None], names: list[str]) -> Found:
