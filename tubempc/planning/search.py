@@ -208,6 +208,7 @@ def _cost(run: LassoRun) -> Fraction:
 
 
 def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fraction) -> list[list[tuple[int, int]]]:
+    """Out-edges per region index as (target index, weight in ticks); the one place the WTS weights are read."""
     adj: list[list[tuple[int, int]]] = [[] for _ in names]
     for a, b, d in wts.edges(data=True):
         if a != b:
@@ -217,15 +218,12 @@ def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fra
 
 def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, silent: bool, prune: bool,
             max_states: int) -> Found | None:
+    """The event-driven first attempt (module docstring, stage 1): Dijkstra by (time, travel) over the product
+    states, with event-driven waits and, with ``prune``, pruning by dominance."""
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
     cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
-    adj: list[list[tuple[int, int]]] = [[] for _ in names]
-    for a, b, d in wts.edges(data=True):
-        if a == b:
-            continue
-        q = Fraction(d[WEIGHT]) / aut.tick
-        adj[idx[a]].append((idx[b], int(q)))
+    adj = _adjacency(wts, names, idx, aut.tick)
     arrivals = [[(w, cls[j]) for j, w in row] for row in adj]
     prod = Product()
     prod.classes = cls
@@ -239,7 +237,6 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
     aimed: set[int] = set()  # observed dwell positions aimed at landing the next arrival on a window end
     stop_at: int | None = None
     expanded = 0
-    nb = len(aut.buchi)
     while heap:
         t, travel, sid = heapq.heappop(heap)
         if prod.settled[sid] or prod.best[sid] != (t, travel):
@@ -252,27 +249,8 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
             prod.pruned[sid] = True
             continue
         expanded += 1
-        succs: list[tuple[int, State, int, int, str, int]] = []  # (region, state, delta, travel, kind, wait)
+        succs = _moves(aut, obl, adj, r, cls, silent=silent)
         targeted: set[int] = set()
-        far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
-        for j, w in adj[r]:
-            for o2 in aut.step(obl, w, cls[j]):
-                succs.append((j, o2, w, w, MOVE, 0))
-            if silent and obl:
-                # event-driven silent waits: the arrival (or the one after it) lands on a goal of the state
-                delays = {g - w for g in aut.silent_goals(obl, cls[j]) if g > w}
-                for k, w2 in adj[j]:
-                    ck = cls[k]
-                    goals = far_goals.get(ck)
-                    if goals is None:
-                        goals = far_goals[ck] = aut.silent_goals(obl, ck, direct=False)
-                    far = w + w2
-                    for g in goals:
-                        if g > far:
-                            delays.add(g - far)
-                for d in sorted(delays):
-                    for o2 in aut.step(obl, w + d, cls[j]):
-                        succs.append((j, o2, w + d, w, MOVE, d))
         if silent:
             if aut.final(obl):
                 # stay here forever without a further position: a finite run that ends in an accepting way
@@ -281,12 +259,10 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                     stop_at = t
         elif wait:
             targeted = aut.targeted_delays(obl, arrivals[r])
-            delays = aut.event_delays(obl, cls[r]) | targeted
-            for d in sorted(delays):
-                for o2 in aut.step(obl, d, cls[r]):
-                    succs.append((r, o2, d, 0, DWELL, 0))
-                    if o2 == obl and stop_at is None and all(aut.accepting(obl)):
-                        stop_at = t
+            dwells, settles = _dwells(aut, obl, cls[r], r, targeted)
+            succs.extend(dwells)
+            if settles and stop_at is None:
+                stop_at = t
         for j, o2, d, moved, kind, waited in succs:
             v, _ = prod.get(j, o2)
             prod.edges[sid].append((v, d, kind, waited))
@@ -304,7 +280,54 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                                    f"for {aut.formula}, before it found a run or proved that none exists; raise the "
                                    f"limit (tubempc plan --max-states N, or max_states=N in Python) or shorten the "
                                    f"formula's windows", limit=max_states)
-    return _best_lasso(prod, aut, nb=nb, names=names, tick=aut.tick, expanded=expanded)
+    return _best_lasso(prod, aut, nb=len(aut.buchi), names=names, tick=aut.tick, expanded=expanded)
+
+
+Succ = tuple[int, State, int, int, str, int]  # (region, state, delta, travel, kind, silent wait)
+
+
+def _moves(aut: TimedAutomaton, obl: State, adj: list[list[tuple[int, int]]], r: int, cls: list[int], *,
+           silent: bool) -> list[Succ]:
+    """The moves out of region ``r``, and in silent mode the same moves after an event-driven wait: the arrival
+    (or the one after it) lands on a goal of the state (``TimedAutomaton.silent_goals``)."""
+    succs: list[Succ] = []
+    far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
+    for j, w in adj[r]:
+        for o2 in aut.step(obl, w, cls[j]):
+            succs.append((j, o2, w, w, MOVE, 0))
+        if silent and obl:
+            for d in _silent_waits(aut, obl, adj[j], w, cls=cls, far_goals=far_goals, into=cls[j]):
+                for o2 in aut.step(obl, w + d, cls[j]):
+                    succs.append((j, o2, w + d, w, MOVE, d))
+    return succs
+
+
+def _silent_waits(aut: TimedAutomaton, obl: State, onward: list[tuple[int, int]], w: int, *, cls: list[int],
+                  far_goals: dict[int, tuple[int, ...]], into: int) -> list[int]:
+    """Silent waits before a move of weight ``w`` into label class ``into`` (whose region's moves are ``onward``)
+    after which the arrival, or the next one, lands on a goal of the state."""
+    delays = {g - w for g in aut.silent_goals(obl, into) if g > w}
+    for k, w2 in onward:
+        ck = cls[k]
+        goals = far_goals.get(ck)
+        if goals is None:
+            goals = far_goals[ck] = aut.silent_goals(obl, ck, direct=False)
+        far = w + w2
+        delays.update(g - far for g in goals if g > far)
+    return sorted(delays)
+
+
+def _dwells(aut: TimedAutomaton, obl: State, cls: int, r: int, targeted: set[int]) -> tuple[list[Succ], bool]:
+    """Observed dwell positions after the event-driven and targeted durations, and whether the state is accepting
+    and a dwell keeps it (the search may then stop after this time)."""
+    out: list[Succ] = []
+    settles = False
+    for d in sorted(aut.event_delays(obl, cls) | targeted):
+        for o2 in aut.step(obl, d, cls):
+            out.append((r, o2, d, 0, DWELL, 0))
+            if o2 == obl and all(aut.accepting(obl)):
+                settles = True
+    return out, settles
 
 
 def _stay_ticks(aut: TimedAutomaton) -> int:
