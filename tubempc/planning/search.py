@@ -11,7 +11,10 @@ so that "strictly after a constant" is one tick after it); every clock value is 
 a finite graph. Cost of a run: the time of its last position (a finite run) or of its repeating part's first one.
 
 With waiting, two stages:
-1. a fast first attempt (this module's ``_search``): Dijkstra over ``(region, automaton state)`` by (time, travel)
+1. a fast first attempt. Observed dwells: the zone search (``tubempc.planning.zones``: clocks as difference-bound
+   matrices, a dwell of any length one symbolic step), and if it finds nothing the event-driven search; silent
+   waits (or ``zones=False``): the event-driven search (this module's ``_search``): Dijkstra over
+   ``(region, automaton state)`` by (time, travel)
    with *event-driven* waits only — a silent wait lands the next arrival, or the one after it, where a pending
    obligation changes status (``TimedAutomaton.silent_goals``); an observed dwell lasts until an obligation changes
    status (``event_delays`` / ``targeted_delays``) — and pruning by dominance. It may miss a run or find a late
