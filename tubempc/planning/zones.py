@@ -298,6 +298,14 @@ class ZoneSearch:
     def _step(self, sid: int, s: _Sym, *, j: int, lo: int, hi: int, kind: str) -> list[int]:
         cj = self.cls[j]
         k = s.depth + 1
+        for g, nodes in enumerate(s.groups):
+            # a pending F/U copy that cannot be met in j and whose window closes before any later region where
+            # it can be met is reached: the step leads nowhere (checked before any zone is split)
+            youngest = -s.dbm[0][2 + g] + lo
+            for nid in nodes:
+                dist = self.dist.get(nid)
+                if dist is not None and dist[j] > 0 and youngest + dist[j] > self.hi_in[nid]:
+                    return []
         base: tuple[Constraint, ...] = ((s.depth, k, lo, hi),)
         made: list[int] = []
         for piece, chosen in self._pieces(delay(s.dbm, lo, hi), s.groups, cj):
