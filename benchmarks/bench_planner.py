@@ -6,8 +6,12 @@ networkx single-source Dijkstra over the same WTS. ``--abstraction`` also times 
 abstraction with the real controller (Algorithm 1) on all cores, cold (fresh cache) and warm (from cache).
 
 Targets: paper case <= 50 ms; 100 regions x 10 timed operators (incl. ``G(g0 -> F[0,60] g1)``) <= 2 s.
-Both apply to the default silent waits; the paper case is also timed with observed dwells and without waiting,
-and the random cases with ``--dwell observed`` for comparison. Random workspaces use the synthetic straight-line
+Both apply to the default silent waits; the paper case is also timed with observed dwells and without waiting.
+``--dwell observed``: every random row and ``G(mission_1 -> F[10,20] mission_2) & F[50,60] mission_1`` on the
+built-in scenario <= 2 s each, with the zone search as the first stage; each row also times the explicit-state
+(event-driven) first stage in the same process (``zones=False``, same exact stage) and prints the ratio, and checks
+that both give the same cost; the last line gives the worst row of each and their ratio.
+Random workspaces use the synthetic straight-line
 oracle (``tubempc.planning.synthetic``). Every row also prints the cost of exactness: the time spent in the exact
 search (delay transitions, A* below the first attempt's cost: the proof that no cheaper run exists), its share
 of the search, and how the run was established.
@@ -35,6 +39,8 @@ from tubempc.scenario import builtin_scenario
 
 TARGET_PAPER_S = 0.050
 TARGET_LARGE_S = 2.0
+TARGET_OBSERVED_S = 2.0  # every observed-dwell row (--dwell observed), zone search as the first stage
+OBSERVED_SPEC = "G(mission_1 -> F[10,20] mission_2) & F[50,60] mission_1"
 
 
 def timed(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
@@ -101,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as err:  # the benchmark falls back to synthetic weights, and says so
             print(f"(real controller unavailable: {err}; using synthetic weights)")
             wts = build_wts(scenario, oracle=straight_line_oracle, workers=1, use_cache=False, progress=False)
+    wts_paper = wts
     labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
     base = baseline(wts, scenario.initial_region, args.repeat)
     for wait, dwell in ((True, "silent"), (True, "observed"), (False, "silent")):
@@ -113,24 +120,63 @@ def main(argv: list[str] | None = None) -> int:
               f"({secs / base:.0f}x one WTS Dijkstra) [{status}] target {TARGET_PAPER_S * 1000:.0f} ms "
               f"{'met' if good else 'MISSED'}; {exactness(res)}")
 
+    observed = args.dwell == "observed"
+    worst = worst_explicit = 0.0
+    if observed:
+        # the observed-dwell formula whose dwell positions anchor un-mergeable copies (zone search vs explicit)
+        labels = {n: tuple(wts_paper.nodes[n][LABELS]) for n in wts_paper.nodes}
+        formula = parse(OBSERVED_SPEC)
+        secs, res = timed(lambda: _try(wts_paper, formula, True, "observed"), args.repeat)
+        old, _ = timed(lambda: _try(wts_paper, formula, True, "observed", zones=False), args.repeat)
+        status = "no run" if res is None else ("ok" if holds(formula, res.run, labels) else "WRONG")
+        good = secs <= TARGET_OBSERVED_S and status == "ok"
+        ok &= good
+        worst, worst_explicit = secs, old
+        print(f"{OBSERVED_SPEC}, 9 regions, observed waits: {secs * 1000:.1f} ms, explicit-state first attempt "
+              f"{old * 1000:.1f} ms ({old / secs:.1f}x) [{status}] target {TARGET_OBSERVED_S:.0f} s "
+              f"{'met' if good else 'MISSED'}; {exactness(res)}")
     for n_regions in (25, 50, 100):
         for n_windows in (3, 7):
             spec, wts = random_case(n_regions, n_windows, seed=n_regions)
             formula = parse(spec)
             labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
             base = baseline(wts, "R0", args.repeat)
+            cpu0 = time.process_time()
             secs, res = timed(lambda f=formula, g=wts: _try(g, f, True, args.dwell), args.repeat)  # type: ignore[misc]
+            cpu = (time.process_time() - cpu0) / args.repeat
             status = "no run" if res is None else ("ok" if holds(formula, res.run, labels) else "WRONG")
             states = 0 if res is None else res.states
             line = (f"{n_regions:>3} regions ({wts.number_of_edges()} transitions), {count_timed(spec):>2} timed "
                     f"operators, {args.dwell} waits: {secs * 1000:8.1f} ms ({secs / base:.0f}x one WTS Dijkstra), "
                     f"{states} product states [{status}]; {exactness(res)}")
+            if observed:
+                # baseline in the same process: the explicit-state (event-driven) first attempt, same exact stage
+                old, old_res = timed(lambda f=formula, g=wts: _try(g, f, True, "observed", zones=False),  # type: ignore[misc]
+                                     args.repeat)
+                same = (res is None) == (old_res is None) and (res is None or _cost(res) == _cost(old_res))
+                ok &= same
+                line += (f"; CPU {cpu * 1000:.1f} ms; explicit-state first attempt {old * 1000:.1f} ms "
+                         f"({old / secs:.1f}x)"
+                         f"{'' if same else ' COST DIFFERS'}")
+                good = secs <= TARGET_OBSERVED_S and status == "ok"
+                ok &= good
+                line += f" target {TARGET_OBSERVED_S:.0f} s {'met' if good else 'MISSED'}"
+                worst, worst_explicit = max(worst, secs), max(worst_explicit, old)
             if n_regions == 100 and n_windows == 7:
                 good = secs <= TARGET_LARGE_S and status == "ok"
                 ok &= good
                 line += f" target {TARGET_LARGE_S:.0f} s {'met' if good else 'MISSED'}"
             print(line)
+    if observed:
+        print(f"observed dwells: worst_zone_s={worst:.3f} worst_explicit_s={worst_explicit:.3f} "
+              f"ratio={worst_explicit / worst:.1f}x target {TARGET_OBSERVED_S:.0f} s "
+              f"{'met' if worst <= TARGET_OBSERVED_S else 'MISSED'}")
     return 0 if ok else 1
+
+
+def _cost(res: object) -> object:
+    run = res.run  # type: ignore[attr-defined]
+    return run.times[run.loop_start if run.loop_start is not None else run.size - 1]
 
 
 def exactness(res: object) -> str:
@@ -142,11 +188,11 @@ def exactness(res: object) -> str:
     return f"exact stage {exact_s * 1000:.2f} ms ({share:.0f}% of the search): {method}"
 
 
-def _try(wts: nx.DiGraph, formula: object, wait: bool, dwell: str):  # type: ignore[no-untyped-def]
+def _try(wts: nx.DiGraph, formula: object, wait: bool, dwell: str, *, zones: bool = True):  # type: ignore[no-untyped-def]
     from tubempc.errors import NoAcceptingRunError
 
     try:
-        return find_run(wts, formula, wait=wait, dwell=dwell, diagnose=False)  # type: ignore[arg-type]
+        return find_run(wts, formula, wait=wait, dwell=dwell, diagnose=False, zones=zones)  # type: ignore[arg-type]
     except NoAcceptingRunError:
         return None
 

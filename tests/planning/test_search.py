@@ -246,7 +246,9 @@ def test_observed_exact_search_beats_the_first_attempt(text: str, first_attempt_
     from tubempc.planning.search import _cost, _search
 
     found = plan(text, dwell="observed")
-    assert found.method == "exact search" and _cost(found.run) == cost
+    assert _cost(found.run) == cost
+    old = find_run(WTS, parse(text), dwell="observed", zones=False)  # the event-driven first attempt
+    assert old.method == "exact search" and _cost(old.run) == cost
     fast = _search(WTS, compile_formula(parse(text), found.tick_s), "A", wait=True, silent=False, prune=True,
                    max_states=10_000)
     assert (None if fast is None else _cost(fast[0])) == first_attempt_cost
@@ -272,5 +274,7 @@ def test_aimed_observed_dwell_is_not_pruned_by_its_own_origin() -> None:
     found = find_run(NEXUS, f, dwell="observed", max_states=20_000)
     assert holds(f, found.run, NEXUS_LABELS), found.run
     assert found.run.loop_start is not None and found.run.times[found.run.loop_start] == 50
-    assert found.method == "first attempt, proved optimal by the exact search"
+    assert found.method == "zone search, proved optimal by the exact search"
     assert ("R3", Fraction(333, 10)) in set(zip(found.run.regions, found.run.times, strict=True))
+    old = find_run(NEXUS, f, dwell="observed", max_states=20_000, zones=False)
+    assert old.method == "first attempt, proved optimal by the exact search" and old.run == found.run

@@ -199,6 +199,17 @@ class TimedAutomaton:
         self._step_memo[key] = out
         return out
 
+    def expand(self, node_id: int, age: int, cls: int) -> Dnf:
+        """Obligation ``node_id`` processed at a position of ``cls`` at ``age`` ticks (at most its cap): the states
+        it leaves, one per disjunct (its own pending copy keeps ``age``; obligations it anchors here have age 0)."""
+        return self._expand(node_id, age, cls)
+
+    @property
+    def subsumption_modes(self) -> list[int]:
+        """Per node: 0 not subsumable, 1 existential (of two in-window copies keep the older), 2 universal (the
+        younger)."""
+        return self._mode
+
     def _expand(self, node_id: int, age: int, cls: int) -> Dnf:
         key = (node_id, age, cls)
         out = self._expand_memo.get(key)

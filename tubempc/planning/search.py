@@ -11,7 +11,10 @@ so that "strictly after a constant" is one tick after it); every clock value is 
 a finite graph. Cost of a run: the time of its last position (a finite run) or of its repeating part's first one.
 
 With waiting, two stages:
-1. a fast first attempt (this module's ``_search``): Dijkstra over ``(region, automaton state)`` by (time, travel)
+1. a fast first attempt. Observed dwells: the zone search (``tubempc.planning.zones``: clocks as difference-bound
+   matrices, a dwell of any length one symbolic step), and if it finds nothing the event-driven search; silent
+   waits (or ``zones=False``): the event-driven search (this module's ``_search``): Dijkstra over
+   ``(region, automaton state)`` by (time, travel)
    with *event-driven* waits only — a silent wait lands the next arrival, or the one after it, where a pending
    obligation changes status (``TimedAutomaton.silent_goals``); an observed dwell lasts until an obligation changes
    status (``event_delays`` / ``targeted_delays``) — and pruning by dominance. It may miss a run or find a late
@@ -41,6 +44,7 @@ from tubempc.planning.exact import exact_search
 from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
 from tubempc.planning.reference_semantics import LassoRun, holds
 from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
+from tubempc.planning.zones import DEFAULT_ZONE_STATES, zone_search
 
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
            "find_run"]
@@ -50,6 +54,7 @@ SILENT, OBSERVED = "silent", "observed"
 DWELL_MODES = (SILENT, OBSERVED)
 FAST = "first attempt, proved optimal by the exact search"
 EXACT = "exact search"
+ZONE = "zone search, proved optimal by the exact search"
 _DIAGNOSIS_STATES = 100_000  # per conjunct set checked while naming the obligation (undecided: named nothing)
 _DOMINANCE_WINDOW = 4  # how many earlier states of the same region and obligation skeleton are compared
 
@@ -93,17 +98,19 @@ def _intervals(formula: Formula) -> list[Interval]:
 
 def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
              max_states: int = DEFAULT_MAX_STATES, diagnose: bool = True, dwell: str = SILENT,
-             first_attempt: bool = True, optimal: bool = True) -> SearchResult:
+             first_attempt: bool = True, optimal: bool = True, zones: bool = True) -> SearchResult:
     """Time-optimal accepting lasso run of ``wts`` for ``formula`` (see the module docstring).
 
     ``wait``: whether the robot may wait in a region; ``dwell`` (with ``wait``): ``silent`` (a wait adds no
     position: the move after it just arrives later) or ``observed`` (each dwell is a position of the run).
-    ``first_attempt=False`` skips the fast event-driven stage (the exact search alone decides; same answer, usually
-    slower); ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run
-    exists (a satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a
-    run, that run is returned with ``method`` saying that its optimality is not proved. Raises
-    ``NoAcceptingRunError`` only when the exact search proves that no run exists, and ``SearchLimitError`` when a
-    search reaches ``max_states`` product states first."""
+    ``first_attempt=False`` skips the fast first stage (the exact search alone decides; same answer, usually
+    slower); ``zones=False`` makes the first stage of observed dwells the event-driven search instead of the zone
+    search (``tubempc.planning.zones``; the explicit-state first attempt, kept as the baseline and the oracle);
+    ``optimal=False`` accepts the first attempt's run without the exact search's proof that no cheaper run exists (a
+    satisfiability check). When the exact search reaches ``max_states`` after the first attempt found a run, that
+    run is returned with ``method`` saying that its optimality is not proved. Raises ``NoAcceptingRunError`` only
+    when the exact search proves that no run exists, and ``SearchLimitError`` when a search reaches ``max_states``
+    product states first."""
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()
@@ -132,18 +139,14 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
         if result is not None:
             states = len(result[4].region)
     else:
-        # a fast first attempt (event-driven waits, pruning by dominance); it may miss runs or find a late one, so
-        # the exact search (delay transitions) runs below its cost: it finds a cheaper run or proves there is none
+        # a fast first attempt (zones for observed dwells, else event-driven waits with pruning by dominance); it
+        # may miss runs or find a late one, so the exact search (delay transitions) runs below its cost: it finds
+        # a cheaper run or proves there is none
         fast: Found | None = None
+        proved = FAST
         if first_attempt:
-            try:
-                fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
-            except SearchLimitError:
-                fast = None
-        if fast is not None:
-            states += len(fast[4].region)
-            if not holds(formula, fast[0], labels):
-                fast = None  # never trust the first attempt's answer unchecked
+            fast, states, proved = _first_attempt(wts, aut, formula, init, labels, names=names, cls=cls, idx=idx,
+                                                  silent=silent, zones=zones, max_states=max_states)
         bound = math.inf if fast is None else float(_cost(fast[0]) / tick)
         exact: Found | None = None
         if fast is None or optimal:
@@ -160,7 +163,7 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
                 method = f"first attempt; optimality not proved (the exact search reached {max_states} states)"
                 exact_states = max_states
             else:
-                method = FAST if exact is None and fast is not None else EXACT
+                method = proved if exact is None and fast is not None else EXACT
             states += exact_states
             exact_s = time.perf_counter() - exact_start
         else:
@@ -177,12 +180,38 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
                         product=prod, region_names=tuple(names), method=method, exact_s=exact_s)
 
 
+def _first_attempt(wts: nx.DiGraph, aut: TimedAutomaton, formula: Formula, init: str,
+                   labels: dict[str, tuple[str, ...]], *, names: list[str], cls: list[int], idx: dict[str, int],
+                   silent: bool, zones: bool, max_states: int) -> tuple[Found | None, int, str]:
+    """The first attempt's run (re-checked by the reference semantics; None if it fails or none was found), the
+    states it created and how a run of it is called once the exact search proves it optimal. Observed dwells:
+    the zone search (``zones.zone_search``), then the event-driven search if the zone search found nothing."""
+    states = 0
+    if zones and not silent:
+        found, created = zone_search(aut, names, cls, _adjacency(wts, names, idx, aut.tick), idx[init],
+                                     max_states=min(max_states, DEFAULT_ZONE_STATES))
+        states += created
+        if found is not None and holds(formula, found[0], labels):
+            return found, states, ZONE
+    try:
+        fast = _search(wts, aut, init, wait=True, silent=silent, prune=True, max_states=max_states)
+    except SearchLimitError:
+        return None, states, FAST
+    if fast is None:
+        return None, states, FAST
+    states += len(fast[4].region)
+    if not holds(formula, fast[0], labels):
+        return None, states, FAST  # never trust the first attempt's answer unchecked
+    return fast, states, FAST
+
+
 def _cost(run: LassoRun) -> Fraction:
     """The cost the search minimises: the first position of the repeating part, or the last of a finite run."""
     return run.times[run.loop_start if run.loop_start is not None else run.size - 1]
 
 
 def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fraction) -> list[list[tuple[int, int]]]:
+    """Out-edges per region index as (target index, weight in ticks); the one place the WTS weights are read."""
     adj: list[list[tuple[int, int]]] = [[] for _ in names]
     for a, b, d in wts.edges(data=True):
         if a != b:
@@ -192,15 +221,12 @@ def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fra
 
 def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, silent: bool, prune: bool,
             max_states: int) -> Found | None:
+    """The event-driven first attempt (module docstring, stage 1): Dijkstra by (time, travel) over the product
+    states, with event-driven waits and, with ``prune``, pruning by dominance."""
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
     cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
-    adj: list[list[tuple[int, int]]] = [[] for _ in names]
-    for a, b, d in wts.edges(data=True):
-        if a == b:
-            continue
-        q = Fraction(d[WEIGHT]) / aut.tick
-        adj[idx[a]].append((idx[b], int(q)))
+    adj = _adjacency(wts, names, idx, aut.tick)
     arrivals = [[(w, cls[j]) for j, w in row] for row in adj]
     prod = Product()
     prod.classes = cls
@@ -214,7 +240,6 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
     aimed: set[int] = set()  # observed dwell positions aimed at landing the next arrival on a window end
     stop_at: int | None = None
     expanded = 0
-    nb = len(aut.buchi)
     while heap:
         t, travel, sid = heapq.heappop(heap)
         if prod.settled[sid] or prod.best[sid] != (t, travel):
@@ -227,27 +252,8 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
             prod.pruned[sid] = True
             continue
         expanded += 1
-        succs: list[tuple[int, State, int, int, str, int]] = []  # (region, state, delta, travel, kind, wait)
+        succs = _moves(aut, obl, adj, r, cls, silent=silent)
         targeted: set[int] = set()
-        far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
-        for j, w in adj[r]:
-            for o2 in aut.step(obl, w, cls[j]):
-                succs.append((j, o2, w, w, MOVE, 0))
-            if silent and obl:
-                # event-driven silent waits: the arrival (or the one after it) lands on a goal of the state
-                delays = {g - w for g in aut.silent_goals(obl, cls[j]) if g > w}
-                for k, w2 in adj[j]:
-                    ck = cls[k]
-                    goals = far_goals.get(ck)
-                    if goals is None:
-                        goals = far_goals[ck] = aut.silent_goals(obl, ck, direct=False)
-                    far = w + w2
-                    for g in goals:
-                        if g > far:
-                            delays.add(g - far)
-                for d in sorted(delays):
-                    for o2 in aut.step(obl, w + d, cls[j]):
-                        succs.append((j, o2, w + d, w, MOVE, d))
         if silent:
             if aut.final(obl):
                 # stay here forever without a further position: a finite run that ends in an accepting way
@@ -256,12 +262,10 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                     stop_at = t
         elif wait:
             targeted = aut.targeted_delays(obl, arrivals[r])
-            delays = aut.event_delays(obl, cls[r]) | targeted
-            for d in sorted(delays):
-                for o2 in aut.step(obl, d, cls[r]):
-                    succs.append((r, o2, d, 0, DWELL, 0))
-                    if o2 == obl and stop_at is None and all(aut.accepting(obl)):
-                        stop_at = t
+            dwells, settles = _dwells(aut, obl, cls[r], r, targeted)
+            succs.extend(dwells)
+            if settles and stop_at is None:
+                stop_at = t
         for j, o2, d, moved, kind, waited in succs:
             v, _ = prod.get(j, o2)
             prod.edges[sid].append((v, d, kind, waited))
@@ -279,7 +283,54 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
                                    f"for {aut.formula}, before it found a run or proved that none exists; raise the "
                                    f"limit (tubempc plan --max-states N, or max_states=N in Python) or shorten the "
                                    f"formula's windows", limit=max_states)
-    return _best_lasso(prod, aut, nb=nb, names=names, tick=aut.tick, expanded=expanded)
+    return _best_lasso(prod, aut, nb=len(aut.buchi), names=names, tick=aut.tick, expanded=expanded)
+
+
+Succ = tuple[int, State, int, int, str, int]  # (region, state, delta, travel, kind, silent wait)
+
+
+def _moves(aut: TimedAutomaton, obl: State, adj: list[list[tuple[int, int]]], r: int, cls: list[int], *,
+           silent: bool) -> list[Succ]:
+    """The moves out of region ``r``, and in silent mode the same moves after an event-driven wait: the arrival
+    (or the one after it) lands on a goal of the state (``TimedAutomaton.silent_goals``)."""
+    succs: list[Succ] = []
+    far_goals: dict[int, tuple[int, ...]] = {}  # label class -> goals of an arrival two moves ahead
+    for j, w in adj[r]:
+        for o2 in aut.step(obl, w, cls[j]):
+            succs.append((j, o2, w, w, MOVE, 0))
+        if silent and obl:
+            for d in _silent_waits(aut, obl, adj[j], w, cls=cls, far_goals=far_goals, into=cls[j]):
+                for o2 in aut.step(obl, w + d, cls[j]):
+                    succs.append((j, o2, w + d, w, MOVE, d))
+    return succs
+
+
+def _silent_waits(aut: TimedAutomaton, obl: State, onward: list[tuple[int, int]], w: int, *, cls: list[int],
+                  far_goals: dict[int, tuple[int, ...]], into: int) -> list[int]:
+    """Silent waits before a move of weight ``w`` into label class ``into`` (whose region's moves are ``onward``)
+    after which the arrival, or the next one, lands on a goal of the state."""
+    delays = {g - w for g in aut.silent_goals(obl, into) if g > w}
+    for k, w2 in onward:
+        ck = cls[k]
+        goals = far_goals.get(ck)
+        if goals is None:
+            goals = far_goals[ck] = aut.silent_goals(obl, ck, direct=False)
+        far = w + w2
+        delays.update(g - far for g in goals if g > far)
+    return sorted(delays)
+
+
+def _dwells(aut: TimedAutomaton, obl: State, cls: int, r: int, targeted: set[int]) -> tuple[list[Succ], bool]:
+    """Observed dwell positions after the event-driven and targeted durations, and whether the state is accepting
+    and a dwell keeps it (the search may then stop after this time)."""
+    out: list[Succ] = []
+    settles = False
+    for d in sorted(aut.event_delays(obl, cls) | targeted):
+        for o2 in aut.step(obl, d, cls):
+            out.append((r, o2, d, 0, DWELL, 0))
+            if o2 == obl and all(aut.accepting(obl)):
+                settles = True
+    return out, settles
 
 
 def _stay_ticks(aut: TimedAutomaton) -> int:
