@@ -24,7 +24,7 @@ def test_verify_imports_only_spec_and_scenario_from_tubempc() -> None:
 
 
 def test_importing_verify_loads_no_planner_or_controller() -> None:
-    code = ("import sys, verify, verify.certify, verify.batch, verify.report, verify.command; "
+    code = ("import sys, verify, verify.certify, verify.batch, verify.report, verify.online.watch; "
             "print(sorted(m for m in sys.modules if m.startswith('tubempc')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     loaded = ast.literal_eval(out.stdout)  # a printed list of module names

@@ -2,7 +2,7 @@
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
 ``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
-``--force`` (``verify.outputs`` states the policy shared by every command). Unusable input raises
+``--force`` (``tubempc.runtime.outputs`` states the policy shared by every command). Unusable input raises
 ``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
@@ -14,22 +14,18 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 from typing import Any, Literal, cast
 
 import click
 
+from tubempc.cli.exits import EXIT_UNUSABLE, leave
+from tubempc.cli.options import scenario_option
+from tubempc.cli.output import verbosity
 from verify.errors import UnusableInputError
 from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS, MESSAGES_DIGEST
 
-__all__ = ["certify"]
-
-
-def _verbosity() -> int:
-    """-1 quiet, 0 normal, 1+ verbose: set by ``tubempc.cli``'s -q/-v options in the context's meta."""
-    ctx = click.get_current_context(silent=True)
-    return int(ctx.meta.get("verbosity", 0)) if ctx is not None else 0
+__all__ = ["certify", "digest_command"]
 
 
 def _json_entry(item: Any) -> dict[str, Any]:
@@ -64,7 +60,7 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
 
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
+@scenario_option(required=True)
 @click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here (one sub-folder per log when several are given).")
@@ -113,7 +109,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                 alternative="pass --no-report for certificate.json only")
     if dask is not None:
         require("dask", feature="certify --dask")
-    level = _verbosity()
+    level = verbosity()
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None
     offsets = _parse_offsets(clock_offsets)
@@ -140,9 +136,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
             click.echo(line, err=as_json)
         if level > 0:
             click.echo("\n".join(check_lines(result.certificate)), err=True)
-        sys.stdout.flush()
-        # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting
-        sys.exit(result.exit_code)
+        leave(result.exit_code)
 
     from verify.batch import certify_many, summary_lines, write_batch
 
@@ -155,7 +149,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
         for text in summary_lines(batch):
             click.echo(text, err=as_json)
     for item in batch.items:  # every unusable input also gets its one line on stderr
-        if item.exit_code == 3 and item.error:
+        if item.exit_code == EXIT_UNUSABLE and item.error:
             click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
         written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
@@ -163,15 +157,13 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
         summary = written.get("summary.md")
         if summary is not None and level >= 0:
             click.echo(f"summary: {summary}", err=as_json)
-    sys.stdout.flush()
-    sys.exit(batch.exit_code)
+    leave(batch.exit_code)
 
 
 @click.command("digest")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", default=None,
-              help="Scenario YAML file or built-in name: its topics are the messages blake3-messages hashes "
-                   "(required for blake3-messages: give the scenario the certificate was made with).")
+@scenario_option(default=None, extra="Its topics are the messages blake3-messages hashes (required for "
+                                       "blake3-messages: give the scenario the certificate was made with).")
 @click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
               help="blake3-messages (the messages certification reads), blake3 / sha256 (the whole file).")
 @click.option("--salvage", is_flag=True, help="Digest the complete records of a truncated log (as certify --salvage).")

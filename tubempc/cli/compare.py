@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import click
 
-from tubempc.commands.output import say, verbosity
+from tubempc.cli.exits import leave
+from tubempc.cli.options import scenario_option
+from tubempc.cli.output import say, verbosity
 
 __all__ = ["compare"]
 
@@ -19,7 +21,7 @@ __all__ = ["compare"]
 @click.command()
 @click.argument("before")
 @click.argument("after")
-@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name.")
+@scenario_option(required=True)
 @click.option("--spec", default=None, help="MITL formula the logs are certified against (default: the scenario's).")
 @click.option("--pair-pattern", default=None, metavar="REGEX",
               help="Pair runs by this regular expression searched in each log's path relative to its side's folder "
@@ -91,4 +93,4 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
         write_junit([outcome_junit(outcome)], out / "junit.xml")
         say(f"compare: {write_page(outcome, out / 'compare.html')}")
     if outcome.exit_code:
-        raise click.exceptions.Exit(outcome.exit_code)
+        leave(outcome.exit_code)

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import click
 
-from tubempc.commands.output import say
+from tubempc.cli.exits import leave
+from tubempc.cli.output import say
 
 __all__ = ["demo"]
 
@@ -41,4 +41,4 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
     for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:
             say(f"  {key:12s} {result.files[key]}")
-    sys.exit(result.exit_code)
+    leave(result.exit_code)

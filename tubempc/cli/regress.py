@@ -12,7 +12,8 @@ from pathlib import Path
 
 import click
 
-from tubempc.commands.output import progress_line, say
+from tubempc.cli.exits import EXIT_FAIL, leave
+from tubempc.cli.output import progress_line, say
 
 __all__ = ["regress"]
 
@@ -98,4 +99,4 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_output_file(out / "diff.txt", text + "\n")
         write_junit([comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)], out / "junit.xml")
     if comparison.regressed:
-        raise click.exceptions.Exit(1)
+        leave(EXIT_FAIL)

@@ -276,3 +276,57 @@ def make_wts(labels: dict[str, Iterable[str]], weights: dict[tuple[str, str], Fr
 def wts_summary(wts: nx.DiGraph) -> list[tuple[str, str, Fraction]]:
     """Edges as ``(source, target, t_ij)`` sorted by name."""
     return sorted((a, b, d[WEIGHT]) for a, b, d in wts.edges(data=True))
+
+
+# Typed accessors: the attribute keys above are read and written here alone; every other module (the search, the
+# planner, the demo, the tests) goes through these.
+
+
+def wts_labels(wts: nx.DiGraph, region: str) -> tuple[str, ...]:
+    """The atomic propositions of ``region``."""
+    return tuple(wts.nodes[region].get(LABELS, ()))
+
+
+def wts_all_labels(wts: nx.DiGraph) -> dict[str, tuple[str, ...]]:
+    """Every region's atomic propositions."""
+    return {n: wts_labels(wts, n) for n in wts.nodes}
+
+
+def wts_weight(wts: nx.DiGraph, source: str, target: str) -> Fraction:
+    """The exact time t_ij (seconds) of the transition ``source -> target`` (KeyError when there is none)."""
+    weight: Fraction = wts.edges[source, target][WEIGHT]
+    return weight
+
+
+def wts_edges(wts: nx.DiGraph) -> list[tuple[str, str, Any]]:
+    """Every transition as ``(source, target, t_ij)`` in the graph's order (t_ij as stored: checked by the search)."""
+    return [(a, b, d[WEIGHT]) for a, b, d in wts.edges(data=True)]
+
+
+def wts_initial(wts: nx.DiGraph) -> str | None:
+    """The initial region the abstraction was built with (None when it names none)."""
+    initial: str | None = wts.graph.get(INITIAL)
+    return initial
+
+
+def wts_failed(wts: nx.DiGraph) -> dict[tuple[str, str], str]:
+    """The region pairs the controller cannot drive, with the oracle's reason."""
+    failed: dict[tuple[str, str], str] = wts.graph.get(FAILED) or {}
+    return failed
+
+
+def set_wts_failed(wts: nx.DiGraph, failed: dict[tuple[str, str], str]) -> None:
+    """Replace the failed pairs (a hand-made abstraction; ``make_wts`` starts with none)."""
+    wts.graph[FAILED] = dict(failed)
+
+
+def wts_oracle(wts: nx.DiGraph) -> str | None:
+    """Which oracle built the weights (None when the graph does not say)."""
+    oracle: str | None = wts.graph.get(ORACLE)
+    return oracle
+
+
+def wts_cache_file(wts: nx.DiGraph) -> str | None:
+    """The cache file the abstraction was read from or stored in (None without the cache)."""
+    cache: str | None = wts.graph.get("cache")
+    return cache
