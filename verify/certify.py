@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import atoms
+from tubempc.runtime.outputs import write_output_file
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
@@ -43,7 +44,6 @@ from verify.judging import (
     timed_run_explanation,
     tube_tolerance_m,
 )
-from verify.outputs import write_output_file
 from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, entry_exits, parse_spec, timed_run_of_sets

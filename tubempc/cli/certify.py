@@ -98,10 +98,10 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input, 4 a needed optional
     dependency is not installed (the line names the extra).
     """
+    from tubempc.runtime.extras import require
+    from tubempc.runtime.outputs import prepare_output_dir
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
-    from verify.extras import require
     from verify.junit import InconclusiveAs
-    from verify.outputs import prepare_output_dir
     from verify.selection import parse_check_list
 
     if out_dir is not None and not no_report:  # before any work: the reports are what was asked for

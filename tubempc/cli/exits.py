@@ -14,6 +14,7 @@ import sys
 from typing import Any, NoReturn
 
 from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
+from tubempc.runtime.errors import MissingExtraError
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_NOT_AVAILABLE", "EXIT_OK",
            "EXIT_UNUSABLE", "exit_code", "is_ours", "leave"]
@@ -27,22 +28,21 @@ EXIT_INTERNAL = 70
 EXIT_INTERRUPTED = 130
 
 
-def _verify_errors() -> tuple[type[BaseException], type[BaseException]] | None:
-    """(VerifyError, MissingExtraError) when the certifier was imported (else no error can be one of them)."""
+def _verify_error() -> type[BaseException] | None:
+    """``VerifyError`` when the certifier was imported (else no error can be one)."""
     mod: Any = sys.modules.get("verify.errors")
-    return None if mod is None else (mod.VerifyError, mod.MissingExtraError)
+    return None if mod is None else mod.VerifyError  # type: ignore[no-any-return]
 
 
 def is_ours(err: BaseException) -> bool:
     """An error raised on purpose by either package (its message is for the user)."""
-    ve = _verify_errors()
-    return isinstance(err, TubeMPCError) or (ve is not None and isinstance(err, ve[0]))
+    ve = _verify_error()
+    return isinstance(err, TubeMPCError) or (ve is not None and isinstance(err, ve))
 
 
 def exit_code(err: BaseException) -> int:
     """The exit code of an error that ends a command."""
-    ve = _verify_errors()
-    if isinstance(err, NotAvailableError) or (ve is not None and isinstance(err, ve[1])):
+    if isinstance(err, NotAvailableError | MissingExtraError):
         return EXIT_NOT_AVAILABLE
     if isinstance(err, NoAcceptingRunError):
         return EXIT_FAIL

@@ -178,7 +178,7 @@ def _resolve_run(req: FalsifyRequest, scenario: Scenario) -> tuple[str, tuple[tu
         plan = plan_mission(scenario, objective="margin")
         targets = tuple((t.region, t.depart_after_s) for t in plan.controller_targets())
         return scenario.initial_region, targets, req.spec, {"planned_run": [list(p) for p in plan.run]}
-    from tubempc.regress.suite import derived_spec
+    from tubempc.scenario.transition import derived_spec
 
     if req.target is None:
         raise FalsifyError("give either --to REGION (one transition) or --plan (the scenario's mission)")

@@ -7,9 +7,9 @@ are never entered, so they are not states of the WTS) and whose edge ``i -> j`` 
 terminal set of ``j`` without violating the tightened constraints. Pairs that fail are listed with the oracle's
 reason in the graph attribute ``FAILED``.
 
-The pairs are evaluated in parallel by ``verify.executor.parallel_map`` (a process pool, or a Dask cluster when a
-client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the result is
-cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
+The pairs are evaluated in parallel by ``tubempc.runtime.executor.parallel_map`` (a process pool, or a Dask cluster
+when a client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the
+result is cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
 settings and its code.
 """
 
@@ -222,7 +222,7 @@ def build_wts(
 
     ``workers``: processes (default: CPU count; 1 evaluates in this process). ``dask``: a
     ``dask.distributed.Client``, a scheduler address or ``"local"``; when given, the pairs run on that cluster
-    instead (``verify.executor.parallel_map``).
+    instead (``tubempc.runtime.executor.parallel_map``).
     ``cache_path``: a directory (default ``cache_dir()``).
     """
     fn: TransitionOracle = default_oracle() if oracle is None else oracle
@@ -237,7 +237,7 @@ def build_wts(
             return g
     names = [r.name for r in scenario.safe_regions]
     todo = [_Job(fn, scenario, a, b, disturbance, seed) for a in names for b in names if a != b]
-    from verify.executor import parallel_map  # the one executor (processes or Dask) of both packages
+    from tubempc.runtime.executor import parallel_map  # the one executor (processes or Dask) of both packages
 
     oracle_module = getattr(fn, "__module__", None)
     preload = ("tubempc.planning.wts", *([oracle_module] if oracle_module and oracle_module != "__main__" else []))

@@ -182,7 +182,7 @@ def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | N
               controller: str | None = None) -> list[RunOutcome]:
     """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address).
     ``controller``: ``package.module:factory`` runs instead of the tube MPC (``tubempc.control.user``)."""
-    from verify.executor import parallel_map
+    from tubempc.runtime.executor import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports, controller) for case in cases]
     preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",

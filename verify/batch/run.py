@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from tubempc.mitl import parse
+from tubempc.runtime.executor import parallel_map
 from tubempc.scenario import Scenario
 from verify.errors import VerifyError
-from verify.executor import parallel_map
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.selection import select_checks
 
