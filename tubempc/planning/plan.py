@@ -25,7 +25,7 @@ from tubempc.mitl import Formula
 from tubempc.planning.reference_semantics import LassoRun
 from tubempc.planning.retime import OBJECTIVES, retime
 from tubempc.planning.search import DEFAULT_MAX_STATES, DWELL_MODES, SILENT, SearchResult, find_run
-from tubempc.planning.wts import FAILED, LABELS, ORACLE, TransitionOracle, build_wts
+from tubempc.planning.wts import TransitionOracle, build_wts, wts_all_labels, wts_failed, wts_oracle
 from tubempc.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -139,7 +139,7 @@ def require_transitions(wts: nx.DiGraph, *, scenario_name: str | None = None) ->
     """Raise ``DesignError`` (unusable input, exit 3) when the abstraction has no usable transition because every
     region pair failed (the controller's design check, or its runs): the message names the failed quantity and an
     example pair (``scenario_name``, when given, opens the message)."""
-    failed: dict[tuple[str, str], str] = wts.graph.get(FAILED) or {}
+    failed = wts_failed(wts)
     if wts.number_of_edges() > 0 or not failed:
         return
     counts: dict[str, list[tuple[str, str]]] = {}
@@ -178,7 +178,7 @@ def plan_from_run(wts: nx.DiGraph, formula: Formula, found: SearchResult, *, wai
     second half: a caller that also needs the search result, e.g. its explored product, searches once)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective={objective!r} must be one of {OBJECTIVES}")
-    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
+    labels = wts_all_labels(wts)
     silent = found.dwell == SILENT
     # the WTS weight of the step into each position (silent mode: its duration without the wait)
     weights = [Fraction(0)] + [found.run.times[k] - found.run.times[k - 1] - found.waits_s[k]
@@ -202,7 +202,7 @@ def plan_from_run(wts: nx.DiGraph, formula: Formula, found: SearchResult, *, wai
         wait=wait,
         dwell=found.dwell,
         retimed=re.retimed,
-        oracle=str(wts.graph.get(ORACLE, "?")),
+        oracle=str(wts_oracle(wts) or "?"),
         search_s=found.seconds,
         product_states=found.states,
         objective=objective,
