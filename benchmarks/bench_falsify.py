@@ -87,8 +87,7 @@ def monte_carlo(job: Job) -> Outcome:
         signal = make_disturbance("random", setup.space.bound, rng)
         cand = dataclasses.replace(centre, signal=signal)  # type: ignore[arg-type]
         run = simulate(setup, cand)
-        margin, name, violated, _, _ = judge(setup, certify_data(in_memory_log(run, sc), sc,
-                                                                 spec=setup.spec).certificate)
+        margin, name, violated, _, _ = judge(setup, certify_data(in_memory_log(run, sc), sc, spec=setup.spec).typed)
         violations += violated
         if margin < lowest:
             lowest, check = margin, name

@@ -71,6 +71,14 @@ class CertifyResult:
     exit_code: int
     columns: dict[str, Columns | None]  # "trajectory", "nominal", "inputs", "robustness" -> column name -> values
     _frames: dict[str, pd.DataFrame] = field(default_factory=dict, compare=False, repr=False)
+    _typed: list[Certificate] = field(default_factory=list, compare=False, repr=False)
+
+    @property
+    def typed(self) -> Certificate:
+        """The certificate as the typed model (validated once, on first use): what the tools read."""
+        if not self._typed:
+            self._typed.append(Certificate.model_validate(self.certificate))
+        return self._typed[0]
 
     def _table(self, name: str) -> pd.DataFrame | None:
         cols = self.columns.get(name)
@@ -297,6 +305,10 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     problems.update(doubted)
     verdict, why = overall_verdict([(c["name"], c["verdict"]) for c in entries], partial=log.partial,
                                    problems=problems)
+    data_quality = dict(log.data_quality)  # the log's own dict is not changed (a LogData may be certified again)
+    if log.metadata and log.metadata.get("scenario_sha256") not in (None, sc.sha256()):
+        data_quality["notes"] = [*data_quality.get("notes", []), "the log's metadata names a different "
+                                 "scenario_sha256 than the scenario given to the certifier"]
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,
@@ -332,12 +344,9 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
                         for k, v in log.signals.items()}} if log.signals else {}),
-        "data_quality": log.data_quality,
+        "data_quality": data_quality,
         "generator": log.metadata,
     }
-    if log.metadata and log.metadata.get("scenario_sha256") not in (None, sc.sha256()):
-        log.data_quality.setdefault("notes", []).append(
-            "the log's metadata names a different scenario_sha256 than the scenario given to the certifier")
     t_s = t_rel * 1e-9
     tables: dict[str, Columns | None] = {
         "trajectory": {"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad},

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, cast
 
 import click
 
@@ -24,6 +24,10 @@ from tubempc.cli.options import scenario_option
 from tubempc.cli.output import verbosity
 from verify.errors import UnusableInputError
 from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS, MESSAGES_DIGEST
+
+if TYPE_CHECKING:
+    from tubempc.scenario import Scenario
+    from verify.certify import CertifyResult
 
 __all__ = ["certify", "digest_command"]
 
@@ -56,6 +60,24 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
             raise ScenarioInputError(f"--clock-offset {item!r}: expected TOPIC=SECONDS, e.g. /cmd_vel=2.0")
         out[topic] = seconds
     return out
+
+
+def _write_one(result: CertifyResult, sc: Scenario, log: Path, out_dir: Path, *, reports: bool,
+               junit_inconclusive: str) -> Path:
+    """certificate.json (and the reports) of one log into ``out_dir``; the certificate's path."""
+    from verify.certify import write_certificate
+    from verify.junit import InconclusiveAs
+
+    try:
+        path = write_certificate(result, out_dir)
+        if reports:
+            from verify.report import write_reports
+
+            write_reports(result, sc, out_dir, suite_name=log.name,
+                          junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
+    except OSError as err:
+        raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)) from None
+    return path
 
 
 @click.command()
@@ -100,8 +122,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     """
     from tubempc.runtime.extras import require
     from tubempc.runtime.outputs import prepare_output_dir
-    from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
-    from verify.junit import InconclusiveAs
+    from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line
     from verify.selection import parse_check_list
 
     if out_dir is not None and not no_report:  # before any work: the reports are what was asked for
@@ -120,16 +141,9 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                              digest=digest, clock_offsets=offsets)
         line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
-            try:
-                line += f" -> {write_certificate(result, out_dir)}"
-                if not no_report:
-                    from verify.report import write_reports
-
-                    write_reports(result, sc, out_dir, suite_name=logs[0].name,
-                                  junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
-            except OSError as err:
-                raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)
-                                         ) from None
+            written = _write_one(result, sc, logs[0], out_dir, reports=not no_report,
+                                 junit_inconclusive=junit_inconclusive)
+            line += f" -> {written}"
         if as_json:
             click.echo(json.dumps(result.certificate, indent=2))
         if level >= 0:
@@ -138,7 +152,19 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
             click.echo("\n".join(check_lines(result.certificate)), err=True)
         leave(result.exit_code)
 
+    _certify_batch(logs, sc, spec=spec, time_base=time_base, salvage=salvage, workers=workers, dask=dask,
+                   progress=progress, checks=checks, digest=digest, offsets=offsets, as_json=as_json,
+                   out_dir=out_dir, reports=not no_report, junit_inconclusive=junit_inconclusive, level=level)
+
+
+def _certify_batch(logs: tuple[Path, ...], sc: Scenario, *, spec: str | None, time_base: str, salvage: bool,
+                   workers: int | None, dask: str | None, progress: bool | None, checks: tuple[str, ...] | None,
+                   digest: str, offsets: dict[str, float], as_json: bool, out_dir: Path | None, reports: bool,
+                   junit_inconclusive: str, level: int) -> NoReturn:
+    """Several logs (or a folder, or ``--dask``): ``verify.batch``; the summary, the one line of every unusable
+    log, the folders under ``out_dir``; the worst exit code."""
     from verify.batch import certify_many, summary_lines, write_batch
+    from verify.junit import InconclusiveAs
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
@@ -152,7 +178,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
         if item.exit_code == EXIT_UNUSABLE and item.error:
             click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
-        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
+        written = write_batch(batch, out_dir, reports=reports, workers=workers, dask=dask, progress=progress,
                               junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
         summary = written.get("summary.md")
         if summary is not None and level >= 0:

@@ -31,7 +31,7 @@ EXIT_INTERRUPTED = 130
 def _verify_error() -> type[BaseException] | None:
     """``VerifyError`` when the certifier was imported (else no error can be one)."""
     mod: Any = sys.modules.get("verify.errors")
-    return None if mod is None else mod.VerifyError  # type: ignore[no-any-return]
+    return None if mod is None else mod.VerifyError
 
 
 def is_ours(err: BaseException) -> bool:

@@ -13,11 +13,16 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import click
 
 from tubempc.cli.exits import EXIT_FAIL, EXIT_OK, leave
 from tubempc.cli.options import load_scenario_ref, scenario_option
+
+if TYPE_CHECKING:
+    from tubempc.falsify.search import Method
+    from tubempc.falsify.space import Family
 
 __all__ = ["falsify"]
 
@@ -119,8 +124,10 @@ def falsify(*, scenario: str, source: str | None, target: str | None, plan: bool
     apply_overrides(sc, overrides)  # a bad override is one line on stderr before anything else
     if horizon_s is not None and not (math.isfinite(horizon_s) and horizon_s > 0):
         raise click.BadParameter(f"--horizon {horizon_s!r} must be a positive number")
-    req = FalsifyRequest(scenario_ref=scenario, source=source, target=target, plan=plan, method=method,  # type: ignore[arg-type]
-                         budget=budget, seed=seed, family=family, knots=knots, switches=switches,  # type: ignore[arg-type]
+    # click.Choice has checked both against the same names as the Literal types
+    req = FalsifyRequest(scenario_ref=scenario, source=source, target=target, plan=plan,
+                         method=cast("Method", method), budget=budget, seed=seed, family=cast("Family", family),
+                         knots=knots, switches=switches,
                          bound_scale=bound_scale, vary_start=not fixed_start,
                          checks=tuple(c.strip() for c in checks_text.split(",") if c.strip()), spec=spec,
                          overrides=overrides, horizon_s=horizon_s, stop_at_first=stop_at_first,

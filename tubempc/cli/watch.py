@@ -84,10 +84,12 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
                              salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
         if not quiet:  # the certificate's one-sentence explanation of each result that is not a pass
-            cert = result.certificate
-            for entry in [*cert.get("obligations", [])[1:], *cert.get("checks", [])]:
-                if entry.get("explanation"):
-                    click.echo(f"   why    {entry.get('formula') or entry.get('name')}: {entry['explanation']}")
+            cert = result.typed
+            whys = [(o.formula, o.explanation) for o in cert.obligations[1:]] + [
+                (c.name, c.explanation) for c in cert.checks]
+            for what, why in whys:
+                if why:
+                    click.echo(f"   why    {what}: {why}")
         if not no_report:
             from verify.report import write_reports
 

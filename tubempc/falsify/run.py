@@ -286,7 +286,7 @@ def write_case(setup: FalsifySetup, ev: Evaluation, out_dir: Path, *, sections: 
     written = write_reports(certified, setup.scenario, out_dir, suite_name="falsify", sections=sections)
     from tubempc.falsify.objective import judge
 
-    margin, check, violated, _, _ = judge(setup, certified.certificate)
+    margin, check, violated, _, _ = judge(setup, certified.typed)
     return {"log": str(log_path), "certificate": str(cert_path),
             "report_html": str(written.get("report.html", "")), "report_md": str(written.get("report.md", "")),
             "certificate_verdict": certified.verdict, "margin_from_log": margin, "check_from_log": check,
