@@ -7,6 +7,7 @@ A failed *check* is never an exception; it is a verdict value with its witness.
 from __future__ import annotations
 
 __all__ = [
+    "FastPathError",
     "LogReadError",
     "MissingTopicError",
     "ScenarioInputError",
@@ -49,3 +50,7 @@ class SpecError(UnusableInputError):
 class ScenarioInputError(UnusableInputError):
     """The scenario given to the certifier cannot be loaded."""
 
+
+class FastPathError(Exception):
+    """Internal to the readers: a fast reader (``verify.ingest.ros1``, ``verify.ingest.mcap``) met a record it does not
+    reproduce exactly; the caller falls back to rosbags. Never reaches the user."""

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import FalsifyError
 from tubempc.falsify.objective import DEFAULT_CHECKS, MARGIN_CHECKS, Evaluation, FalsifySetup, evaluate, simulate
 from tubempc.falsify.overrides import apply_overrides
 from tubempc.falsify.search import Method, SearchResult, search
@@ -34,10 +34,6 @@ __all__ = ["FALSIFY_FORMAT", "FalsifyError", "FalsifyOutcome", "FalsifyRequest",
 FALSIFY_FORMAT = "tubempc-falsify/1"
 EXIT_CODES = {"fail": 1, "inconclusive": 2, "no_violation_found": 0}
 KNOWN_CHECKS = (*MARGIN_CHECKS, "spec_timed_run")
-
-
-class FalsifyError(TubeMPCError, ValueError):
-    """The falsification cannot start (the unperturbed run fails to simulate, an unknown check, ...)."""
 
 
 @dataclass(frozen=True)

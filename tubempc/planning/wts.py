@@ -33,7 +33,7 @@ from typing import Any, Protocol
 import networkx as nx
 
 import tubempc
-from tubempc.errors import TubeMPCError
+from tubempc.errors import AbstractionError, TubeMPCError
 from tubempc.scenario import Scenario
 
 __all__ = [
@@ -68,10 +68,6 @@ _ORACLE = "oracle"  # graph attribute: which oracle built the weights
 _CACHE = "cache"  # graph attribute: the cache file (None without the cache)
 CACHE_ENV = "TUBEMPC_CACHE"
 _FORMAT = 1
-
-
-class AbstractionError(TubeMPCError, RuntimeError):
-    """The abstraction could not be built (an oracle crashed or returned a malformed result)."""
 
 
 class TransitionOutcome(Protocol):

@@ -20,7 +20,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tubempc.control.disturbance import DISTURBANCE_MODELS
-from tubempc.errors import TubeMPCError
+from tubempc.errors import SuiteError
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario, load_scenario
 from tubempc.scenario.transition import derived_spec
@@ -46,15 +46,6 @@ __all__ = [
 DEFAULT_SUITE = "default-suite.yaml"
 SCENARIO_SPEC = "scenario"  # a run's ``spec: scenario`` certifies against the scenario's own formula
 _NAME = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
-
-
-class SuiteError(TubeMPCError, ValueError):
-    """A suite file is malformed; the message names the file and the field."""
-
-    def __init__(self, message: str, *, source: str, field: str | None = None) -> None:
-        self.source = source
-        self.field = field
-        super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
 
 
 class _Frozen(BaseModel):
