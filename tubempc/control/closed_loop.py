@@ -34,7 +34,7 @@ from tubempc.errors import DesignError
 from tubempc.scenario import Scenario
 
 __all__ = ["Arrival", "ClosedLoopResult", "SolverRecord", "Target", "check_run_arguments", "disturbance_of",
-           "hold_position", "leg_obstacles", "run_closed_loop"]
+           "hold_position", "leg_obstacles", "rk4_symbolic", "run_closed_loop"]
 
 LOOKAHEAD_M = 0.5  # guide-path look-ahead of the first reference: far enough to saturate the speed
 GUIDE_MARGIN_M = 0.05  # extra clearance of the guide path around the constraint discs
@@ -112,6 +112,18 @@ def leg_obstacles(scenario: Scenario, source: str, target: str) -> list[tuple[fl
 _BLOCK_CACHE: dict[tuple[str, float, int], ca.Function] = {}
 
 
+def rk4_symbolic(model: DynamicsModel, z: ca.SX, u: ca.SX, d: ca.SX, dt_s: float, *, sub: int = 4) -> ca.SX:
+    """One sample of ``x' = f(x) + g(x) u + d`` with ``sub`` RK4 substeps (u, d held), as a casadi expression."""
+    dt = dt_s / sub
+    for _ in range(sub):
+        k1 = model.f(z) + model.g(z) @ u + d
+        k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
+        k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
+        k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
+        z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return z
+
+
 def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Function:
     """One MPC step of the sampled loop as a CasADi function (any model, any disturbance, with noise).
 
@@ -127,17 +139,9 @@ def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Funct
     noise, delta = ca.SX.sym("noise", STATE_DIM, samples), ca.SX.sym("delta", STATE_DIM, samples)
     worst, bound, sigma = ca.SX.sym("worst"), ca.SX.sym("bound"), ca.SX.sym("sigma")
     direction = ca.SX.sym("direction", STATE_DIM)
-    sub = 4
-    dt = dt_s / sub
 
     def rk4(z: ca.SX, u: ca.SX, d: ca.SX) -> ca.SX:
-        for _ in range(sub):
-            k1 = model.f(z) + model.g(z) @ u + d
-            k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
-            k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
-            k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
-            z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return z
+        return rk4_symbolic(model, z, u, d, dt_s)
 
     x, xh = x0, xh0
     xs, xhs, us = [], [], []

@@ -25,7 +25,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from tubempc.control.closed_loop import Arrival, ClosedLoopResult, Target
+from tubempc.control.closed_loop import Arrival, ClosedLoopResult, Target, rk4_symbolic
 from tubempc.control.disturbance import DisturbanceLike
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel
 from tubempc.control.user import (
@@ -62,15 +62,7 @@ def _model_step(model: DynamicsModel, dt_s: float) -> ca.Function:
     fn = _STEP_CACHE.get(key)
     if fn is None:
         z0, u, d = (ca.SX.sym(n, STATE_DIM) for n in ("x", "u", "d"))
-        sub, z = 4, z0
-        dt = dt_s / sub
-        for _ in range(sub):
-            k1 = model.f(z) + model.g(z) @ u + d
-            k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
-            k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
-            k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
-            z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        fn = _STEP_CACHE[key] = ca.Function("plant_step", [z0, u, d], [z])
+        fn = _STEP_CACHE[key] = ca.Function("plant_step", [z0, u, d], [rk4_symbolic(model, z0, u, d, dt_s)])
     return fn
 
 
