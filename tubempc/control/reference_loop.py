@@ -112,12 +112,8 @@ def run_closed_loop_reference(scenario: Scenario, targets: Sequence[Target], *, 
                     disturbance: str | DisturbanceLike = "random", seed: int = 0, t_end_s: float | None = None,
                     mocap_noise_m: float = 0.0, model: DynamicsModel | None = None,
                     start_pose: Sequence[float] | None = None) -> ClosedLoopResult:
-    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring).
-
-    ``disturbance``: a model name (``DISTURBANCE_MODELS``, drawn from ``seed``) or a ``DisturbanceLike`` signal.
-    ``start_pose``: (x, y, theta) where the robot and the nominal start (default: the start region's centre with
-    the scenario's initial heading). ``seed`` also draws the MoCap noise.
-    """
+    """``run_closed_loop``'s run (same arguments, same checks), by the straight loop of this module: the reference
+    the equality test holds the general loop to."""
     source = check_run_arguments(scenario, targets, start_region=start_region, mocap_noise_m=mocap_noise_m,
                                  t_end_s=t_end_s, start_pose=start_pose)
     model = model or model_for(scenario)
