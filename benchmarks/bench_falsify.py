@@ -87,8 +87,7 @@ def monte_carlo(job: Job) -> Outcome:
         signal = make_disturbance("random", setup.space.bound, rng)
         cand = dataclasses.replace(centre, signal=signal)  # type: ignore[arg-type]
         run = simulate(setup, cand)
-        margin, name, violated, _, _ = judge(setup, certify_data(in_memory_log(run, sc), sc,
-                                                                 spec=setup.spec).certificate)
+        margin, name, violated, _, _ = judge(setup, certify_data(in_memory_log(run, sc), sc, spec=setup.spec).typed)
         violations += violated
         if margin < lowest:
             lowest, check = margin, name
@@ -165,7 +164,7 @@ def main() -> None:
     ap.add_argument("--mission-repeat", type=int, default=3)
     args = ap.parse_args()
 
-    from verify.executor import parallel_map
+    from tubempc.runtime.executor import parallel_map
 
     sim_s, judge_s, file_s, length = mission_cost(args.mission_repeat)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

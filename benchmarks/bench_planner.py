@@ -34,7 +34,7 @@ from tubempc.mitl import parse
 from tubempc.planning.reference_semantics import holds
 from tubempc.planning.search import find_run
 from tubempc.planning.synthetic import random_scenario, straight_line_oracle
-from tubempc.planning.wts import FAILED, LABELS, ORACLE, WEIGHT, build_wts
+from tubempc.planning.wts import build_wts, wts_all_labels, wts_failed, wts_oracle, wts_weight
 from tubempc.scenario import builtin_scenario
 
 TARGET_PAPER_S = 0.050
@@ -54,8 +54,10 @@ def timed(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
 
 
 def baseline(wts: nx.DiGraph, source: str, repeat: int) -> float:
+    weights = {(a, b): float(wts_weight(wts, a, b)) for a, b in wts.edges}
+
     def run() -> object:
-        return nx.single_source_dijkstra_path_length(wts, source, weight=lambda a, b, d: float(d[WEIGHT]))
+        return nx.single_source_dijkstra_path_length(wts, source, weight=lambda a, b, d: weights[a, b])
 
     return timed(run, repeat)[0]
 
@@ -98,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             build_wts(scenario, cache_path=Path(tmp), progress=False)
             warm = time.perf_counter() - t0
         print(f"abstraction of {scenario.name} (Algorithm 1, all cores): cold {cold:.2f} s, from cache "
-              f"{warm * 1000:.1f} ms; {wts.number_of_edges()} transitions, {len(wts.graph[FAILED])} failed pairs")
+              f"{warm * 1000:.1f} ms; {wts.number_of_edges()} transitions, {len(wts_failed(wts))} failed pairs")
     else:
         try:
             from tubempc.planning.wts import cache_dir
@@ -108,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"(real controller unavailable: {err}; using synthetic weights)")
             wts = build_wts(scenario, oracle=straight_line_oracle, workers=1, use_cache=False, progress=False)
     wts_paper = wts
-    labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
+    labels = wts_all_labels(wts)
     base = baseline(wts, scenario.initial_region, args.repeat)
     for wait, dwell in ((True, "silent"), (True, "observed"), (False, "silent")):
         secs, res = timed(lambda w=wait, m=dwell: _try(wts, scenario.formula, w, m), args.repeat)  # type: ignore[misc]
@@ -116,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         good = secs <= TARGET_PAPER_S and status != "WRONG"
         ok &= good
         mode = f"{dwell} waits" if wait else "no waits"
-        print(f"paper formula, 9 regions (weights: {wts.graph[ORACLE]}), {mode}: {secs * 1000:.1f} ms "
+        print(f"paper formula, 9 regions (weights: {wts_oracle(wts)}), {mode}: {secs * 1000:.1f} ms "
               f"({secs / base:.0f}x one WTS Dijkstra) [{status}] target {TARGET_PAPER_S * 1000:.0f} ms "
               f"{'met' if good else 'MISSED'}; {exactness(res)}")
 
@@ -124,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     worst = worst_explicit = 0.0
     if observed:
         # the observed-dwell formula whose dwell positions anchor un-mergeable copies (zone search vs explicit)
-        labels = {n: tuple(wts_paper.nodes[n][LABELS]) for n in wts_paper.nodes}
+        labels = wts_all_labels(wts_paper)
         formula = parse(OBSERVED_SPEC)
         secs, res = timed(lambda: _try(wts_paper, formula, True, "observed"), args.repeat)
         old, _ = timed(lambda: _try(wts_paper, formula, True, "observed", zones=False), args.repeat)
@@ -139,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         for n_windows in (3, 7):
             spec, wts = random_case(n_regions, n_windows, seed=n_regions)
             formula = parse(spec)
-            labels = {n: tuple(wts.nodes[n][LABELS]) for n in wts.nodes}
+            labels = wts_all_labels(wts)
             base = baseline(wts, "R0", args.repeat)
             cpu0 = time.process_time()
             secs, res = timed(lambda f=formula, g=wts: _try(g, f, True, args.dwell), args.repeat)  # type: ignore[misc]

@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tubempc.scenario import Scenario, SignalSpec, builtin_scenario
-from verify.certify import _judge  # the offline judgement of in-memory samples, as certify_log runs it
+from verify.certify import certify_data  # the offline judgement of in-memory samples, as certify_log runs it
 from verify.ingest.fields import SignalStream
 from verify.ingest.log import LogData, _stream
 from verify.ingest.timebase import judged_samples
@@ -142,7 +142,7 @@ def _offline(run: dict[str, object], spec: str, sc: Scenario = SC) -> dict[str, 
     signals = {"calm": _signal_stream(run["signal"])} if run.get("signal") else {}  # type: ignore[arg-type]
     log = LogData("memory", "mcap", "", "sha256", "header", int(pose.t_ns[0]), pose, {}, nominal, cmd_t, cmd_u,
                   (), None, {}, False, pose_samples=every, signals=signals)
-    return _judge(log, sc, formula_text=spec).certificate
+    return certify_data(log, sc, spec=spec).certificate
 
 
 def _online(run: dict[str, object], spec: str, update_every: int, sc: Scenario = SC

@@ -43,7 +43,16 @@ from tubempc.mitl import (
     parse,
     to_fraction,
 )
-from tubempc.planning import LABELS, WEIGHT, LassoRun, SearchLimitError, find_run, holds, make_wts, plan_from_wts
+from tubempc.planning import (
+    LassoRun,
+    SearchLimitError,
+    find_run,
+    holds,
+    make_wts,
+    plan_from_wts,
+    wts_all_labels,
+    wts_weight,
+)
 from tubempc.planning.automaton import tick_of
 from tubempc.planning.reference_semantics import brute_force_silent
 from tubempc.planning.search import OBSERVED, SILENT
@@ -360,7 +369,7 @@ def test_every_plan_satisfies_its_formula_per_the_certifier(wts: nx.DiGraph, f: 
     except (NoAcceptingRunError, SearchLimitError):
         assume(False)
         return
-    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
+    labels = wts_all_labels(wts)
     regions = tuple(r for r, _ in plan.run)
     times = plan.exact_times
     period = to_fraction(plan.period_s) if plan.period_s > 0 else None
@@ -380,7 +389,7 @@ def simple_lassos(wts: nx.DiGraph, init: str, max_len: int) -> list[LassoRun]:
         path, times = stack.pop()
         last = path[-1]
         for nxt in wts.successors(last):
-            w = wts.edges[last, nxt][WEIGHT]
+            w = wts_weight(wts, last, nxt)
             for loop in range(len(path)):
                 if path[loop] == nxt:
                     period = times[-1] + w - times[loop]
@@ -393,7 +402,7 @@ def simple_lassos(wts: nx.DiGraph, init: str, max_len: int) -> list[LassoRun]:
 @given(wts=tiny_wts(), f=bounded_formulas)
 @settings(max_examples=CHEAP, suppress_health_check=[HealthCheck.too_slow])
 def test_planner_finds_a_run_when_brute_force_does(wts: nx.DiGraph, f: Formula) -> None:
-    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
+    labels = wts_all_labels(wts)
     init = next(iter(sorted(wts.nodes)))
     witness = next((run for run in simple_lassos(wts, init, 4) if certifier_on_lasso(f, run, labels) == "pass"),
                    None)

@@ -2,7 +2,7 @@
 extra and exit 4 (feature not available), never an ImportError traceback; the base install certifies without them.
 
 A missing module is simulated by ``sys.modules[name] = None`` (what Python does for a blocked import: ``import name``
-raises ImportError); ``verify.extras`` must see it as missing even when the module was imported earlier.
+raises ImportError); ``tubempc.runtime.extras`` must see it as missing even when the module was imported earlier.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 from tubempc.cli import main
+from tubempc.runtime.errors import MissingExtraError
+from tubempc.runtime.extras import EXTRAS, missing_modules, require
 from tubempc.scenario import builtin_scenario
-from verify.errors import MissingExtraError
-from verify.extras import EXTRAS, missing_modules, require
 
 ROOT = Path(__file__).resolve().parent.parent
 LOG = ROOT / "logs" / "late_mission.mcap"

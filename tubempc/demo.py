@@ -47,13 +47,13 @@ class DemoResult:
 def comparison_rows(scenario: Scenario, wts: nx.DiGraph) -> list[dict[str, Any]]:
     """Per leg of the paper's run: the paper's time, ours (Algorithm 1 on our WTS), the straight-line distance and
     the least time any admissible input needs for it (distance / speed bound)."""
-    from tubempc.planning.wts import WEIGHT
+    from tubempc.planning.wts import wts_weight
 
     speed = min(scenario.inputs.max_abs[0], scenario.inputs.max_abs[1])
     rows: list[dict[str, Any]] = []
     for (a, b), paper in zip(itertools.pairwise(PAPER_SEQUENCE), PAPER_TIMES_S, strict=True):
         dist = math.dist(scenario.region(a).center, scenario.region(b).center)
-        ours = float(wts.edges[a, b][WEIGHT]) if wts.has_edge(a, b) else None
+        ours = float(wts_weight(wts, a, b)) if wts.has_edge(a, b) else None
         rows.append({"leg": f"{a} -> {b}", "paper_s": paper, "ours_s": ours, "distance_m": dist,
                      "lower_bound_s": dist / speed})
     return rows
@@ -150,7 +150,7 @@ def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random",
 
     meta = {"plan": plan.to_json(), "demo": {"seed": seed, "disturbance": disturbance}}
     if replace:
-        from verify.outputs import replace_output_log
+        from tubempc.runtime.outputs import replace_output_log
 
         for name in ("demo.mcap", "demo.bag"):
             replace_output_log(out / name)

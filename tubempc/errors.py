@@ -9,16 +9,23 @@ Failed *checks* are never exceptions: they are values (see ``verify``).
 from __future__ import annotations
 
 __all__ = [
+    "AbstractionError",
+    "BaselineError",
     "CompareInputError",
     "ControllerError",
     "DesignError",
+    "FalsifyError",
+    "InvalidArgumentError",
     "LogWriteError",
     "NoAcceptingRunError",
+    "NoGuidePathError",
     "NotAvailableError",
+    "OverrideError",
     "ScenarioError",
     "SearchLimitError",
     "SolverError",
     "SpecSyntaxError",
+    "SuiteError",
     "TubeMPCError",
 ]
 
@@ -93,3 +100,36 @@ class CompareInputError(TubeMPCError, ValueError):
 class ControllerError(TubeMPCError, ValueError):
     """A ``--controller`` that cannot be loaded or that breaks the controller protocol (exit 3, the message names
     it)."""
+
+
+class InvalidArgumentError(TubeMPCError, ValueError):
+    """An argument of a control function is out of its domain; the message names it and its value."""
+
+
+class AbstractionError(TubeMPCError, RuntimeError):
+    """The abstraction could not be built (an oracle crashed or returned a malformed result)."""
+
+
+class FalsifyError(TubeMPCError, ValueError):
+    """The falsification cannot start (the unperturbed run fails to simulate, an unknown check, ...)."""
+
+
+class OverrideError(TubeMPCError, ValueError):
+    """A ``--set`` override is malformed or names no scenario field; the message quotes it."""
+
+
+class BaselineError(TubeMPCError, ValueError):
+    """The baseline file is missing or malformed (the message names the file)."""
+
+
+class SuiteError(TubeMPCError, ValueError):
+    """A suite file is malformed; the message names the file and the field."""
+
+    def __init__(self, message: str, *, source: str, field: str | None = None) -> None:
+        self.source = source
+        self.field = field
+        super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+
+
+class NoGuidePathError(DesignError):
+    """No collision-free polyline connects the start to the goal."""

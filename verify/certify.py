@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import atoms
+from tubempc.runtime.outputs import write_output_file
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
@@ -44,7 +45,6 @@ from verify.judging import (
     timed_run_explanation,
     tube_tolerance_m,
 )
-from verify.outputs import write_output_file
 from verify.scenario_check import data_findings
 from verify.selection import Selection, select_checks
 from verify.semantics.timed_run import check_timed_run, entry_exits, parse_spec, timed_run_of_sets
@@ -72,6 +72,14 @@ class CertifyResult:
     exit_code: int
     columns: dict[str, Columns | None]  # "trajectory", "nominal", "inputs", "robustness" -> column name -> values
     _frames: dict[str, pd.DataFrame] = field(default_factory=dict, compare=False, repr=False)
+    _typed: list[Certificate] = field(default_factory=list, compare=False, repr=False)
+
+    @property
+    def typed(self) -> Certificate:
+        """The certificate as the typed model (validated once, on first use): what the tools read."""
+        if not self._typed:
+            self._typed.append(Certificate.model_validate(self.certificate))
+        return self._typed[0]
 
     def _table(self, name: str) -> pd.DataFrame | None:
         cols = self.columns.get(name)
@@ -315,6 +323,10 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
     problems.update(doubted)
     verdict, why = overall_verdict([(c["name"], c["verdict"]) for c in entries], partial=log.partial,
                                    problems=problems)
+    data_quality = dict(log.data_quality)  # the log's own dict is not changed (a LogData may be certified again)
+    if log.metadata and log.metadata.get("scenario_sha256") not in (None, sc.sha256()):
+        data_quality["notes"] = [*data_quality.get("notes", []), "the log's metadata names a different "
+                                 "scenario_sha256 than the scenario given to the certifier"]
     cert: dict[str, Any] = {
         "certificate_version": CERTIFICATE_VERSION,
         "verdict": verdict,
@@ -350,12 +362,9 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
         "timed_run": [{"region": r, "time": round(t, 9)} for r, t in run],
         **({"signals": {k: signal_summary(v, t0, int(pose.t_ns[-1]) if pose.t_ns.size else t0)
                         for k, v in log.signals.items()}} if log.signals else {}),
-        "data_quality": log.data_quality,
+        "data_quality": data_quality,
         "generator": log.metadata,
     }
-    if log.metadata and log.metadata.get("scenario_sha256") not in (None, sc.sha256()):
-        log.data_quality.setdefault("notes", []).append(
-            "the log's metadata names a different scenario_sha256 than the scenario given to the certifier")
     t_s = t_rel * 1e-9
     tables: dict[str, Columns | None] = {
         "trajectory": {"t_s": t_s, "x_m": pose.x_m, "y_m": pose.y_m, "theta_rad": pose.theta_rad},

@@ -1,5 +1,5 @@
-"""Exceptions of the certifier: raised when a log cannot be judged at all (exit code 3), or when a feature needs an
-optional dependency that is not installed (``MissingExtraError``, exit code 4).
+"""Exceptions of the certifier: raised when a log cannot be judged at all (exit code 3). (A feature whose optional
+dependency is not installed raises ``tubempc.runtime.errors.MissingExtraError``, exit code 4.)
 
 A failed *check* is never an exception; it is a verdict value with its witness.
 """
@@ -7,8 +7,8 @@ A failed *check* is never an exception; it is a verdict value with its witness.
 from __future__ import annotations
 
 __all__ = [
+    "FastPathError",
     "LogReadError",
-    "MissingExtraError",
     "MissingTopicError",
     "ScenarioInputError",
     "SpecError",
@@ -51,6 +51,6 @@ class ScenarioInputError(UnusableInputError):
     """The scenario given to the certifier cannot be loaded."""
 
 
-class MissingExtraError(VerifyError, ImportError):
-    """A feature needs an optional dependency that is not installed (exit code 4: feature not available); the
-    message names the extra that installs it (``verify.extras``)."""
+class FastPathError(Exception):
+    """Internal to the readers: a fast reader (``verify.ingest.ros1``, ``verify.ingest.mcap``) met a record it does not
+    reproduce exactly; the caller falls back to rosbags. Never reaches the user."""

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from tubempc.runtime.outputs import write_output_file
 from verify.certificate import Certificate, Verdict
-from verify.outputs import write_output_file
 
 __all__ = ["INCONCLUSIVE_AS", "InconclusiveAs", "JUnitCase", "JUnitSuite", "certificate_suite", "suite_element",
            "write_junit"]

@@ -27,12 +27,12 @@ from typing import Any, Protocol
 
 import pandas as pd
 
+from tubempc.runtime.outputs import output_subdir, write_output_file
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, CheckEntry, ObligationEntry, TimedRunEntry
 from verify.errors import VerifyError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
-from verify.outputs import output_subdir, write_output_file
 
 __all__ = [
     "CertifyResultLike",

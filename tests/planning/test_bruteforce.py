@@ -102,9 +102,10 @@ def brute_force(labels, weights, formula: Formula, *, wait: bool, max_pos: int =
     return best
 
 
-def brute_force_silent(labels, weights, formula: Formula, *, max_pos: int,  # type: ignore[no-untyped-def]
-                       max_wait: int = 6) -> Fraction | None:
-    """Earliest loop entry (or end) over all runs of at most ``max_pos`` arrivals (the start included), with a
+def brute_force_lasso_silent(labels, weights, formula: Formula, *, max_pos: int,  # type: ignore[no-untyped-def]
+                             max_wait: int = 6) -> Fraction | None:
+    """Earliest loop entry (or end) over all runs, lassos included (``brute_force_silent`` of the package: finite
+    runs only), of at most ``max_pos`` arrivals (the start included), with a
     silent wait of 0..max_wait half-ticks before every move (the closing move of a lasso included); a finite run
     stays in its last region forever without a further position."""
     waits = [HALF * k for k in range(max_wait + 1)]
@@ -156,7 +157,7 @@ def _check(seed: int, *, wait: bool, dwell: str = "observed", max_pos: int = 4) 
         if wait and dwell == "silent":
             assert set(found.kinds) <= {"start", "move"}, found.kinds  # a silent wait is never a position
     if wait and dwell == "silent":
-        bf = brute_force_silent(labels, weights, formula, max_pos=max_pos)
+        bf = brute_force_lasso_silent(labels, weights, formula, max_pos=max_pos)
     else:
         bf = brute_force(labels, weights, formula, wait=wait, max_pos=max_pos)
     if bf is not None:
@@ -189,7 +190,7 @@ def test_silent_wait_aimed_two_moves_ahead() -> None:
     found = find_run(make_wts(labels, weights, initial="A"), formula, dwell="silent")
     assert found.run.regions == ("A", "B", "C") and found.run.times == (0, 7, 10)
     assert found.waits_s == (0, 5, 0) and found.run.loop_start is None
-    assert brute_force_silent(labels, weights, formula, max_pos=3, max_wait=10) == 10
+    assert brute_force_lasso_silent(labels, weights, formula, max_pos=3, max_wait=10) == 10
 
 
 @pytest.mark.parametrize("seed", range(40))

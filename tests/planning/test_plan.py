@@ -14,7 +14,7 @@ import pytest
 
 from tubempc.planning import Plan, plan_from_wts
 from tubempc.planning.synthetic import straight_line_oracle
-from tubempc.planning.wts import WEIGHT, build_wts
+from tubempc.planning.wts import build_wts, wts_weight
 from tubempc.scenario import builtin_scenario
 
 # the paper's formula: F[30,50] mission_2 & F[80,110] mission_1 (plus G !obstacle)
@@ -56,7 +56,7 @@ def check_silent_builtin(p: Plan, wts: nx.DiGraph) -> None:
             assert t.region == s.initial_region and t.depart_after_s is not None
             prev_depart = t.depart_after_s
             continue
-        weight = float(wts.edges[prev_region, t.region][WEIGHT])
+        weight = float(wts_weight(wts, prev_region, t.region))
         assert t.arrival_s == pytest.approx(prev_depart + weight, abs=1e-6)  # float sums of exact ms values
         prev_region, prev_depart = t.region, (t.depart_after_s if t.depart_after_s is not None else t.arrival_s)
 
@@ -129,14 +129,14 @@ def test_abstraction_without_transitions_is_a_design_error() -> None:
     from tubempc.errors import DesignError
     from tubempc.mitl import parse
     from tubempc.planning import make_wts
-    from tubempc.planning.wts import FAILED
+    from tubempc.planning.wts import set_wts_failed
 
     wts = make_wts({"A": ("p",), "B": ("q",)}, {}, initial="A")
-    wts.graph[FAILED] = {("A", "B"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m",
-                         ("B", "A"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m"}
+    set_wts_failed(wts, {("A", "B"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m",
+                         ("B", "A"): "design check: tube radius 0.4 m exceeds the region radius 0.3 m"})
     with pytest.raises(DesignError, match=r"no usable transition.*tube radius 0\.4 m"):
         plan_from_wts(wts, parse("F[0,10] q"), initial="A")
-    wts.graph[FAILED] = {}
+    set_wts_failed(wts, {})
     with pytest.raises(Exception, match="no timed run"):  # no pair was tried: the formula is what fails
         plan_from_wts(wts, parse("F[0,10] q"), initial="A")
 

@@ -131,7 +131,8 @@ def test_log_names_are_escaped_in_summaries(tmp_path: Path, scenario: Scenario, 
     assert "<script>" not in md and "\\|" in md  # the pipe cannot break the table
 
 
-def test_worst_margin_of_a_failed_log_is_its_failed_checks(scenario: Scenario) -> None:
+def test_worst_margin_of_a_failed_log_is_its_failed_checks(scenario: Scenario,
+                                                            make_result: Callable[..., Any]) -> None:
     """A passing check's margin (here -0.0 < 0.3 > ...) never stands for a failed log; the most negative fail does."""
     from types import SimpleNamespace
 
@@ -142,12 +143,16 @@ def test_worst_margin_of_a_failed_log_is_its_failed_checks(scenario: Scenario) -
               {"name": "obstacle_clearance", "verdict": "fail", "margin": -0.5, "margin_unit": "m"},
               {"name": "spec_timed_run", "verdict": "fail", "margin": -7.0, "margin_unit": "s"},  # seconds: not m
               {"name": "tube", "verdict": "pass", "margin": -0.9, "margin_unit": "m"}]  # a pass below the fails
-    result = SimpleNamespace(certificate={"checks": checks}, exit_code=1)
-    item = BatchItem("a.bag", "a", 1, "fail", None, 0.1, result)  # type: ignore[arg-type]
+    checks = [{**c, "first_violation_time": 1.0 if c["verdict"] == "fail" else None} for c in checks]
+    base = make_result(verdict="fail").certificate  # a whole certificate: the batch reads the typed model
+
+    def result(entries: list[dict[str, Any]], code: int) -> SimpleNamespace:
+        return SimpleNamespace(certificate={**base, "checks": entries}, exit_code=code)
+
+    item = BatchItem("a.bag", "a", 1, "fail", None, 0.1, result(checks, 1))  # type: ignore[arg-type]
     row = BatchResult((item,), scenario, None).rows()[0]
     assert row["worst_margin_m"] == -0.5
-    ok = BatchItem("b.bag", "b", 0, "pass", None, 0.1,
-                   SimpleNamespace(certificate={"checks": checks[:1]}, exit_code=0))  # type: ignore[arg-type]
+    ok = BatchItem("b.bag", "b", 0, "pass", None, 0.1, result(checks[:1], 0))  # type: ignore[arg-type]
     assert BatchResult((ok,), scenario, None).rows()[0]["worst_margin_m"] == 0.3
 
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from verify.errors import UnusableInputError
-from verify.executor import parallel_map
+from tubempc.runtime.errors import OutputError
+from tubempc.runtime.executor import parallel_map
 
 ITEMS = [3, -1, 4, -1, -5, 9, -2, 6]
 EXPECTED = [abs(x) for x in ITEMS]
@@ -34,7 +34,7 @@ def test_exceptions_propagate() -> None:
 
 
 def test_bad_dask_address_is_unusable_input() -> None:
-    with pytest.raises(UnusableInputError, match="expected 'local'"):
+    with pytest.raises(OutputError, match="expected 'local'"):
         parallel_map(abs, ITEMS, dask="my-laptop", progress=False)
 
 

@@ -8,21 +8,17 @@ huge scenarios, and warnings on stderr. Runs the real ``tubempc.cli.main`` in th
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import struct
-import sys
 import threading
 import time
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 import pytest
 from rosbags.serde import SerdeError
 
-from tubempc.cli import main
 from tubempc.scenario import builtin_scenario, builtin_scenario_text
 from verify.errors import LogReadError
 from verify.ingest import decode as decode_module
@@ -31,39 +27,13 @@ from verify.ingest.decode import decode_pose
 from verify.ingest.raw import RawTopic
 from verify.ingest.readerrors import LibraryError
 
+from .support import FUZZ, one_line_error, run
+
 ROOT = Path(__file__).resolve().parents[2]
 #: every case holds with our own readers and with plain rosbags (TUBEMPC_FAST_INGEST=0): the same exit and message
 pytestmark = pytest.mark.usefixtures("ingest_path")
 
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
-
-
-def _fuzz() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fuzz_certify", ROOT / "benchmarks" / "fuzz_certify.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("fuzz_certify", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-FUZZ = _fuzz()
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exc:
-        main(argv)
-    out, err = capsys.readouterr()
-    code = exc.value.code
-    return (code if isinstance(code, int) else 0), out, err
-
-
-def one_line_error(err: str, *needles: str) -> None:
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert lines[0].startswith("tubempc: error: "), err
-    for needle in needles:
-        assert needle in lines[0], (needle, err)
 
 
 @pytest.fixture(scope="module")

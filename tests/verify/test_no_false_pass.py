@@ -7,51 +7,21 @@ span, unknown samples in the timed run, several components of a command.
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import pytest
 from rosbags.serde import SerdeError
 
-from tubempc.cli import main
 from verify.errors import VerifyError
+
+from .support import FUZZ, one_line_error, run
 
 ROOT = Path(__file__).resolve().parents[2]
 REFUSED = (SerdeError, VerifyError)
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
-
-
-def _fuzz() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fuzz_certify", ROOT / "benchmarks" / "fuzz_certify.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("fuzz_certify", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-FUZZ = _fuzz()
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exc:
-        main(argv)
-    out, err = capsys.readouterr()
-    code = exc.value.code
-    return (code if isinstance(code, int) else 0), out, err
-
-
-def one_line_error(err: str, *needles: str) -> None:
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert lines[0].startswith("tubempc: error: "), err
-    for needle in needles:
-        assert needle in lines[0], (needle, err)
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
 ``load_side`` (logs certified with ``verify``, or certificates) -> ``pair_runs`` -> ``judge`` (per metric: summaries,
 difference, one-sided tests against a tolerance) -> ``format_diff`` / ``write_page`` / ``outcome_junit`` /
-``outcome_json``. ``tubempc compare`` is the command-line front (``tubempc.commands.compare``).
+``outcome_json``. ``tubempc compare`` is the command-line front (``tubempc.cli.compare``).
 """
 
 from tubempc.compare.metrics import MetricInfo, MetricValue, certificate_metrics, metric_info

@@ -33,8 +33,8 @@ from tubempc.control.tube import TubeDesign, design_tube
 from tubempc.errors import DesignError
 from tubempc.scenario import Scenario
 
-__all__ = ["Arrival", "ClosedLoopResult", "SolverRecord", "Target", "hold_position", "leg_obstacles",
-           "run_closed_loop"]
+__all__ = ["Arrival", "ClosedLoopResult", "SolverRecord", "Target", "check_run_arguments", "disturbance_of",
+           "hold_position", "leg_obstacles", "rk4_symbolic", "run_closed_loop"]
 
 LOOKAHEAD_M = 0.5  # guide-path look-ahead of the first reference: far enough to saturate the speed
 GUIDE_MARGIN_M = 0.05  # extra clearance of the guide path around the constraint discs
@@ -112,6 +112,18 @@ def leg_obstacles(scenario: Scenario, source: str, target: str) -> list[tuple[fl
 _BLOCK_CACHE: dict[tuple[str, float, int], ca.Function] = {}
 
 
+def rk4_symbolic(model: DynamicsModel, z: ca.SX, u: ca.SX, d: ca.SX, dt_s: float, *, sub: int = 4) -> ca.SX:
+    """One sample of ``x' = f(x) + g(x) u + d`` with ``sub`` RK4 substeps (u, d held), as a casadi expression."""
+    dt = dt_s / sub
+    for _ in range(sub):
+        k1 = model.f(z) + model.g(z) @ u + d
+        k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
+        k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
+        k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
+        z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return z
+
+
 def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Function:
     """One MPC step of the sampled loop as a CasADi function (any model, any disturbance, with noise).
 
@@ -127,17 +139,9 @@ def _block_function(model: DynamicsModel, dt_s: float, samples: int) -> ca.Funct
     noise, delta = ca.SX.sym("noise", STATE_DIM, samples), ca.SX.sym("delta", STATE_DIM, samples)
     worst, bound, sigma = ca.SX.sym("worst"), ca.SX.sym("bound"), ca.SX.sym("sigma")
     direction = ca.SX.sym("direction", STATE_DIM)
-    sub = 4
-    dt = dt_s / sub
 
     def rk4(z: ca.SX, u: ca.SX, d: ca.SX) -> ca.SX:
-        for _ in range(sub):
-            k1 = model.f(z) + model.g(z) @ u + d
-            k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
-            k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
-            k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
-            z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return z
+        return rk4_symbolic(model, z, u, d, dt_s)
 
     x, xh = x0, xh0
     xs, xhs, us = [], [], []
@@ -206,19 +210,10 @@ def _slots(leg: _Leg, pos: np.ndarray, reach_m: float) -> np.ndarray:
     return slots
 
 
-def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
-                    disturbance: str | DisturbanceLike = "random", seed: int = 0, t_end_s: float | None = None,
-                    mocap_noise_m: float = 0.0, model: DynamicsModel | None = None,
-                    start_pose: Sequence[float] | None = None) -> ClosedLoopResult:
-    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring).
-
-    ``disturbance``: a model name (``DISTURBANCE_MODELS``, drawn from ``seed``) or a ``DisturbanceLike`` signal.
-    ``start_pose``: (x, y, theta) where the robot and the nominal start (default: the start region's centre with
-    the scenario's initial heading). ``seed`` also draws the MoCap noise.
-    """
-    from tubempc.control.loop import Plant, drive
-    from tubempc.control.tube_controller import TubeMPC
-
+def check_run_arguments(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None,
+                        mocap_noise_m: float, t_end_s: float | None, start_pose: Sequence[float] | None) -> str:
+    """The start region of a tube-MPC run, after checking its arguments (``InvalidArgumentError`` naming the bad
+    one; ``DesignError`` for an unsafe start region)."""
     if not targets:
         raise InvalidArgumentError("targets: at least one target is required")
     if not (math.isfinite(mocap_noise_m) and mocap_noise_m >= 0):
@@ -233,15 +228,38 @@ def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_regi
         raise DesignError(f"start region {source} is an unsafe region")
     if start_pose is not None and not (len(start_pose) == STATE_DIM and all(math.isfinite(v) for v in start_pose)):
         raise InvalidArgumentError(f"start_pose={start_pose!r} must be {STATE_DIM} finite numbers (x, y, theta)")
+    return source
+
+
+def disturbance_of(disturbance: str | DisturbanceLike, scenario: Scenario, rng: np.random.Generator
+                   ) -> DisturbanceLike:
+    """A model name drawn from ``rng`` with the scenario's bound, or a given signal (its bound checked)."""
+    if isinstance(disturbance, str):
+        return make_disturbance(disturbance, scenario.disturbance.bound, rng)
+    if not (math.isfinite(disturbance.bound) and disturbance.bound >= 0):
+        raise InvalidArgumentError(f"disturbance bound={disturbance.bound!r} must be a finite non-negative number")
+    return disturbance
+
+
+def run_closed_loop(scenario: Scenario, targets: Sequence[Target], *, start_region: str | None = None,
+                    disturbance: str | DisturbanceLike = "random", seed: int = 0, t_end_s: float | None = None,
+                    mocap_noise_m: float = 0.0, model: DynamicsModel | None = None,
+                    start_pose: Sequence[float] | None = None) -> ClosedLoopResult:
+    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring).
+
+    ``disturbance``: a model name (``DISTURBANCE_MODELS``, drawn from ``seed``) or a ``DisturbanceLike`` signal.
+    ``start_pose``: (x, y, theta) where the robot and the nominal start (default: the start region's centre with
+    the scenario's initial heading). ``seed`` also draws the MoCap noise.
+    """
+    from tubempc.control.loop import Plant, drive
+    from tubempc.control.tube_controller import TubeMPC
+
+    source = check_run_arguments(scenario, targets, start_region=start_region, mocap_noise_m=mocap_noise_m,
+                                 t_end_s=t_end_s, start_pose=start_pose)
     model = model or model_for(scenario)
     tube = design_tube(scenario, model)
     rng = np.random.default_rng(seed)
-    if isinstance(disturbance, str):
-        dist: DisturbanceLike = make_disturbance(disturbance, scenario.disturbance.bound, rng)
-    else:
-        dist = disturbance
-        if not (math.isfinite(dist.bound) and dist.bound >= 0):
-            raise InvalidArgumentError(f"disturbance bound={dist.bound!r} must be a finite non-negative number")
+    dist = disturbance_of(disturbance, scenario, rng)
     # the linear world model's nominal in closed form, except under the outward push with noise (RK4 blocks)
     closed_form = model.linear_world and not (dist.may_be_worst and mocap_noise_m > 0)
     controller = TubeMPC(model, tube=tube, closed_form_nominal=closed_form)

@@ -22,16 +22,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import InvalidArgumentError
 
 __all__ = ["DISTURBANCE_MODELS", "Disturbance", "DisturbanceLike", "InvalidArgumentError", "make_disturbance"]
 
 DISTURBANCE_MODELS = ("none", "random", "worst", "bias", "sine")
 _SINE_FREQUENCY_HZ = 0.2
-
-
-class InvalidArgumentError(TubeMPCError, ValueError):
-    """An argument of a control function is out of its domain; the message names it and its value."""
 
 
 class DisturbanceLike(Protocol):

@@ -16,15 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tubempc.errors import DesignError
+from tubempc.errors import NoGuidePathError
 
 __all__ = ["GuidePath", "NoGuidePathError", "guide_path", "references"]
 
 _RING_POINTS = 16
-
-
-class NoGuidePathError(DesignError):
-    """No collision-free polyline connects the start to the goal."""
 
 
 @dataclass(frozen=True, slots=True)

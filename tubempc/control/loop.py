@@ -25,7 +25,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from tubempc.control.closed_loop import Arrival, ClosedLoopResult, Target
+from tubempc.control.closed_loop import Arrival, ClosedLoopResult, Target, rk4_symbolic
 from tubempc.control.disturbance import DisturbanceLike
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel
 from tubempc.control.user import (
@@ -62,15 +62,7 @@ def _model_step(model: DynamicsModel, dt_s: float) -> ca.Function:
     fn = _STEP_CACHE.get(key)
     if fn is None:
         z0, u, d = (ca.SX.sym(n, STATE_DIM) for n in ("x", "u", "d"))
-        sub, z = 4, z0
-        dt = dt_s / sub
-        for _ in range(sub):
-            k1 = model.f(z) + model.g(z) @ u + d
-            k2 = model.f(z + dt / 2 * k1) + model.g(z + dt / 2 * k1) @ u + d
-            k3 = model.f(z + dt / 2 * k2) + model.g(z + dt / 2 * k2) @ u + d
-            k4 = model.f(z + dt * k3) + model.g(z + dt * k3) @ u + d
-            z = z + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        fn = _STEP_CACHE[key] = ca.Function("plant_step", [z0, u, d], [z])
+        fn = _STEP_CACHE[key] = ca.Function("plant_step", [z0, u, d], [rk4_symbolic(model, z0, u, d, dt_s)])
     return fn
 
 
@@ -102,6 +94,93 @@ class _Leg:
     departure_s: float | None = None
 
 
+@dataclass(frozen=True)
+class _Loop:
+    """What stays fixed during one run: the scenario, the controller and its hooks, the plant and its step."""
+
+    scenario: Scenario
+    controller: Controller
+    plant: Plant
+    dist: DisturbanceLike
+    dt: float
+    period: int  # samples per decision period
+    eta: float  # robot radius
+    model_step: ca.Function | None
+    nominal: Any  # the controller's nominal() hook, or None
+    arrived: Any  # the controller's arrived(t_s, reference) hook, or None
+
+
+@dataclass(frozen=True)
+class _Trace:
+    """The run's samples, one row per sample: true, measured and nominal state, body and world input."""
+
+    xs: np.ndarray
+    xms: np.ndarray
+    xhs: np.ndarray
+    ub: np.ndarray
+    uw: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> _Trace:
+        return cls(np.zeros((n, 3)), np.zeros((n, 3)), np.full((n, 3), np.nan), np.zeros((n, 3)), np.zeros((n, 3)))
+
+
+def _inside(x: np.ndarray, ref: Any, eta: float) -> bool:
+    """The robot's disc lies inside the reference's region."""
+    return bool(math.hypot(x[0] - ref.center_xy[0], x[1] - ref.center_xy[1]) + eta <= ref.radius_m)
+
+
+def _update_legs(loop: _Loop, legs: list[_Leg], refs: Sequence[Any], x: np.ndarray, t0: float, *,
+                 done: bool) -> bool:
+    """At a block start: note the current target's entry, and move to the next target once the current one is
+    reached and held (a new leg). True when the last target is reached and held now."""
+    leg = legs[-1]
+    ref = refs[leg.index]
+    if loop.period == 1 and leg.inside_s is None and _inside(x, ref, loop.eta):
+        leg.inside_s = t0
+    if callable(loop.arrived) and loop.arrived(t0, ref) and leg.entered_s is None:
+        leg.entered_s = t0
+    if not callable(loop.arrived) and leg.entered_s is None:
+        leg.entered_s = leg.inside_s
+    if done or leg.entered_s is None or leg.inside_s is None or (
+            ref.depart_after_s is not None and t0 < ref.depart_after_s - 1e-9):
+        return False
+    if leg.index + 1 < len(refs):
+        leg.departure_s = t0
+        legs.append(_Leg(leg.index + 1, t0))
+        return False
+    return True
+
+
+def _run_block(loop: _Loop, trace: _Trace, x: np.ndarray, *, i: int, m_blk: int, t_arr: np.ndarray, leg: _Leg,
+               ref: Any, rng: np.random.Generator, mocap_noise_m: float) -> np.ndarray:
+    """One decision period from sample ``i`` (``m_blk`` samples): draw the block's noise and disturbance, then at
+    every sample measure, ask the controller, record and advance the plant. Returns the state after the block."""
+    dt, dist, plant = loop.dt, loop.dist, loop.plant
+    t0 = float(t_arr[i])
+    m_draw = loop.period if plant.full_blocks else m_blk
+    noise = np.zeros((m_draw, 2))
+    if mocap_noise_m > 0:
+        noise = rng.normal(scale=mocap_noise_m, size=(m_draw, 2))
+    worst = dist.worst_at(t0) if dist.may_be_worst else False
+    deltas = None if worst else np.asarray(
+        dist.batch(t0 + dt * np.arange(m_draw) if plant.full_blocks else t_arr[i:i + m_blk]), dtype=float)
+    for j in range(m_blk):
+        k = i + j
+        t = float(t_arr[k])
+        measured = x.copy()
+        measured[:2] += noise[j]
+        u = _command(loop.controller.step(t, measured.copy(), ref), loop.controller.input_model, t)
+        trace.xs[k], trace.xms[k], trace.ub[k] = x, measured, u
+        if callable(loop.nominal):
+            trace.xhs[k] = np.asarray(loop.nominal(), dtype=float).ravel()[:3]
+        if loop.period > 1 and leg.inside_s is None and _inside(x, ref, loop.eta):
+            leg.inside_s = t
+        x, trace.uw[k] = _advance(x, u, scenario=loop.scenario, plant=plant, model_step=loop.model_step,
+                                  x_hat=trace.xhs[k], worst=worst, deltas=deltas, j=j, dist=dist, dt=dt)
+    return x
+
+
 def drive(scenario: Scenario, controller: Controller, targets: Sequence[Target], *, source: str,
           start: Sequence[float], dist: DisturbanceLike, rng: np.random.Generator, seed: int, t_end_s: float | None,
           mocap_noise_m: float, plant: Plant, budget_speed_mps: float) -> ClosedLoopResult:
@@ -112,82 +191,51 @@ def drive(scenario: Scenario, controller: Controller, targets: Sequence[Target],
     x = np.array([float(v) for v in start], dtype=float)
     refs = tuple(_reference(scenario, k, t) for k, t in enumerate(targets))
     controller.reset(scenario, ControllerPlan(source, (float(x[0]), float(x[1]), float(x[2])), refs))
-    period = _period_samples(controller, dt)
+    model = plant.model
+    loop = _Loop(scenario, controller, plant, dist, dt, _period_samples(controller, dt), scenario.robot.radius,
+                 None if model is None or model.linear_world else _model_step(model, dt),
+                 getattr(controller, "nominal", None), getattr(controller, "arrived", None))
     t_max = t_end_s if t_end_s is not None else _time_budget_s(scenario, targets, scenario.region(source).center,
                                                                budget_speed_mps)
     n_max = math.floor(t_max / dt + 1e-9) + 1
     t_arr = np.round(np.arange(n_max) * dt, 9)  # sample times without accumulated float noise
-    xs, xms, xhs = np.zeros((n_max, 3)), np.zeros((n_max, 3)), np.full((n_max, 3), np.nan)
-    ub, uw = np.zeros((n_max, 3)), np.zeros((n_max, 3))
-    nominal = getattr(controller, "nominal", None)
-    arrived = getattr(controller, "arrived", None)
-    model = plant.model
-    model_step = None if model is None or model.linear_world else _model_step(model, dt)
-    eta = scenario.robot.radius
+    trace = _Trace.empty(n_max)
     legs = [_Leg(0, 0.0)]
     done = False
     n = n_max
     i = 0
     while i < n:
-        t0 = float(t_arr[i])
-        leg = legs[-1]
-        ref = refs[leg.index]
-        if period == 1 and leg.inside_s is None and math.hypot(x[0] - ref.center_xy[0], x[1] - ref.center_xy[1]) \
-                + eta <= ref.radius_m:
-            leg.inside_s = t0
-        if callable(arrived) and arrived(t0, ref) and leg.entered_s is None:
-            leg.entered_s = t0
-        if not callable(arrived) and leg.entered_s is None:
-            leg.entered_s = leg.inside_s
-        if not done and leg.entered_s is not None and leg.inside_s is not None and (
-                ref.depart_after_s is None or t0 >= ref.depart_after_s - 1e-9):
-            if leg.index + 1 < len(refs):
-                leg.departure_s = t0
-                leg = _Leg(leg.index + 1, t0)
-                legs.append(leg)
-                ref = refs[leg.index]
-            else:
-                done = True
-                if t_end_s is None:
-                    n = i + 1
-        m_blk = min(period, n - i)
-        m_draw = period if plant.full_blocks else m_blk
-        noise = np.zeros((m_draw, 2))
-        if mocap_noise_m > 0:
-            noise = rng.normal(scale=mocap_noise_m, size=(m_draw, 2))
-        worst = dist.worst_at(t0) if dist.may_be_worst else False
-        deltas = None if worst else np.asarray(
-            dist.batch(t0 + dt * np.arange(m_draw) if plant.full_blocks else t_arr[i:i + m_blk]), dtype=float)
-        for j in range(m_blk):
-            k = i + j
-            t = float(t_arr[k])
-            measured = x.copy()
-            measured[:2] += noise[j]
-            u = _command(controller.step(t, measured.copy(), ref), controller.input_model, t)
-            xs[k], xms[k], ub[k] = x, measured, u
-            if callable(nominal):
-                xhs[k] = np.asarray(nominal(), dtype=float).ravel()[:3]
-            if period > 1 and leg.inside_s is None and math.hypot(x[0] - ref.center_xy[0], x[1] - ref.center_xy[1]) \
-                    + eta <= ref.radius_m:
-                leg.inside_s = t
-            x, uw[k] = _advance(x, u, scenario=scenario, plant=plant, model_step=model_step, x_hat=xhs[k],
-                                worst=worst, deltas=deltas, j=j, dist=dist, dt=dt)
+        if _update_legs(loop, legs, refs, x, float(t_arr[i]), done=done):
+            done = True
+            if t_end_s is None:
+                n = i + 1
+        m_blk = min(loop.period, n - i)
+        x = _run_block(loop, trace, x, i=i, m_blk=m_blk, t_arr=t_arr, leg=legs[-1], ref=refs[legs[-1].index],
+                       rng=rng, mocap_noise_m=mocap_noise_m)
         i += m_blk
     if model is not None and not model.linear_world and n:
-        g_all = np.asarray(model.g.map(n)(xs[:n].T), dtype=float).reshape(STATE_DIM, n, STATE_DIM)
-        uw[:n] = np.einsum("ikj,kj->ki", g_all, ub[:n])
+        g_all = np.asarray(model.g.map(n)(trace.xs[:n].T), dtype=float).reshape(STATE_DIM, n, STATE_DIM)
+        trace.uw[:n] = np.einsum("ikj,kj->ki", g_all, trace.ub[:n])
+    return _result(trace, legs, targets, t_arr[:n], controller=controller, source=source, seed=seed, dist=dist,
+                   mocap_noise_m=mocap_noise_m)
+
+
+def _result(trace: _Trace, legs: list[_Leg], targets: Sequence[Target], t_s: np.ndarray, *, controller: Controller,
+            source: str, seed: int, dist: DisturbanceLike, mocap_noise_m: float) -> ClosedLoopResult:
+    """The run's samples (the first ``len(t_s)``), its arrivals and whether every target was reached."""
+    n = len(t_s)
     arrivals = tuple(Arrival(targets[lg.index].region, lg.departed_s,
                              None if lg.entered_s is None else round(lg.entered_s - lg.departed_s, 9), lg.entered_s,
                              lg.inside_s, lg.departure_s) for lg in legs)
     ok, reason = True, None
     for k, tg in enumerate(targets):
         if k >= len(legs) or legs[k].entered_s is None or legs[k].inside_s is None:
-            ok, reason = False, f"target {tg.region} (#{k + 1}) not reached by t={t_arr[n - 1]:.2f} s"
+            ok, reason = False, f"target {tg.region} (#{k + 1}) not reached by t={t_s[n - 1]:.2f} s"
             break
     claimed = getattr(controller, "tube_radius_m", None)
     return ClosedLoopResult(
-        t_s=t_arr[:n].copy(), x=xs[:n].copy(), x_measured=xms[:n].copy(), x_hat=xhs[:n].copy(),
-        u_world=uw[:n].copy(), u_body=ub[:n].copy(), solver=(), arrivals=arrivals, targets=tuple(targets),
+        t_s=t_s.copy(), x=trace.xs[:n].copy(), x_measured=trace.xms[:n].copy(), x_hat=trace.xhs[:n].copy(),
+        u_world=trace.uw[:n].copy(), u_body=trace.ub[:n].copy(), solver=(), arrivals=arrivals, targets=tuple(targets),
         start_region=source, tube_radius_m=float(claimed) if isinstance(claimed, int | float) else 0.0, sigma=0.0,
         seed=seed, disturbance=dist.kind, disturbance_params=dist.params, mocap_noise_m=mocap_noise_m, ok=ok,
         reason=reason)

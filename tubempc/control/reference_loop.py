@@ -27,8 +27,10 @@ from tubempc.control.closed_loop import (
     _Leg,
     _slots,
     _start_leg,
+    check_run_arguments,
+    disturbance_of,
 )
-from tubempc.control.disturbance import DisturbanceLike, InvalidArgumentError, make_disturbance
+from tubempc.control.disturbance import DisturbanceLike
 from tubempc.control.dynamics import STATE_DIM, DynamicsModel, model_for
 from tubempc.control.fhocp import NominalMPC, build_fhocp
 from tubempc.control.guide import references
@@ -110,35 +112,14 @@ def run_closed_loop_reference(scenario: Scenario, targets: Sequence[Target], *, 
                     disturbance: str | DisturbanceLike = "random", seed: int = 0, t_end_s: float | None = None,
                     mocap_noise_m: float = 0.0, model: DynamicsModel | None = None,
                     start_pose: Sequence[float] | None = None) -> ClosedLoopResult:
-    """Simulate the tube MPC through ``targets`` from the centre of ``start_region`` (see module docstring).
-
-    ``disturbance``: a model name (``DISTURBANCE_MODELS``, drawn from ``seed``) or a ``DisturbanceLike`` signal.
-    ``start_pose``: (x, y, theta) where the robot and the nominal start (default: the start region's centre with
-    the scenario's initial heading). ``seed`` also draws the MoCap noise.
-    """
-    if not targets:
-        raise InvalidArgumentError("targets: at least one target is required")
-    if not (math.isfinite(mocap_noise_m) and mocap_noise_m >= 0):
-        raise InvalidArgumentError(f"mocap_noise_m={mocap_noise_m!r} must be a finite non-negative number")
-    if t_end_s is not None and not (math.isfinite(t_end_s) and t_end_s > 0):
-        raise InvalidArgumentError(f"t_end_s={t_end_s!r} must be a positive number")
-    source = start_region or scenario.initial_region
-    for name in [source, *(t.region for t in targets)]:
-        if name not in {r.name for r in scenario.regions}:
-            raise InvalidArgumentError(f"region={name!r} is not in scenario {scenario.name!r}")
-    if scenario.region(source).unsafe:
-        raise DesignError(f"start region {source} is an unsafe region")
-    if start_pose is not None and not (len(start_pose) == STATE_DIM and all(math.isfinite(v) for v in start_pose)):
-        raise InvalidArgumentError(f"start_pose={start_pose!r} must be {STATE_DIM} finite numbers (x, y, theta)")
+    """``run_closed_loop``'s run (same arguments, same checks), by the straight loop of this module: the reference
+    the equality test holds the general loop to."""
+    source = check_run_arguments(scenario, targets, start_region=start_region, mocap_noise_m=mocap_noise_m,
+                                 t_end_s=t_end_s, start_pose=start_pose)
     model = model or model_for(scenario)
     tube = design_tube(scenario, model)
     rng = np.random.default_rng(seed)
-    if isinstance(disturbance, str):
-        dist: DisturbanceLike = make_disturbance(disturbance, scenario.disturbance.bound, rng)
-    else:
-        dist = disturbance
-        if not (math.isfinite(dist.bound) and dist.bound >= 0):
-            raise InvalidArgumentError(f"disturbance bound={dist.bound!r} must be a finite non-negative number")
+    dist = disturbance_of(disturbance, scenario, rng)
     h = scenario.mpc.h
     dt = 1.0 / scenario.mocap.rate_hz
     per_step = round(h / dt)

@@ -15,7 +15,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from tubempc.control.closed_loop import ClosedLoopResult, Target, run_closed_loo
 from tubempc.errors import TubeMPCError
 from tubempc.falsify.space import Candidate, SearchSpace
 from tubempc.scenario import Scenario
+
+if TYPE_CHECKING:
+    from verify.certificate import Certificate
 
 __all__ = ["DEFAULT_CHECKS", "MARGIN_CHECKS", "Evaluation", "FalsifySetup", "evaluate", "evaluate_job",
            "judge", "simulate"]
@@ -87,10 +90,10 @@ def simulate(setup: FalsifySetup, cand: Candidate) -> ClosedLoopResult:
                            mocap_noise_m=cand.noise_std_m, start_pose=cand.start_pose)
 
 
-def judge(setup: FalsifySetup, certificate: dict[str, Any]) -> tuple[float, str | None, bool, bool,
-                                                                      dict[str, dict[str, Any]]]:
+def judge(setup: FalsifySetup, certificate: Certificate) -> tuple[float, str | None, bool, bool,
+                                                                dict[str, dict[str, Any]]]:
     """(objective, its check, violated, inconclusive, per-check entries) of a certificate's selected checks."""
-    entries = {str(c["name"]): c for c in certificate.get("checks", [])}
+    entries = {c.name: c for c in certificate.checks}
     picked: dict[str, dict[str, Any]] = {}
     objective, worst = math.inf, None
     violated = inconclusive = False
@@ -98,11 +101,11 @@ def judge(setup: FalsifySetup, certificate: dict[str, Any]) -> tuple[float, str 
         entry = entries.get(name)
         if entry is None:
             continue
-        verdict, margin = str(entry.get("verdict")), entry.get("margin")
+        verdict, margin = str(entry.verdict), entry.margin
         picked[name] = {"verdict": verdict, "margin": margin}
         violated |= verdict == "fail"
         inconclusive |= verdict == "inconclusive"
-        value = float(margin) if isinstance(margin, int | float) and math.isfinite(float(margin)) else None
+        value = margin if margin is not None and math.isfinite(margin) else None
         if value is None and verdict == "fail":
             value = 0.0  # a failed check without a margin (the timed run) still counts as a violation at 0
         if value is not None and value < objective:
@@ -129,9 +132,10 @@ def evaluate(setup: FalsifySetup, z: Sequence[float]) -> Evaluation:
         return Evaluation(key, math.nan, None, False, False, {}, "error", time.perf_counter() - start, 0.0,
                           error=f"{err.__class__.__name__}: {err}")
     judge_s = time.perf_counter() - start - sim_s
-    objective, worst, violated, inconclusive, picked = judge(setup, certified.certificate)
+    typed = certified.typed
+    objective, worst, violated, inconclusive, picked = judge(setup, typed)
     duration = float(result.t_s[-1]) if len(result.t_s) else 0.0
-    return Evaluation(key, objective, worst, violated, inconclusive, picked, str(certified.certificate["verdict"]),
+    return Evaluation(key, objective, worst, violated, inconclusive, picked, str(typed.verdict),
                       sim_s, judge_s, duration)
 
 

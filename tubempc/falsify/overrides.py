@@ -14,14 +14,10 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import OverrideError
 from tubempc.scenario import Scenario
 
 __all__ = ["OverrideError", "apply_overrides", "parse_override"]
-
-
-class OverrideError(TubeMPCError, ValueError):
-    """A ``--set`` override is malformed or names no scenario field; the message quotes it."""
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import FalsifyError
 from tubempc.falsify.objective import DEFAULT_CHECKS, MARGIN_CHECKS, Evaluation, FalsifySetup, evaluate, simulate
 from tubempc.falsify.overrides import apply_overrides
 from tubempc.falsify.search import Method, SearchResult, search
@@ -34,10 +34,6 @@ __all__ = ["FALSIFY_FORMAT", "FalsifyError", "FalsifyOutcome", "FalsifyRequest",
 FALSIFY_FORMAT = "tubempc-falsify/1"
 EXIT_CODES = {"fail": 1, "inconclusive": 2, "no_violation_found": 0}
 KNOWN_CHECKS = (*MARGIN_CHECKS, "spec_timed_run")
-
-
-class FalsifyError(TubeMPCError, ValueError):
-    """The falsification cannot start (the unperturbed run fails to simulate, an unknown check, ...)."""
 
 
 @dataclass(frozen=True)
@@ -178,7 +174,7 @@ def _resolve_run(req: FalsifyRequest, scenario: Scenario) -> tuple[str, tuple[tu
         plan = plan_mission(scenario, objective="margin")
         targets = tuple((t.region, t.depart_after_s) for t in plan.controller_targets())
         return scenario.initial_region, targets, req.spec, {"planned_run": [list(p) for p in plan.run]}
-    from tubempc.regress.suite import derived_spec
+    from tubempc.scenario.transition import derived_spec
 
     if req.target is None:
         raise FalsifyError("give either --to REGION (one transition) or --plan (the scenario's mission)")
@@ -286,7 +282,7 @@ def write_case(setup: FalsifySetup, ev: Evaluation, out_dir: Path, *, sections: 
     written = write_reports(certified, setup.scenario, out_dir, suite_name="falsify", sections=sections)
     from tubempc.falsify.objective import judge
 
-    margin, check, violated, _, _ = judge(setup, certified.certificate)
+    margin, check, violated, _, _ = judge(setup, certified.typed)
     return {"log": str(log_path), "certificate": str(cert_path),
             "report_html": str(written.get("report.html", "")), "report_md": str(written.get("report.md", "")),
             "certificate_verdict": certified.verdict, "margin_from_log": margin, "check_from_log": check,

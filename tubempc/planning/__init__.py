@@ -9,21 +9,18 @@ from tubempc.planning.reference_semantics import LassoRun, holds, truth_table
 from tubempc.planning.retime import Retimed, retime
 from tubempc.planning.search import SearchLimitError, SearchResult, export_dot, find_run
 from tubempc.planning.wts import (
-    FAILED,
-    INITIAL,
-    LABELS,
-    WEIGHT,
     AbstractionError,
     TransitionOracle,
     build_wts,
     make_wts,
+    wts_all_labels,
+    wts_edges,
+    wts_failed,
+    wts_labels,
+    wts_weight,
 )
 
 __all__ = [
-    "FAILED",
-    "INITIAL",
-    "LABELS",
-    "WEIGHT",
     "AbstractionError",
     "LassoRun",
     "Plan",
@@ -44,4 +41,9 @@ __all__ = [
     "retime",
     "tick_of",
     "truth_table",
+    "wts_all_labels",
+    "wts_edges",
+    "wts_failed",
+    "wts_labels",
+    "wts_weight",
 ]

@@ -25,13 +25,13 @@ from tubempc.mitl import Formula
 from tubempc.planning.reference_semantics import LassoRun
 from tubempc.planning.retime import OBJECTIVES, retime
 from tubempc.planning.search import DEFAULT_MAX_STATES, DWELL_MODES, SILENT, SearchResult, find_run
-from tubempc.planning.wts import FAILED, LABELS, ORACLE, TransitionOracle, build_wts
+from tubempc.planning.wts import TransitionOracle, build_wts, wts_all_labels, wts_failed, wts_oracle
 from tubempc.scenario import Scenario
 
 if TYPE_CHECKING:
     from tubempc.control.closed_loop import Target
 
-__all__ = ["Plan", "PlannedTarget", "plan_from_wts", "plan_mission", "require_transitions"]
+__all__ = ["Plan", "PlannedTarget", "plan_from_run", "plan_from_wts", "plan_mission", "require_transitions"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,10 +135,11 @@ def _silent_targets(run: LassoRun, weights: list[Fraction]) -> tuple[PlannedTarg
     return tuple(out)
 
 
-def require_transitions(wts: nx.DiGraph) -> None:
+def require_transitions(wts: nx.DiGraph, *, scenario_name: str | None = None) -> None:
     """Raise ``DesignError`` (unusable input, exit 3) when the abstraction has no usable transition because every
-    region pair failed (the controller's design check, or its runs): the message names the failed quantity."""
-    failed: dict[tuple[str, str], str] = wts.graph.get(FAILED) or {}
+    region pair failed (the controller's design check, or its runs): the message names the failed quantity and an
+    example pair (``scenario_name``, when given, opens the message)."""
+    failed = wts_failed(wts)
     if wts.number_of_edges() > 0 or not failed:
         return
     counts: dict[str, list[tuple[str, str]]] = {}
@@ -147,8 +148,10 @@ def require_transitions(wts: nx.DiGraph) -> None:
     reason, pairs = max(counts.items(), key=lambda kv: (len(kv[1]), kv[0]))
     a, b = sorted(pairs)[0]
     others = "" if len(counts) == 1 else f"; {len(counts) - 1} other reason(s) for the other pairs"
-    raise DesignError(f"the abstraction has no usable transition: all {len(failed)} region pairs failed; "
-                      f"{len(pairs)} of them (e.g. {a}->{b}) with {reason}{others}")
+    opening = f"scenario {scenario_name}: " if scenario_name is not None else ""
+    raise DesignError(f"{opening}every transition between regions failed the controller's design check "
+                      f"({len(failed)} of {len(failed)}): the abstraction has no usable transition, so there is "
+                      f"nothing to plan on; {len(pairs)} of them with this reason, e.g. {a} -> {b}: {reason}{others}")
 
 
 def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: str | None = None,
@@ -166,7 +169,16 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
         raise ValueError(f"objective={objective!r} must be one of {OBJECTIVES}")
     require_transitions(wts)
     found: SearchResult = find_run(wts, formula, wait=wait, initial=initial, max_states=max_states, dwell=dwell)
-    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in wts.nodes}
+    return plan_from_run(wts, formula, found, wait=wait, objective=objective)
+
+
+def plan_from_run(wts: nx.DiGraph, formula: Formula, found: SearchResult, *, wait: bool = True,
+                  objective: str = "time") -> Plan:
+    """Re-time the run ``find_run`` found on ``wts`` for ``formula`` and map it to targets (``plan_from_wts``'s
+    second half: a caller that also needs the search result, e.g. its explored product, searches once)."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective={objective!r} must be one of {OBJECTIVES}")
+    labels = wts_all_labels(wts)
     silent = found.dwell == SILENT
     # the WTS weight of the step into each position (silent mode: its duration without the wait)
     weights = [Fraction(0)] + [found.run.times[k] - found.run.times[k - 1] - found.waits_s[k]
@@ -190,7 +202,7 @@ def plan_from_wts(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initi
         wait=wait,
         dwell=found.dwell,
         retimed=re.retimed,
-        oracle=str(wts.graph.get(ORACLE, "?")),
+        oracle=str(wts_oracle(wts) or "?"),
         search_s=found.seconds,
         product_states=found.states,
         objective=objective,

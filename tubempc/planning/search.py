@@ -43,7 +43,7 @@ from tubempc.planning.automaton import State, TimedAutomaton, compile_formula, t
 from tubempc.planning.exact import exact_search
 from tubempc.planning.product import DWELL, MOVE, STAY, Found, Product, accepting_cycle, assemble
 from tubempc.planning.reference_semantics import LassoRun, holds
-from tubempc.planning.wts import INITIAL, LABELS, WEIGHT
+from tubempc.planning.wts import wts_edges, wts_initial, wts_labels
 from tubempc.planning.zones import DEFAULT_ZONE_STATES, zone_search
 
 __all__ = ["DEFAULT_MAX_STATES", "DWELL_MODES", "OBSERVED", "SILENT", "SearchLimitError", "SearchResult", "export_dot",
@@ -114,22 +114,21 @@ def find_run(wts: nx.DiGraph, formula: Formula, *, wait: bool = True, initial: s
     if dwell not in DWELL_MODES:
         raise ValueError(f"dwell={dwell!r} must be one of {DWELL_MODES}")
     start = time.perf_counter()
-    init = initial if initial is not None else wts.graph.get(INITIAL)
+    init = initial if initial is not None else wts_initial(wts)
     if init is None or init not in wts:
         raise ValueError(f"initial region {init!r} is not a state of the WTS (safe regions: {sorted(wts.nodes)})")
-    weights = [d[WEIGHT] for _, _, d in wts.edges(data=True)]
-    for a, b, d in wts.edges(data=True):
-        w = d[WEIGHT]
+    weights = [w for _, _, w in wts_edges(wts)]
+    for a, b, w in wts_edges(wts):
         if not isinstance(w, Fraction | int) or w <= 0:
-            raise ValueError(f"WTS edge {a}->{b}: {WEIGHT}={w!r} must be a positive exact number (Fraction)")
+            raise ValueError(f"WTS edge {a}->{b}: t_ij={w!r} must be a positive exact number (Fraction)")
     consts = [c for iv in _intervals(formula) for c in (iv.lo, iv.hi) if c is not None]
     tick = tick_of([Fraction(w) for w in weights] + consts, refine=2 if wait else 1)
     aut = compile_formula(formula, tick)
     silent = wait and dwell == SILENT
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
-    cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
-    labels = {n: tuple(wts.nodes[n].get(LABELS, ())) for n in names}
+    cls = [aut.label_class(wts_labels(wts, n)) for n in names]
+    labels = {n: wts_labels(wts, n) for n in names}
     states = 0
     exact_s = 0.0
     if not wait:
@@ -213,9 +212,9 @@ def _cost(run: LassoRun) -> Fraction:
 def _adjacency(wts: nx.DiGraph, names: list[str], idx: dict[str, int], tick: Fraction) -> list[list[tuple[int, int]]]:
     """Out-edges per region index as (target index, weight in ticks); the one place the WTS weights are read."""
     adj: list[list[tuple[int, int]]] = [[] for _ in names]
-    for a, b, d in wts.edges(data=True):
+    for a, b, w in wts_edges(wts):
         if a != b:
-            adj[idx[a]].append((idx[b], int(Fraction(d[WEIGHT]) / tick)))
+            adj[idx[a]].append((idx[b], int(Fraction(w) / tick)))
     return adj
 
 
@@ -225,7 +224,7 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
     states, with event-driven waits and, with ``prune``, pruning by dominance."""
     names = sorted(wts.nodes)
     idx = {n: i for i, n in enumerate(names)}
-    cls = [aut.label_class(wts.nodes[n].get(LABELS, ())) for n in names]
+    cls = [aut.label_class(wts_labels(wts, n)) for n in names]
     adj = _adjacency(wts, names, idx, aut.tick)
     arrivals = [[(w, cls[j]) for j, w in row] for row in adj]
     prod = Product()

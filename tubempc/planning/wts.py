@@ -1,15 +1,16 @@
 """Abstraction: scenario + a transition oracle (Algorithm 1 by default) -> weighted transition system (WTS).
 
 input: a ``Scenario`` and a ``TransitionOracle`` (``tubempc.control.algorithm1.transition_time`` unless another is
-given) -> output: a networkx ``DiGraph`` whose nodes are the *safe* regions (attribute ``LABELS``; unsafe regions
-are never entered, so they are not states of the WTS) and whose edge ``i -> j`` carries the exact rational
-``WEIGHT`` t_ij (seconds, a ``Fraction``) when the tube-MPC closed loop drives the robot from region ``i`` into the
+given) -> output: a networkx ``DiGraph`` whose nodes are the *safe* regions (their labels: ``wts_labels``; unsafe
+regions are never entered, so they are not states of the WTS) and whose edge ``i -> j`` carries the exact rational
+t_ij (seconds, a ``Fraction``: ``wts_weight``) when the tube-MPC closed loop drives the robot from region ``i`` into the
 terminal set of ``j`` without violating the tightened constraints. Pairs that fail are listed with the oracle's
-reason in the graph attribute ``FAILED``.
+reason (``wts_failed``). The graph's attribute keys are private to this module: everything else reads the graph
+through the typed accessors at its end.
 
-The pairs are evaluated in parallel by ``verify.executor.parallel_map`` (a process pool, or a Dask cluster when a
-client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the result is
-cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
+The pairs are evaluated in parallel by ``tubempc.runtime.executor.parallel_map`` (a process pool, or a Dask cluster
+when a client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the
+result is cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
 settings and its code.
 """
 
@@ -32,17 +33,11 @@ from typing import Any, Protocol
 import networkx as nx
 
 import tubempc
-from tubempc.errors import TubeMPCError
+from tubempc.errors import AbstractionError, TubeMPCError
 from tubempc.scenario import Scenario
 
 __all__ = [
     "CACHE_ENV",
-    "FAILED",
-    "INITIAL",
-    "LABELS",
-    "ORACLE",
-    "SCENARIO_SHA",
-    "WEIGHT",
     "AbstractionError",
     "PairResult",
     "TransitionOracle",
@@ -51,22 +46,28 @@ __all__ = [
     "cache_dir",
     "default_oracle",
     "make_wts",
+    "set_wts_failed",
+    "wts_all_labels",
+    "wts_cache_file",
+    "wts_edges",
+    "wts_failed",
     "wts_from_weights",
+    "wts_initial",
+    "wts_labels",
+    "wts_oracle",
     "wts_summary",
+    "wts_weight",
 ]
 
-WEIGHT = "t_ij"  # edge attribute: Algorithm 1 time (Fraction, seconds)
-LABELS = "labels"  # node attribute: tuple of atomic propositions
-FAILED = "failed"  # graph attribute: {(i, j): reason} of pairs the controller cannot drive
-INITIAL = "initial"  # graph attribute: the initial region
-SCENARIO_SHA = "scenario_sha256"  # graph attribute
-ORACLE = "oracle"  # graph attribute: which oracle built the weights
+_WEIGHT = "t_ij"  # edge attribute: Algorithm 1 time (Fraction, seconds)
+_LABELS = "labels"  # node attribute: tuple of atomic propositions
+_FAILED = "failed"  # graph attribute: {(i, j): reason} of pairs the controller cannot drive
+_INITIAL = "initial"  # graph attribute: the initial region
+_SCENARIO_SHA = "scenario_sha256"  # graph attribute
+_ORACLE = "oracle"  # graph attribute: which oracle built the weights
+_CACHE = "cache"  # graph attribute: the cache file (None without the cache)
 CACHE_ENV = "TUBEMPC_CACHE"
 _FORMAT = 1
-
-
-class AbstractionError(TubeMPCError, RuntimeError):
-    """The abstraction could not be built (an oracle crashed or returned a malformed result)."""
 
 
 class TransitionOutcome(Protocol):
@@ -172,17 +173,17 @@ def _evaluate(job: _Job) -> PairResult:
 def wts_from_weights(scenario: Scenario, pairs: Iterable[PairResult], *, oracle_name: str) -> nx.DiGraph:
     """Assemble the WTS from evaluated pairs (also used to rebuild it from the cache)."""
     g = nx.DiGraph()
-    g.graph[INITIAL] = scenario.initial_region
-    g.graph[SCENARIO_SHA] = scenario.sha256()
-    g.graph[ORACLE] = oracle_name
-    g.graph[FAILED] = {}
+    g.graph[_INITIAL] = scenario.initial_region
+    g.graph[_SCENARIO_SHA] = scenario.sha256()
+    g.graph[_ORACLE] = oracle_name
+    g.graph[_FAILED] = {}
     for r in scenario.safe_regions:
-        g.add_node(r.name, **{LABELS: tuple(r.labels)})
+        g.add_node(r.name, **{_LABELS: tuple(r.labels)})
     for p in pairs:
         if p.ok and p.t_ij is not None:
-            g.add_edge(p.source, p.target, **{WEIGHT: p.t_ij})
+            g.add_edge(p.source, p.target, **{_WEIGHT: p.t_ij})
         else:
-            g.graph[FAILED][(p.source, p.target)] = p.reason or "failed"
+            g.graph[_FAILED][(p.source, p.target)] = p.reason or "failed"
     return g
 
 
@@ -222,7 +223,7 @@ def build_wts(
 
     ``workers``: processes (default: CPU count; 1 evaluates in this process). ``dask``: a
     ``dask.distributed.Client``, a scheduler address or ``"local"``; when given, the pairs run on that cluster
-    instead (``verify.executor.parallel_map``).
+    instead (``tubempc.runtime.executor.parallel_map``).
     ``cache_path``: a directory (default ``cache_dir()``).
     """
     fn: TransitionOracle = default_oracle() if oracle is None else oracle
@@ -233,11 +234,11 @@ def build_wts(
         cached = _load_cache(path)
         if cached is not None:
             g = wts_from_weights(scenario, cached, oracle_name=ident["oracle"])
-            g.graph["cache"] = str(path)
+            g.graph[_CACHE] = str(path)
             return g
     names = [r.name for r in scenario.safe_regions]
     todo = [_Job(fn, scenario, a, b, disturbance, seed) for a in names for b in names if a != b]
-    from verify.executor import parallel_map  # the one executor (processes or Dask) of both packages
+    from tubempc.runtime.executor import parallel_map  # the one executor (processes or Dask) of both packages
 
     oracle_module = getattr(fn, "__module__", None)
     preload = ("tubempc.planning.wts", *([oracle_module] if oracle_module and oracle_module != "__main__" else []))
@@ -250,7 +251,7 @@ def build_wts(
         with contextlib.suppress(OSError):  # an unwritable cache directory only costs time on the next run
             _store_cache(path, results, {"scenario": scenario.sha256(), **ident})
     g = wts_from_weights(scenario, results, oracle_name=ident["oracle"])
-    g.graph["cache"] = str(path) if use_cache else None
+    g.graph[_CACHE] = str(path) if use_cache else None
     return g
 
 
@@ -258,16 +259,16 @@ def make_wts(labels: dict[str, Iterable[str]], weights: dict[tuple[str, str], Fr
              initial: str, oracle_name: str = "given") -> nx.DiGraph:
     """A WTS from explicit labels and exact weights (seconds), e.g. for tests or hand-made abstractions."""
     g = nx.DiGraph()
-    g.graph.update({INITIAL: initial, SCENARIO_SHA: None, ORACLE: oracle_name, FAILED: {}})
+    g.graph.update({_INITIAL: initial, _SCENARIO_SHA: None, _ORACLE: oracle_name, _FAILED: {}})
     for name, labs in labels.items():
-        g.add_node(name, **{LABELS: tuple(labs)})
+        g.add_node(name, **{_LABELS: tuple(labs)})
     for (a, b), w in weights.items():
         if a not in g or b not in g:
             raise ValueError(f"weights: edge {a}->{b} names a region without labels")
         wf = Fraction(w)
         if wf <= 0:
             raise ValueError(f"weights[{a}->{b}]={w!r} must be positive")
-        g.add_edge(a, b, **{WEIGHT: wf})
+        g.add_edge(a, b, **{_WEIGHT: wf})
     if initial not in g:
         raise ValueError(f"initial={initial!r} is not a region of the WTS")
     return g
@@ -275,4 +276,58 @@ def make_wts(labels: dict[str, Iterable[str]], weights: dict[tuple[str, str], Fr
 
 def wts_summary(wts: nx.DiGraph) -> list[tuple[str, str, Fraction]]:
     """Edges as ``(source, target, t_ij)`` sorted by name."""
-    return sorted((a, b, d[WEIGHT]) for a, b, d in wts.edges(data=True))
+    return sorted((a, b, d[_WEIGHT]) for a, b, d in wts.edges(data=True))
+
+
+# Typed accessors: the attribute keys above are read and written here alone; every other module (the search, the
+# planner, the demo, the tests) goes through these.
+
+
+def wts_labels(wts: nx.DiGraph, region: str) -> tuple[str, ...]:
+    """The atomic propositions of ``region``."""
+    return tuple(wts.nodes[region].get(_LABELS, ()))
+
+
+def wts_all_labels(wts: nx.DiGraph) -> dict[str, tuple[str, ...]]:
+    """Every region's atomic propositions."""
+    return {n: wts_labels(wts, n) for n in wts.nodes}
+
+
+def wts_weight(wts: nx.DiGraph, source: str, target: str) -> Fraction:
+    """The exact time t_ij (seconds) of the transition ``source -> target`` (KeyError when there is none)."""
+    weight: Fraction = wts.edges[source, target][_WEIGHT]
+    return weight
+
+
+def wts_edges(wts: nx.DiGraph) -> list[tuple[str, str, Any]]:
+    """Every transition as ``(source, target, t_ij)`` in the graph's order (t_ij as stored: checked by the search)."""
+    return [(a, b, d[_WEIGHT]) for a, b, d in wts.edges(data=True)]
+
+
+def wts_initial(wts: nx.DiGraph) -> str | None:
+    """The initial region the abstraction was built with (None when it names none)."""
+    initial: str | None = wts.graph.get(_INITIAL)
+    return initial
+
+
+def wts_failed(wts: nx.DiGraph) -> dict[tuple[str, str], str]:
+    """The region pairs the controller cannot drive, with the oracle's reason."""
+    failed: dict[tuple[str, str], str] = wts.graph.get(_FAILED) or {}
+    return failed
+
+
+def set_wts_failed(wts: nx.DiGraph, failed: dict[tuple[str, str], str]) -> None:
+    """Replace the failed pairs (a hand-made abstraction; ``make_wts`` starts with none)."""
+    wts.graph[_FAILED] = dict(failed)
+
+
+def wts_oracle(wts: nx.DiGraph) -> str | None:
+    """Which oracle built the weights (None when the graph does not say)."""
+    oracle: str | None = wts.graph.get(_ORACLE)
+    return oracle
+
+
+def wts_cache_file(wts: nx.DiGraph) -> str | None:
+    """The cache file the abstraction was read from or stored in (None without the cache)."""
+    cache: str | None = wts.graph.get(_CACHE)
+    return cache

@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from tubempc.errors import TubeMPCError
+from tubempc.errors import BaselineError
 from tubempc.regress.runner import RunOutcome
 from tubempc.regress.suite import Suite, Tolerance, Tolerances
 
@@ -43,10 +43,6 @@ __all__ = [
 BASELINE_FORMAT = "tubempc-regress-baseline/1"
 _VERDICT_RANK = {"pass": 0, "inconclusive": 1, "fail": 2}
 Status = Literal["regressed", "improved", "new", "missing", "error"]
-
-
-class BaselineError(TubeMPCError, ValueError):
-    """The baseline file is missing or malformed (the message names the file)."""
 
 
 @dataclass(frozen=True, slots=True)

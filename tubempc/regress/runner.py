@@ -24,13 +24,16 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from tubempc.errors import TubeMPCError
 from tubempc.regress.suite import FalsifyCase, RunCase
 from tubempc.scenario import Scenario
+
+if TYPE_CHECKING:
+    from verify.certificate import Certificate
 
 __all__ = ["RunJob", "RunOutcome", "closed_loop_metrics", "falsify_metrics", "run_case", "run_cases"]
 
@@ -90,14 +93,13 @@ def closed_loop_metrics(result: Any, scenario: Scenario) -> dict[str, Any]:
     return metrics
 
 
-def certificate_metrics(certificate: dict[str, Any]) -> dict[str, Any]:
-    metrics: dict[str, Any] = {"verdict": str(certificate.get("verdict"))}
-    for check in certificate.get("checks", []) or []:
-        name = str(check.get("name"))
-        metrics[f"check.{name}.verdict"] = str(check.get("verdict"))
-        margin = check.get("margin")
-        if isinstance(margin, int | float) and math.isfinite(float(margin)):
-            metrics[f"check.{name}.margin"] = float(margin)
+def certificate_metrics(certificate: Certificate) -> dict[str, Any]:
+    """``verdict``, ``check.<name>.verdict`` and ``check.<name>.margin`` (finite margins only) of a certificate."""
+    metrics: dict[str, Any] = {"verdict": str(certificate.verdict)}
+    for check in certificate.checks:
+        metrics[f"check.{check.name}.verdict"] = str(check.verdict)
+        if check.margin is not None and math.isfinite(check.margin):
+            metrics[f"check.{check.name}.margin"] = float(check.margin)
     return metrics
 
 
@@ -127,7 +129,7 @@ def _run_in(case: RunCase, folder: Path, reports: bool, controller: str | None =
 
         write_reports(certified, case.scenario, folder, suite_name=case.run_id)
     metrics = closed_loop_metrics(result, case.scenario)
-    metrics.update(certificate_metrics(certified.certificate))
+    metrics.update(certificate_metrics(certified.typed))
     return metrics, str(log)
 
 
@@ -182,7 +184,7 @@ def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | N
               controller: str | None = None) -> list[RunOutcome]:
     """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address).
     ``controller``: ``package.module:factory`` runs instead of the tube MPC (``tubempc.control.user``)."""
-    from verify.executor import parallel_map
+    from tubempc.runtime.executor import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports, controller) for case in cases]
     preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",

@@ -20,9 +20,10 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tubempc.control.disturbance import DISTURBANCE_MODELS
-from tubempc.errors import TubeMPCError
+from tubempc.errors import SuiteError
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario, load_scenario
+from tubempc.scenario.transition import derived_spec
 
 __all__ = [
     "DEFAULT_SUITE",
@@ -37,7 +38,6 @@ __all__ = [
     "Tolerance",
     "Tolerances",
     "default_suite_path",
-    "derived_spec",
     "expand_falsify",
     "expand_suite",
     "load_suite",
@@ -46,15 +46,6 @@ __all__ = [
 DEFAULT_SUITE = "default-suite.yaml"
 SCENARIO_SPEC = "scenario"  # a run's ``spec: scenario`` certifies against the scenario's own formula
 _NAME = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
-
-
-class SuiteError(TubeMPCError, ValueError):
-    """A suite file is malformed; the message names the file and the field."""
-
-    def __init__(self, message: str, *, source: str, field: str | None = None) -> None:
-        self.source = source
-        self.field = field
-        super().__init__(f"{source}: {field}: {message}" if field else f"{source}: {message}")
 
 
 class _Frozen(BaseModel):
@@ -268,18 +259,6 @@ def load_suite(path: str | Path | None = None) -> LoadedSuite:
                 raise SuiteError(f"region {maybe!r} is not in scenario {scenarios[case.scenario].name!r}",
                                  source=source, field=f"falsify[{i}].{where}")
     return LoadedSuite(suite, scenarios, source, refs)
-
-
-def derived_spec(scenario: Scenario, last_target: str) -> str:
-    """Safety from every unsafe label, and reaching the last target's labels (if it has any)."""
-    unsafe = sorted({lab for r in scenario.unsafe_regions for lab in r.labels})
-    parts = []
-    if unsafe:
-        parts.append(f"G[0,inf) !({' | '.join(unsafe)})")
-    labels = scenario.region(last_target).labels
-    if labels:
-        parts.append(f"F[0,inf) {labels[0]}" if len(labels) == 1 else f"F[0,inf) ({' | '.join(labels)})")
-    return " & ".join(parts) if parts else "true"
 
 
 @dataclass(frozen=True, slots=True)

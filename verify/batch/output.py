@@ -10,12 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tubempc.runtime.executor import parallel_map
+from tubempc.runtime.outputs import output_subdir, write_output_file
 from tubempc.scenario import Scenario
 from verify.batch.run import _PRELOAD, BatchItem, BatchResult
 from verify.certificate import Certificate
-from verify.executor import parallel_map
 from verify.junit import InconclusiveAs, JUnitCase, JUnitSuite, certificate_suite, write_junit
-from verify.outputs import output_subdir, write_output_file
 
 if TYPE_CHECKING:  # verify.report imports matplotlib (the 'report' extra): only when reports are written
     from verify.report import CertifyResultLike
@@ -107,8 +107,8 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
-    from verify.extras import require
-    from verify.outputs import prepare_output_dir
+    from tubempc.runtime.extras import require
+    from tubempc.runtime.outputs import prepare_output_dir
 
     if reports:
         require("report", feature="report.html", alternative="write certificates only (reports=False, --no-report)")

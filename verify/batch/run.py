@@ -10,9 +10,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from tubempc.mitl import parse
+from tubempc.runtime.executor import parallel_map
 from tubempc.scenario import Scenario
+from verify.certificate import Certificate, Verdict
 from verify.errors import VerifyError
-from verify.executor import parallel_map
 from verify.ingest.digest import DEFAULT_DIGEST
 from verify.selection import select_checks
 
@@ -107,6 +108,11 @@ class BatchItem:
     elapsed_s: float
     result: CertifyResultLike | None
 
+    @property
+    def typed(self) -> Certificate | None:
+        """The certificate as the typed model (None for a log that was unusable or crashed)."""
+        return None if self.result is None else Certificate.model_validate(self.result.certificate)
+
     def __post_init__(self) -> None:
         if self.exit_code not in _VERDICT_OF_CODE:
             raise ValueError(f"exit_code={self.exit_code!r} is not one of {sorted(_VERDICT_OF_CODE)}")
@@ -136,18 +142,16 @@ class BatchResult:
         """One summary row per log (the content of ``summary.csv``)."""
         rows = []
         for item in self.items:
-            checks = list(item.result.certificate.get("checks", []) or []) if item.result is not None else []
-            failed = [str(c.get("name")) for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"]
-            unknown = [str(c.get("name")) for c in checks
-                       if isinstance(c, dict) and c.get("verdict") not in ("pass", "fail")]
+            cert = item.typed
+            checks = cert.checks if cert is not None else []
+            failed = [c.name for c in checks if c.verdict == Verdict.FAIL]
+            unknown = [c.name for c in checks if c.verdict not in (Verdict.PASS, Verdict.FAIL)]
             # a failed log's worst margin is its most negative failed check's, never a passing check's;
             # metres only: seconds and m/s do not compare
-            judged = [c for c in checks if isinstance(c, dict) and c.get("verdict") == "fail"] or checks
-            margins = [float(c["margin"]) for c in judged
-                       if isinstance(c, dict) and isinstance(c.get("margin"), int | float)
-                       and c.get("margin_unit") == "m"]
-            first = [float(c["first_violation_time"]) for c in checks if isinstance(c, dict)
-                     and c.get("verdict") == "fail" and isinstance(c.get("first_violation_time"), int | float)]
+            judged = [c for c in checks if c.verdict == Verdict.FAIL] or checks
+            margins = [c.margin for c in judged if c.margin is not None and c.margin_unit == "m"]
+            first = [c.first_violation_time for c in checks
+                     if c.verdict == Verdict.FAIL and c.first_violation_time is not None]
             rows.append({
                 "log": item.path, "folder": item.name, "verdict": item.verdict, "exit_code": item.exit_code,
                 "checks": len(checks), "failed_checks": " ".join(failed), "inconclusive_checks": " ".join(unknown),

@@ -44,6 +44,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 from rosbags.rosbag2.storage_mcap import decompress as rosbags_decompress
 
+from verify.errors import FastPathError as _UnusualError  # the fast path declines: fall back
 from verify.ingest.mcaprecords import (
     CHUNK_FIXED,
     MESSAGE_HEAD,
@@ -86,10 +87,6 @@ class TopicMessages:
     data: U8Array
     offsets: IntArray
     lengths: IntArray
-
-
-class _UnusualError(Exception):
-    """Anything the fast path does not reproduce exactly; the caller falls back to rosbags."""
 
 
 @dataclass(slots=True)

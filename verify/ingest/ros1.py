@@ -35,6 +35,7 @@ import numpy.typing as npt
 from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
+from verify.errors import FastPathError as _UnusualError  # the fast path declines: fall back
 from verify.ingest.readerrors import one_type_per_topic
 from verify.ingest.records import (
     ROS1,
@@ -103,10 +104,6 @@ class Ros1Index:
 
     topics: dict[str, tuple[str, bool, IntArray, PayloadBuffer]]
     available: dict[str, str]
-
-
-class _UnusualError(Exception):
-    """Anything the fast path does not handle; the caller falls back to rosbags."""
 
 
 def _fields(raw: bytes | memoryview) -> dict[str, bytes]:

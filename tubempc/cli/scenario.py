@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from tubempc.commands.output import say
+from tubempc.cli.output import say
 
 __all__ = ["scenario", "schema", "spec"]
 

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import click
 
-from tubempc.commands.output import progress_line, say
+from tubempc.cli.exits import EXIT_FAIL, leave
+from tubempc.cli.output import progress_line, say
 
 __all__ = ["regress"]
 
@@ -38,7 +39,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
             dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None,
             controller: str | None) -> None:
     """Run a regression suite with the current controller (or --controller) and compare it with a baseline."""
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     require("plan", *(("report",) if reports and out_dir else ()), *(("dask",) if dask else ()),
             feature="tubempc regress")
@@ -57,8 +58,8 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_baseline,
     )
     from tubempc.regress.compare import BaselineError
+    from tubempc.runtime.outputs import write_output_file
     from verify.junit import write_junit
-    from verify.outputs import write_output_file
 
     loaded = load_suite(suite_path)
     if baseline_path is None:
@@ -69,7 +70,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
     if out_dir is None and reports:
         raise click.UsageError("--reports needs --out DIR")
     if out_dir is not None:
-        from verify.outputs import prepare_output_dir
+        from tubempc.runtime.outputs import prepare_output_dir
 
         prepare_output_dir(out_dir, force=force)
     cases: list[RunCase | FalsifyCase] = [*expand_suite(loaded), *expand_falsify(loaded)]
@@ -98,4 +99,4 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_output_file(out / "diff.txt", text + "\n")
         write_junit([comparison_junit(comparison, outcomes, suite_name=loaded.suite.name)], out / "junit.xml")
     if comparison.regressed:
-        raise click.exceptions.Exit(1)
+        leave(EXIT_FAIL)

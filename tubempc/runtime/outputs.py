@@ -7,7 +7,7 @@ The policy, one for all commands (certify, regress, demo write a folder; simulat
   its own files (``certificate.json``, ``report.*``, ``junit.xml``, per-log sub-folders) rewritten; an existing log
   file (``.bag``, ``.mcap``, ``.db3``) or ROS2 bag folder (it holds ``metadata.yaml``) is replaced once the new log
   is ready;
-- an output of the wrong kind is always refused (``UnusableInputError``, exit 3): a file (or ``/dev/null``, a
+- an output of the wrong kind is always refused (``OutputError``, exit 3): a file (or ``/dev/null``, a
   device) where a folder is needed, a folder that is not a bag where a log is needed, a path below a file, an
   unwritable or read-only place, and a report folder that is (or is inside) a log being certified (inputs are never
   modified);
@@ -29,7 +29,7 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
-from verify.errors import UnusableInputError
+from tubempc.runtime.errors import OutputError
 
 __all__ = ["LOG_SUFFIXES", "output_subdir", "prepare_output_dir", "prepare_output_log", "replace_output_log",
            "write_output_file"]
@@ -68,30 +68,30 @@ def prepare_output_dir(path: str | Path, *, force: bool = False, inputs: Iterabl
         return _prepare_output_dir(Path(path), force=force, inputs=inputs)
     except (OSError, RuntimeError) as err:  # RuntimeError: pathlib's resolve() on a symlink loop
         words = _os_words(err) if isinstance(err, OSError) else "too many levels of symbolic links (a symlink loop)"
-        raise UnusableInputError(f"--out cannot be made: {words}", path=str(path)) from None
+        raise OutputError(f"--out cannot be made: {words}", path=str(path)) from None
 
 
 def _prepare_output_dir(out: Path, *, force: bool, inputs: Iterable[str | Path]) -> Path:
     if out.exists() and not out.is_dir():
-        raise UnusableInputError("--out exists and is not a folder (reports need a folder)", path=str(out))
+        raise OutputError("--out exists and is not a folder (reports need a folder)", path=str(out))
     if out.is_dir() and not force and any(out.iterdir()):
-        raise UnusableInputError("--out exists already and is not empty: pass --force to replace its reports",
+        raise OutputError("--out exists already and is not empty: pass --force to replace its reports",
                                  path=str(out))
     blocker = _below_a_file(out)
     if blocker is not None:
-        raise UnusableInputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
+        raise OutputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
     resolved = out.resolve()
     for item in inputs:
         log = Path(item).resolve()
         if log.is_dir() and (resolved == log or log in resolved.parents):
-            raise UnusableInputError(f"--out is inside the log {item} being certified (inputs are never modified)",
+            raise OutputError(f"--out is inside the log {item} being certified (inputs are never modified)",
                                      path=str(out))
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise UnusableInputError(f"cannot create the output folder: {_os_words(err)}", path=str(out)) from None
+        raise OutputError(f"cannot create the output folder: {_os_words(err)}", path=str(out)) from None
     if not os.access(out, os.W_OK | os.X_OK):
-        raise UnusableInputError("the output folder is not writable: permission denied", path=str(out))
+        raise OutputError("the output folder is not writable: permission denied", path=str(out))
     return out
 
 
@@ -101,28 +101,28 @@ def prepare_output_log(path: str | Path, *, force: bool = False) -> Path:
         return _prepare_output_log(Path(path), force=force)
     except (OSError, RuntimeError) as err:
         words = _os_words(err) if isinstance(err, OSError) else "too many levels of symbolic links (a symlink loop)"
-        raise UnusableInputError(f"--out cannot be made: {words}", path=str(path)) from None
+        raise OutputError(f"--out cannot be made: {words}", path=str(path)) from None
 
 
 def _prepare_output_log(out: Path, *, force: bool) -> Path:
     if out.exists() and not force:
-        raise UnusableInputError("--out exists already: pass --force to replace it", path=str(out))
+        raise OutputError("--out exists already: pass --force to replace it", path=str(out))
     if out.exists():
         if out.is_dir():
             if not (out / "metadata.yaml").is_file():
-                raise UnusableInputError("--out is a folder that is not a ROS2 bag (no metadata.yaml): not replaced",
+                raise OutputError("--out is a folder that is not a ROS2 bag (no metadata.yaml): not replaced",
                                          path=str(out))
         elif not out.is_file() or out.suffix.lower() not in LOG_SUFFIXES:
-            raise UnusableInputError(f"--out exists and is not a log file ({', '.join(LOG_SUFFIXES)}): not "
+            raise OutputError(f"--out exists and is not a log file ({', '.join(LOG_SUFFIXES)}): not "
                                      f"replaced", path=str(out))
     blocker = _below_a_file(out)
     if blocker is not None:
-        raise UnusableInputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
+        raise OutputError(f"--out lies below {blocker}, which is a file, not a folder", path=str(out))
     parent = out.absolute().parent
     if not parent.is_dir():
-        raise UnusableInputError(f"the folder {parent} does not exist", path=str(out))
+        raise OutputError(f"the folder {parent} does not exist", path=str(out))
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise UnusableInputError(f"cannot write into {parent}: permission denied", path=str(out))
+        raise OutputError(f"cannot write into {parent}: permission denied", path=str(out))
     return out
 
 
@@ -135,7 +135,7 @@ def replace_output_log(path: str | Path) -> Path:
         elif out.exists():
             out.unlink()
     except OSError as err:
-        raise UnusableInputError(f"cannot replace the existing log: {_os_words(err)}", path=str(out)) from None
+        raise OutputError(f"cannot replace the existing log: {_os_words(err)}", path=str(out)) from None
     return out
 
 
@@ -160,12 +160,12 @@ def output_subdir(folder: Path, name: str) -> Path:
         try:
             sub.mkdir()
         except OSError as err:
-            raise UnusableInputError(f"cannot create {name}/ in the output folder: {_os_words(err)}",
+            raise OutputError(f"cannot create {name}/ in the output folder: {_os_words(err)}",
                                      path=str(sub)) from None
         return sub
     if not stat.S_ISDIR(mode):
         what = "a symbolic link" if stat.S_ISLNK(mode) else "not a folder"
-        raise UnusableInputError(f"{name} in the output folder is {what}: not written through", path=str(sub))
+        raise OutputError(f"{name} in the output folder is {what}: not written through", path=str(sub))
     return sub
 
 
@@ -175,13 +175,13 @@ def write_output_file(path: str | Path, data: bytes | str) -> Path:
     target = Path(path)
     why = _not_own(target)
     if why is not None:
-        raise UnusableInputError(f"{target.name} in the output folder is {why}, not a file this command wrote: "
+        raise OutputError(f"{target.name} in the output folder is {why}, not a file this command wrote: "
                                  "not replaced", path=str(target))
     raw = data.encode("utf-8") if isinstance(data, str) else data
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     except OSError as err:
-        raise UnusableInputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
+        raise OutputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(raw)
@@ -189,6 +189,6 @@ def write_output_file(path: str | Path, data: bytes | str) -> Path:
         os.replace(tmp, target)
     except OSError as err:
         Path(tmp).unlink(missing_ok=True)
-        raise UnusableInputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
+        raise OutputError(f"cannot write {target.name}: {_os_words(err)}", path=str(target)) from None
     return target
 

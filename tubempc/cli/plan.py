@@ -22,14 +22,14 @@ from pathlib import Path
 
 import click
 
-from tubempc.commands.output import say
+from tubempc.cli.options import load_scenario_ref, scenario_option
+from tubempc.cli.output import say
 
 __all__ = ["plan"]
 
 
 @click.command("plan")
-@click.option("--scenario", "scenario_name", default="nexus-sml", show_default=True,
-              help="A built-in scenario name or a scenario YAML file.")
+@scenario_option()
 @click.option("--spec", "spec_text", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--no-wait", is_flag=True, help="Strict WTS of the paper: no dwelling in a region.")
 @click.option("--dwell", type=click.Choice(["silent", "observed"]), default="silent", show_default=True,
@@ -47,42 +47,35 @@ __all__ = ["plan"]
 @click.option("--dask", "dask_address", default=None, help="Dask scheduler address for the abstraction.")
 @click.option("--dot", "dot_out", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write the explored product graph as Graphviz DOT.")
-def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str, objective: str,
+def plan(*, scenario: str, spec_text: str | None, no_wait: bool, dwell: str, objective: str,
          max_states: int | None, json_out: str | None, no_cache: bool, workers: int | None, dask_address: str | None,
          dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     require("plan", *(("dask",) if dask_address else ()), feature="tubempc plan")
     from tubempc.control.dynamics import model_for
     from tubempc.control.tube import design_tube
     from tubempc.errors import DesignError
     from tubempc.mitl import parse
-    from tubempc.planning.plan import plan_from_wts
+    from tubempc.planning.plan import plan_from_run, require_transitions
     from tubempc.planning.search import DEFAULT_MAX_STATES, export_dot, find_run
-    from tubempc.planning.wts import FAILED, build_wts
-    from tubempc.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
+    from tubempc.planning.wts import build_wts, wts_oracle
 
-    scenario = builtin_scenario(scenario_name) if scenario_name in BUILTIN_SCENARIOS else load_scenario(
-        scenario_name)
-    scenario.require_planning()  # exit 3 naming the field: missing controller data, unicycle, polygons, overlaps
-    formula = parse(spec_text) if spec_text is not None else scenario.formula
+    sc = load_scenario_ref(scenario)
+    sc.require_planning()  # exit 3 naming the field: missing controller data, unicycle, polygons, overlaps
+    formula = parse(spec_text) if spec_text is not None else sc.formula
     try:  # an impossible design is unusable input (exit 3), not "no accepting run" over a WTS without edges
-        design_tube(scenario, model_for(scenario))
+        design_tube(sc, model_for(sc))
     except DesignError as err:
-        raise DesignError(f"{scenario_name}: the tube MPC cannot be designed for this scenario: {err}") from err
-    wts = build_wts(scenario, use_cache=not no_cache, workers=workers, dask=dask_address)
-    failed = wts.graph.get(FAILED) or {}
-    if wts.number_of_edges() == 0 and failed:
-        (src, dst), why = next(iter(sorted(failed.items())))
-        raise DesignError(f"scenario {scenario.name}: every transition between regions failed the controller's "
-                          f"design check ({len(failed)} of {len(failed)}), so there is nothing to plan on; "
-                          f"e.g. {src} -> {dst}: {why}")
+        raise DesignError(f"{scenario}: the tube MPC cannot be designed for this scenario: {err}") from err
+    wts = build_wts(sc, use_cache=not no_cache, workers=workers, dask=dask_address)
+    require_transitions(wts, scenario_name=sc.name)
     limit = max_states if max_states is not None else DEFAULT_MAX_STATES
-    result = plan_from_wts(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region,
-                           max_states=limit, objective=objective)
-    say(f"scenario {scenario.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
-        f"transitions, weights from {wts.graph.get('oracle')}); formula {formula}")
+    found = find_run(wts, formula, wait=not no_wait, dwell=dwell, initial=sc.initial_region, max_states=limit)
+    result = plan_from_run(wts, formula, found, wait=not no_wait, objective=objective)
+    say(f"scenario {sc.name} ({wts.number_of_nodes()} safe regions, {wts.number_of_edges()} "
+        f"transitions, weights from {wts_oracle(wts)}); formula {formula}")
     say(f"{'region':<8} {'time [s]':>10}  {'kind':<6} labels")
     for k, ((region, t), kind) in enumerate(zip(result.run, result.kinds, strict=True)):
         mark = "  <- repeats from here" if k == result.loop_start and result.period_s > 0 else ""
@@ -101,7 +94,5 @@ def plan(*, scenario_name: str, spec_text: str | None, no_wait: bool, dwell: str
         f"{result.search_s * 1000:.1f} ms, {result.product_states} product states ({result.method})")
     if json_out is not None:
         Path(json_out).write_text(json.dumps(result.to_json(), indent=2) + "\n")
-    if dot_out is not None:
-        found = find_run(wts, formula, wait=not no_wait, dwell=dwell, initial=scenario.initial_region,
-                         max_states=limit)
+    if dot_out is not None:  # the explored product of the one search above
         Path(dot_out).write_text(export_dot(found.explored()))

@@ -13,8 +13,16 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import click
+
+from tubempc.cli.exits import EXIT_FAIL, EXIT_OK, leave
+from tubempc.cli.options import load_scenario_ref, scenario_option
+
+if TYPE_CHECKING:
+    from tubempc.falsify.search import Method
+    from tubempc.falsify.space import Family
 
 __all__ = ["falsify"]
 
@@ -37,8 +45,7 @@ def _z(text: str) -> tuple[float, ...]:
 
 
 @click.command("falsify")
-@click.option("--scenario", "scenario_ref", default="nexus-sml", show_default=True,
-              help="A built-in scenario name or a scenario YAML file (the claims the runs are judged against).")
+@scenario_option(extra="The claims the runs are judged against.")
 @click.option("--from", "source", default=None, help="Start region of one transition (default: initial region).")
 @click.option("--to", "target", default=None,
               help="Target region of one transition (several, comma-separated: through each in turn).")
@@ -80,7 +87,7 @@ def _z(text: str) -> tuple[float, ...]:
               help="Output folder (default: reports/falsify-<time>).")
 @click.option("--controller", "controller", default=None, metavar="PACKAGE.MODULE:FACTORY",
               help="Search against your own controller instead of the tube MPC (docs/controller.md).")
-def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: bool, budget: int, method: str,
+def falsify(*, scenario: str, source: str | None, target: str | None, plan: bool, budget: int, method: str,
             seed: int, family: str, knots: int, switches: int, bound_scale: float, fixed_start: bool,
             checks_text: str, spec: str | None, overrides: tuple[str, ...], horizon_s: float | None,
             stop_at_first: bool, shrink_budget: int | None, replay_text: str | None, workers: int | None,
@@ -89,7 +96,7 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
     import os
     import tempfile
 
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     # hypothesis caches what it learns about the code under test in its storage folder (./.hypothesis unless
     # HYPOTHESIS_STORAGE_DIRECTORY says otherwise): a scratch folder removed when the command ends keeps the
@@ -102,7 +109,7 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
 
     require("plan", *(("testing",) if method == "targeted" else ()), *(("dask",) if dask else ()),
             feature=f"tubempc falsify --method {method}")
-    from tubempc.commands.output import detail, say
+    from tubempc.cli.output import detail, say
     from tubempc.falsify import (
         FalsifyRequest,
         apply_overrides,
@@ -112,14 +119,15 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
         write_case,
         write_outcome,
     )
-    from tubempc.scenario import load_scenario
 
-    scenario = load_scenario(scenario_ref)
-    apply_overrides(scenario, overrides)  # a bad override is one line on stderr before anything else
+    sc = load_scenario_ref(scenario)
+    apply_overrides(sc, overrides)  # a bad override is one line on stderr before anything else
     if horizon_s is not None and not (math.isfinite(horizon_s) and horizon_s > 0):
         raise click.BadParameter(f"--horizon {horizon_s!r} must be a positive number")
-    req = FalsifyRequest(scenario_ref=scenario_ref, source=source, target=target, plan=plan, method=method,  # type: ignore[arg-type]
-                         budget=budget, seed=seed, family=family, knots=knots, switches=switches,  # type: ignore[arg-type]
+    # click.Choice has checked both against the same names as the Literal types
+    req = FalsifyRequest(scenario_ref=scenario, source=source, target=target, plan=plan,
+                         method=cast("Method", method), budget=budget, seed=seed, family=cast("Family", family),
+                         knots=knots, switches=switches,
                          bound_scale=bound_scale, vary_start=not fixed_start,
                          checks=tuple(c.strip() for c in checks_text.split(",") if c.strip()), spec=spec,
                          overrides=overrides, horizon_s=horizon_s, stop_at_first=stop_at_first,
@@ -127,7 +135,7 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
     out = Path(out_dir) if out_dir is not None else Path("reports") / f"falsify-{time.strftime('%Y%m%d-%H%M%S')}"
     if replay_text is not None:
         z = _z(replay_text)
-        setup, _ = prepare(req, scenario)
+        setup, _ = prepare(req, sc)
         if len(z) != setup.space.dim:
             raise click.BadParameter(f"--replay has {len(z)} coordinates; this search space has {setup.space.dim} "
                                      f"({', '.join(setup.space.names())})")
@@ -140,11 +148,11 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
                    f"{_g(files['margin_from_log'])} ({files['check_from_log']}) from the written log; certificate "
                    f"verdict {files['certificate_verdict']}")
         say(f"log: {files['log']}\ncertificate: {files['certificate']}\nreport: {files['report_html']}")
-        raise click.exceptions.Exit(1 if files["violated_from_log"] else 0)
+        leave(EXIT_FAIL if files["violated_from_log"] else EXIT_OK)
 
-    detail(f"falsify: scenario {scenario.name}, method {method}, budget {budget}, seed {seed}, family {family}"
+    detail(f"falsify: scenario {sc.name}, method {method}, budget {budget}, seed {seed}, family {family}"
            + (f", controller overrides {', '.join(overrides)}" if overrides else ""))
-    outcome = write_outcome(run_falsify(req, scenario, workers=workers, dask=dask), out)
+    outcome = write_outcome(run_falsify(req, sc, workers=workers, dask=dask), out)
     data = outcome.to_json()
     ref = data["reference"]
     say(f"unperturbed run: margin {_g(ref['margin'])} ({ref['check']}), {_g(ref['duration_s'], '.1f')} s")
@@ -167,4 +175,4 @@ def falsify(*, scenario_ref: str, source: str | None, target: str | None, plan: 
         say(f"worst case: certificate verdict {data['files']['worst']['certificate_verdict']} (from the "
                    f"written log: margin {_g(data['files']['worst']['margin_from_log'])})\n  replay: {worst['replay']}")
     say(f"verdict: {data['verdict']}; {out / 'falsify.json'}")
-    raise click.exceptions.Exit(outcome.exit_code)
+    leave(outcome.exit_code)

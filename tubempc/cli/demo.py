@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import click
 
-from tubempc.commands.output import say
+from tubempc.cli.exits import leave
+from tubempc.cli.output import say
 
 __all__ = ["demo"]
 
@@ -26,11 +26,11 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
 
     Exit code: the certificate's (0 pass, 1 fail, 2 inconclusive).
     """
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     require("plan", "report", feature="the demo")
     from tubempc.demo import run_demo
-    from verify.outputs import prepare_output_dir
+    from tubempc.runtime.outputs import prepare_output_dir
 
     folder = out_dir if out_dir is not None else Path("reports") / time.strftime("demo-%Y%m%d-%H%M%S")
     prepare_output_dir(folder, force=force)
@@ -41,4 +41,4 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
     for key in ("mcap", "bag", "plan", "certificate", "report.md", "report.html", "junit.xml"):
         if key in result.files:
             say(f"  {key:12s} {result.files[key]}")
-    sys.exit(result.exit_code)
+    leave(result.exit_code)

@@ -1,9 +1,10 @@
 """Optional dependencies: a feature and the extra it needs -> nothing, or one ``MissingExtraError`` line (exit 4).
 
-The base install certifies logs; the heavy libraries come with extras (pyproject.toml): ``report`` (matplotlib:
-report.html and its figures), ``dask`` (Dask distributed: ``--dask``), ``testing`` (hypothesis:
-``tubempc.strategies``, the falsifier's ``targeted`` search) and ``plan`` (casadi, cvxpy, networkx, scipy: plan,
-simulate, falsify, regress, demo); ``all`` is every one of them. Each place that needs an extra calls ``require``
+The base install (pyproject.toml) holds matplotlib, casadi, cvxpy, networkx and scipy; ``dask`` (Dask
+distributed: ``--dask``) and ``testing`` (hypothesis: ``tubempc.strategies``, the falsifier's ``targeted`` search)
+are extras. ``report`` (matplotlib: report.html and its figures) and ``plan`` (casadi, cvxpy, networkx, scipy: plan,
+simulate, falsify, regress, demo) name the parts of the base a command needs, so that an install missing one of them
+gets a line saying what to reinstall; ``all`` is every one of them. Each place that needs an extra calls ``require``
 before importing it, so a missing one is one line naming the extra to install, never an ImportError traceback.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 import importlib.util
 import sys
 
-from verify.errors import MissingExtraError
+from tubempc.runtime.errors import MissingExtraError
 
 __all__ = ["EXTRAS", "missing_modules", "require"]
 

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import click
 
-from tubempc.commands.output import say, verbosity
+from tubempc.cli.exits import leave
+from tubempc.cli.options import scenario_option
+from tubempc.cli.output import say, verbosity
 
 __all__ = ["compare"]
 
@@ -19,7 +21,7 @@ __all__ = ["compare"]
 @click.command()
 @click.argument("before")
 @click.argument("after")
-@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name.")
+@scenario_option(required=True)
 @click.option("--spec", default=None, help="MITL formula the logs are certified against (default: the scenario's).")
 @click.option("--pair-pattern", default=None, metavar="REGEX",
               help="Pair runs by this regular expression searched in each log's path relative to its side's folder "
@@ -50,7 +52,7 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
     regressed = worse beyond the tolerance and significant at the confidence.
 
     Exit 0 no regression, 1 regression, 2 not enough runs to tell, 3 unusable input."""
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     if out_dir is not None:  # compare.html's plots (scipy, for the tests, is a base dependency)
         require("report", feature="compare.html (compare --out)", alternative="drop --out and use --json")
@@ -72,7 +74,7 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
     settings = load_settings(tolerances_path if tolerances_path is not None else settings_path_for(scenario),
                              overrides=tol, confidence=confidence)
     if out_dir is not None:
-        from verify.outputs import prepare_output_dir
+        from tubempc.runtime.outputs import prepare_output_dir
 
         prepare_output_dir(out_dir, force=force, inputs=[before, after])
     sides = [load_side(text, sc, formula=formula, spec=spec, time_base=time_base, workers=workers,
@@ -91,4 +93,4 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
         write_junit([outcome_junit(outcome)], out / "junit.xml")
         say(f"compare: {write_page(outcome, out / 'compare.html')}")
     if outcome.exit_code:
-        raise click.exceptions.Exit(outcome.exit_code)
+        leave(outcome.exit_code)

@@ -1,6 +1,6 @@
 """Output levels of every subcommand: ``-q/--quiet`` and ``-v/--verbose`` -> what goes to stdout and stderr.
 
-``tubempc.cli`` adds both options to the group and to every subcommand (``tubempc -q certify ...`` and
+The group in ``tubempc.cli`` adds both options to the group and to every subcommand (``tubempc -q certify ...`` and
 ``tubempc certify -q ...`` mean the same) and keeps the level in ``click.Context.meta[VERBOSITY_KEY]``: -1 quiet,
 0 normal, 1 verbose, 2 and more debug. Quiet prints no progress or summary lines: only what was asked for (a
 ``--json`` document, ``scenario show``'s YAML, ``spec``'s canonical formula), errors on stderr, and the exit code.
@@ -16,7 +16,7 @@ import click
 
 __all__ = ["VERBOSITY_KEY", "add_verbosity_options", "detail", "progress_line", "say", "verbosity"]
 
-VERBOSITY_KEY = "verbosity"  # verify.command reads the same key (verify does not import tubempc.commands)
+VERBOSITY_KEY = "verbosity"
 
 
 def verbosity() -> int:

@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 
 from tqdm import tqdm
 
-from verify.errors import UnusableInputError
+from tubempc.runtime.errors import OutputError
 
 __all__ = ["parallel_map"]
 
@@ -134,7 +134,7 @@ def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.B
 
 
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any) -> list[R]:
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     require("dask", feature="--dask")
     # distributed is only partly typed; treat it as untyped at this one boundary
@@ -154,10 +154,10 @@ def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, 
         elif re.fullmatch(r"(tcp|tls|inproc|ucx)://\S+", dask):
             client = Client(dask, timeout="20s")
         else:
-            raise UnusableInputError(f"dask={dask!r}: expected 'local' or a scheduler address such as "
+            raise OutputError(f"dask={dask!r}: expected 'local' or a scheduler address such as "
                                      f"tcp://host:8786", path=dask)
     except OSError as err:  # includes connection timeouts
-        raise UnusableInputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
+        raise OutputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
                                  path=str(dask)) from err
     try:
         # ship the inputs as data (certification results carry frames), not embedded in the task graph

@@ -15,6 +15,10 @@ from pathlib import Path
 
 import click
 
+from tubempc.cli.exits import leave
+from tubempc.cli.options import scenario_option
+from tubempc.cli.output import verbosity
+
 __all__ = ["watch"]
 
 
@@ -29,7 +33,7 @@ def _certified_path(path: Path, finished: bool) -> Path:
 
 @click.command()
 @click.argument("log", type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
+@scenario_option(required=True)
 @click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--follow", is_flag=True, help="Keep reading as the log grows (until it is closed or idle).")
 @click.option("--idle-timeout", "idle_timeout", type=click.FloatRange(min=0.0), default=10.0, show_default=True,
@@ -71,8 +75,7 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
 
     res = watch_log(log, monitor, follow=follow, idle_timeout_s=idle_timeout, poll_s=poll_s, time_base=time_base,
                     on_decision=show)
-    ctx = click.get_current_context(silent=True)
-    quiet = ctx is not None and int(ctx.meta.get("verbosity", 0)) < 0  # -q: the decisions and the exit code only
+    quiet = verbosity() < 0  # -q: the decisions and the exit code only
     if not quiet:  # the final margins (a decision states its margin only once no later sample can change it)
         for text in res.result.state.final_lines():
             click.echo(text)
@@ -86,15 +89,16 @@ def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout
                              salvage=not res.finished, checks=checks)
         line += f" -> {write_certificate(result, out_dir)}"
         if not quiet:  # the certificate's one-sentence explanation of each result that is not a pass
-            cert = result.certificate
-            for entry in [*cert.get("obligations", [])[1:], *cert.get("checks", [])]:
-                if entry.get("explanation"):
-                    click.echo(f"   why    {entry.get('formula') or entry.get('name')}: {entry['explanation']}")
+            cert = result.typed
+            whys = [(o.formula, o.explanation) for o in cert.obligations[1:]] + [
+                (c.name, c.explanation) for c in cert.checks]
+            for what, why in whys:
+                if why:
+                    click.echo(f"   why    {what}: {why}")
         if not no_report:
             from verify.report import write_reports
 
             write_reports(result, sc, out_dir, suite_name=log.name)
     if not quiet:
         click.echo(line)
-    sys.stdout.flush()
-    sys.exit(res.result.exit_code)
+    leave(res.result.exit_code)

@@ -1,11 +1,9 @@
-"""The ``tubempc`` command: a thin front over both packages; maps errors to exit codes and one clear line.
+"""The ``tubempc`` command: one package, one module per command; maps errors to exit codes and one clear line.
 
-Exit codes (all subcommands): 0 success / all checks pass; 1 a violation was found (certify, regress) or no
-accepting run exists (plan, proved); 2 inconclusive (certify) or undecided (plan: the search reached its state
-limit, ``--max-states``); 3 unusable input (unreadable or truncated log, missing topic, malformed formula or
-scenario, impossible controller design, an abstraction without any usable transition); 4 feature not available
-(among others: an optional dependency is not installed; the line names the extra, ``verify.extras``); 70 internal
-error.
+``tubempc --help`` is built from ``COMMANDS`` alone: a command's module (and what it imports: pandas, matplotlib,
+casadi, rosbags...) is imported only when that command runs or its own ``--help`` is asked for. Exit codes:
+``tubempc.cli.exits``; options shared by several commands (``--scenario``): ``tubempc.cli.options``; output levels
+(``-q``/``-v``, read once): ``tubempc.cli.output``.
 """
 
 from __future__ import annotations
@@ -14,42 +12,54 @@ import importlib
 import sys
 import traceback
 import warnings
-from typing import Any, NoReturn
+from typing import NoReturn
 
 import click
 
-from tubempc.commands.output import add_verbosity_options
-from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
+from tubempc.cli.exits import (
+    EXIT_FAIL,
+    EXIT_INCONCLUSIVE,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_NOT_AVAILABLE,
+    EXIT_OK,
+    EXIT_UNUSABLE,
+    exit_code,
+    is_ours,
+)
+from tubempc.cli.output import add_verbosity_options
 
-__all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_NOT_AVAILABLE", "EXIT_OK", "EXIT_UNUSABLE",
-           "cli", "main"]
-
-EXIT_OK = 0
-EXIT_FAIL = 1
-EXIT_INCONCLUSIVE = 2
-EXIT_UNUSABLE = 3
-EXIT_NOT_AVAILABLE = 4
-EXIT_INTERNAL = 70
+__all__ = [
+    "EXIT_FAIL",
+    "EXIT_INCONCLUSIVE",
+    "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
+    "EXIT_NOT_AVAILABLE",
+    "EXIT_OK",
+    "EXIT_UNUSABLE",
+    "cli",
+    "main",
+]
 
 #: subcommand -> (module:attribute of its click command, the one line ``tubempc --help`` shows). A command's
 #: module (and what it imports: pandas, matplotlib, casadi, rosbags...) is imported only when that command runs or
 #: its own --help is asked for, so ``tubempc -V`` and ``tubempc --help`` start at once.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "certify": ("verify.command:certify", "Certify ROS logs against a scenario and a formula."),
-    "compare": ("tubempc.commands.compare:compare", "Compare runs before and after a change, metric by metric."),
-    "demo": ("tubempc.commands.demo:demo", "Simulate the paper's mission and certify its log (a first run)."),
-    "digest": ("verify.command:digest_command", "Print the digest a certificate states for each log."),
-    "falsify": ("tubempc.commands.falsify:falsify", "Search the admissible perturbations of a run for the one "
+    "certify": ("tubempc.cli.certify:certify", "Certify ROS logs against a scenario and a formula."),
+    "compare": ("tubempc.cli.compare:compare", "Compare runs before and after a change, metric by metric."),
+    "demo": ("tubempc.cli.demo:demo", "Simulate the paper's mission and certify its log (a first run)."),
+    "digest": ("tubempc.cli.certify:digest_command", "Print the digest a certificate states for each log."),
+    "falsify": ("tubempc.cli.falsify:falsify", "Search the admissible perturbations of a run for the one "
                                                     "that breaks it."),
-    "info": ("tubempc.commands.info:info", "What a log holds: topics, types, rates, gaps, clock, where the robot "
+    "info": ("tubempc.cli.info:info", "What a log holds: topics, types, rates, gaps, clock, where the robot "
                                            "went."),
-    "plan": ("tubempc.commands.plan:plan", "Plan a timed run of the scenario's formula on its abstraction."),
-    "regress": ("tubempc.commands.regress:regress", "Run a suite of scenarios and seeds against a baseline."),
-    "scenario": ("tubempc.commands.scenario:scenario", "Inspect, scaffold and validate scenario files."),
-    "schema": ("tubempc.commands.scenario:schema", "Print the JSON Schema of an output other programs parse."),
-    "simulate": ("tubempc.commands.simulate:simulate", "Simulate one transition of the tube MPC closed loop."),
-    "spec": ("tubempc.commands.scenario:spec", "Parse an MITL formula and print its canonical form."),
-    "watch": ("verify.online.command:watch", "Monitor a log online (a growing file) against the formula."),
+    "plan": ("tubempc.cli.plan:plan", "Plan a timed run of the scenario's formula on its abstraction."),
+    "regress": ("tubempc.cli.regress:regress", "Run a suite of scenarios and seeds against a baseline."),
+    "scenario": ("tubempc.cli.scenario:scenario", "Inspect, scaffold and validate scenario files."),
+    "schema": ("tubempc.cli.scenario:schema", "Print the JSON Schema of an output other programs parse."),
+    "simulate": ("tubempc.cli.simulate:simulate", "Simulate one transition of the tube MPC closed loop."),
+    "spec": ("tubempc.cli.scenario:spec", "Parse an MITL formula and print its canonical form."),
+    "watch": ("tubempc.cli.watch:watch", "Monitor a log online (a growing file) against the formula."),
 }
 
 
@@ -84,37 +94,15 @@ class LazyGroup(click.Group):
 @click.option("--debug", is_flag=True, help="Show full tracebacks instead of one-line errors.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
-    """Plan timed robot missions with tube MPC under MITL, and certify their ROS logs."""
+    """Plan timed robot missions with tube MPC under MITL, and certify their ROS logs.
+
+    Every --scenario names a scenario YAML file or a built-in scenario: a file of that name first, then a built-in
+    name (`tubempc scenario list`)."""
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
 
 
 add_verbosity_options(cli)  # on the group; LazyGroup adds them to each subcommand it loads
-
-
-def _verify_errors() -> tuple[type[BaseException], type[BaseException]] | None:
-    """(VerifyError, MissingExtraError) when the certifier was imported (else no error can be one of them)."""
-    mod: Any = sys.modules.get("verify.errors")
-    return None if mod is None else (mod.VerifyError, mod.MissingExtraError)
-
-
-def _ours(err: BaseException) -> bool:
-    """An error raised on purpose by either package (its message is for the user)."""
-    ve = _verify_errors()
-    return isinstance(err, TubeMPCError) or (ve is not None and isinstance(err, ve[0]))
-
-
-def _exit_code(err: BaseException) -> int:
-    ve = _verify_errors()
-    if isinstance(err, NotAvailableError) or (ve is not None and isinstance(err, ve[1])):
-        return EXIT_NOT_AVAILABLE
-    if isinstance(err, NoAcceptingRunError):
-        return EXIT_FAIL
-    if isinstance(err, SearchLimitError):
-        return EXIT_INCONCLUSIVE
-    if _ours(err):
-        return EXIT_UNUSABLE
-    return EXIT_INTERNAL
 
 
 def _one_line(text: str, limit: int = 600) -> str:
@@ -141,19 +129,19 @@ def main(argv: list[str] | None = None) -> NoReturn:
         sys.exit(err.exit_code)
     except click.Abort:
         click.echo("tubempc: aborted", err=True)
-        sys.exit(130)
+        sys.exit(EXIT_INTERRUPTED)
     except click.ClickException as err:
         err.show()
         sys.exit(EXIT_UNUSABLE if err.exit_code == 2 else err.exit_code)
     except KeyboardInterrupt:
         click.echo("tubempc: interrupted", err=True)
-        sys.exit(130)
+        sys.exit(EXIT_INTERRUPTED)
     except Exception as err:
-        if _ours(err):
+        if is_ours(err):
             if debug:
                 traceback.print_exc()
             click.echo(f"tubempc: error: {_one_line(str(err))}", err=True)
-            sys.exit(_exit_code(err))
+            sys.exit(exit_code(err))
         if debug:
             traceback.print_exc()
         hint = "" if debug else " (rerun with --debug for the traceback)"

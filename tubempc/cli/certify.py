@@ -2,7 +2,7 @@
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
 ``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
-``--force`` (``verify.outputs`` states the policy shared by every command). Unusable input raises
+``--force`` (``tubempc.runtime.outputs`` states the policy shared by every command). Unusable input raises
 ``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
@@ -14,22 +14,22 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
-from typing import Any, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, cast
 
 import click
 
+from tubempc.cli.exits import EXIT_UNUSABLE, leave
+from tubempc.cli.options import scenario_option
+from tubempc.cli.output import verbosity
 from verify.errors import UnusableInputError
 from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS, MESSAGES_DIGEST
 
-__all__ = ["certify"]
+if TYPE_CHECKING:
+    from tubempc.scenario import Scenario
+    from verify.certify import CertifyResult
 
-
-def _verbosity() -> int:
-    """-1 quiet, 0 normal, 1+ verbose: set by ``tubempc.cli``'s -q/-v options in the context's meta."""
-    ctx = click.get_current_context(silent=True)
-    return int(ctx.meta.get("verbosity", 0)) if ctx is not None else 0
+__all__ = ["certify", "digest_command"]
 
 
 def _json_entry(item: Any) -> dict[str, Any]:
@@ -62,9 +62,27 @@ def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
     return out
 
 
+def _write_one(result: CertifyResult, sc: Scenario, log: Path, out_dir: Path, *, reports: bool,
+               junit_inconclusive: str) -> Path:
+    """certificate.json (and the reports) of one log into ``out_dir``; the certificate's path."""
+    from verify.certify import write_certificate
+    from verify.junit import InconclusiveAs
+
+    try:
+        path = write_certificate(result, out_dir)
+        if reports:
+            from verify.report import write_reports
+
+            write_reports(result, sc, out_dir, suite_name=log.name,
+                          junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
+    except OSError as err:
+        raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)) from None
+    return path
+
+
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", required=True, help="Scenario YAML file or built-in name (nexus-sml).")
+@scenario_option(required=True)
 @click.option("--spec", default=None, help="MITL formula (default: the scenario's spec).")
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here (one sub-folder per log when several are given).")
@@ -102,10 +120,9 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input, 4 a needed optional
     dependency is not installed (the line names the extra).
     """
-    from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line, write_certificate
-    from verify.extras import require
-    from verify.junit import InconclusiveAs
-    from verify.outputs import prepare_output_dir
+    from tubempc.runtime.extras import require
+    from tubempc.runtime.outputs import prepare_output_dir
+    from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line
     from verify.selection import parse_check_list
 
     if out_dir is not None and not no_report:  # before any work: the reports are what was asked for
@@ -113,7 +130,7 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                 alternative="pass --no-report for certificate.json only")
     if dask is not None:
         require("dask", feature="certify --dask")
-    level = _verbosity()
+    level = verbosity()
     sc = resolve_scenario(scenario)
     checks = parse_check_list(checks_text) if checks_text is not None else None
     offsets = _parse_offsets(clock_offsets)
@@ -124,27 +141,30 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
                              digest=digest, clock_offsets=offsets)
         line = verdict_line(logs[0], result.certificate)
         if out_dir is not None:
-            try:
-                line += f" -> {write_certificate(result, out_dir)}"
-                if not no_report:
-                    from verify.report import write_reports
-
-                    write_reports(result, sc, out_dir, suite_name=logs[0].name,
-                                  junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
-            except OSError as err:
-                raise UnusableInputError(f"cannot write the reports ({err.strerror or err})", path=str(out_dir)
-                                         ) from None
+            written = _write_one(result, sc, logs[0], out_dir, reports=not no_report,
+                                 junit_inconclusive=junit_inconclusive)
+            line += f" -> {written}"
         if as_json:
             click.echo(json.dumps(result.certificate, indent=2))
         if level >= 0:
             click.echo(line, err=as_json)
         if level > 0:
             click.echo("\n".join(check_lines(result.certificate)), err=True)
-        sys.stdout.flush()
-        # SystemExit, not click's Exit: in standalone_mode=False click returns Exit's code instead of exiting
-        sys.exit(result.exit_code)
+        leave(result.exit_code)
 
+    _certify_batch(logs, sc, spec=spec, time_base=time_base, salvage=salvage, workers=workers, dask=dask,
+                   progress=progress, checks=checks, digest=digest, offsets=offsets, as_json=as_json,
+                   out_dir=out_dir, reports=not no_report, junit_inconclusive=junit_inconclusive, level=level)
+
+
+def _certify_batch(logs: tuple[Path, ...], sc: Scenario, *, spec: str | None, time_base: str, salvage: bool,
+                   workers: int | None, dask: str | None, progress: bool | None, checks: tuple[str, ...] | None,
+                   digest: str, offsets: dict[str, float], as_json: bool, out_dir: Path | None, reports: bool,
+                   junit_inconclusive: str, level: int) -> NoReturn:
+    """Several logs (or a folder, or ``--dask``): ``verify.batch``; the summary, the one line of every unusable
+    log, the folders under ``out_dir``; the worst exit code."""
     from verify.batch import certify_many, summary_lines, write_batch
+    from verify.junit import InconclusiveAs
 
     base = cast(Literal["auto", "header", "log"], time_base)
     batch = certify_many(logs, sc, spec=spec, time_base=base, salvage=salvage, workers=workers, dask=dask,
@@ -155,23 +175,21 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
         for text in summary_lines(batch):
             click.echo(text, err=as_json)
     for item in batch.items:  # every unusable input also gets its one line on stderr
-        if item.exit_code == 3 and item.error:
+        if item.exit_code == EXIT_UNUSABLE and item.error:
             click.echo(f"tubempc: error: {' '.join(item.error.split())}", err=True)
     if out_dir is not None:
-        written = write_batch(batch, out_dir, reports=not no_report, workers=workers, dask=dask, progress=progress,
+        written = write_batch(batch, out_dir, reports=reports, workers=workers, dask=dask, progress=progress,
                               junit_inconclusive=cast(InconclusiveAs, junit_inconclusive))
         summary = written.get("summary.md")
         if summary is not None and level >= 0:
             click.echo(f"summary: {summary}", err=as_json)
-    sys.stdout.flush()
-    sys.exit(batch.exit_code)
+    leave(batch.exit_code)
 
 
 @click.command("digest")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--scenario", "scenario", default=None,
-              help="Scenario YAML file or built-in name: its topics are the messages blake3-messages hashes "
-                   "(required for blake3-messages: give the scenario the certificate was made with).")
+@scenario_option(default=None, extra="Its topics are the messages blake3-messages hashes (required for "
+                                       "blake3-messages: give the scenario the certificate was made with).")
 @click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
               help="blake3-messages (the messages certification reads), blake3 / sha256 (the whole file).")
 @click.option("--salvage", is_flag=True, help="Digest the complete records of a truncated log (as certify --salvage).")

@@ -12,19 +12,20 @@ from typing import TYPE_CHECKING
 
 import click
 
-from tubempc.commands.output import say
+from tubempc.cli.exits import EXIT_FAIL, leave
+from tubempc.cli.options import load_scenario_ref, scenario_option
+from tubempc.cli.output import say
 
 if TYPE_CHECKING:
     from tubempc.scenario import Scenario
 
 __all__ = ["simulate"]
 
-EXIT_NOT_REACHED = 1
+EXIT_NOT_REACHED = EXIT_FAIL
 
 
 @click.command()
-@click.option("--scenario", "scenario_path", default="nexus-sml", show_default=True,
-              help="Scenario YAML file or built-in scenario name.")
+@scenario_option()
 @click.option("--from", "source", default=None, help="Start region (default: the scenario's initial region).")
 @click.option("--to", "target", required=True, help="Target region.")
 @click.option("--disturbance", type=click.Choice(["none", "random", "worst", "bias", "sine"]), default="random",
@@ -40,10 +41,10 @@ EXIT_NOT_REACHED = 1
 @click.option("--controller", "controller_spec", default=None, metavar="PACKAGE.MODULE:FACTORY",
               help="Run your own controller (docs/controller.md, 'Your controller in the loop') instead of the tube "
                    "MPC; --to may list several targets, comma-separated.")
-def simulate(*, scenario_path: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
+def simulate(*, scenario: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
              hold_s: float | None, out_path: str, force: bool, controller_spec: str | None) -> None:
     """Simulate the tube MPC (or your --controller) from one region to another and write the robot's log."""
-    from verify.extras import require
+    from tubempc.runtime.extras import require
 
     require("plan", feature="tubempc simulate")
     import numpy as np
@@ -51,25 +52,24 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     from tubempc.control import Target, run_closed_loop
     from tubempc.errors import DesignError
     from tubempc.rosio import write_log
-    from tubempc.scenario import load_scenario
-    from verify.outputs import prepare_output_log, replace_output_log
+    from tubempc.runtime.outputs import prepare_output_log, replace_output_log
 
     prepare_output_log(out_path, force=force)
-    scenario = load_scenario(scenario_path)
+    sc = load_scenario_ref(scenario)
     if controller_spec is not None:
-        _simulate_controller(scenario, controller_spec, source=source, targets=target.split(","),
+        _simulate_controller(sc, controller_spec, source=source, targets=target.split(","),
                              disturbance=disturbance, seed=seed, mocap_noise_m=mocap_noise_m, hold_s=hold_s,
                              out_path=out_path, force=force)
         return
-    scenario.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
+    sc.require_planning()  # exit 3 naming the field the controller needs (or its unicycle/polygon problem)
     try:
-        result = run_closed_loop(scenario, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
+        result = run_closed_loop(sc, [Target(target)], start_region=source, disturbance=disturbance, seed=seed,
                                  t_end_s=hold_s, mocap_noise_m=mocap_noise_m)
     except DesignError as err:  # exit 3, and the line names the scenario file
-        raise DesignError(f"{scenario_path}: the tube MPC cannot be designed for this scenario: {err}") from err
+        raise DesignError(f"{scenario}: the tube MPC cannot be designed for this scenario: {err}") from err
     if force:
         replace_output_log(out_path)
-    path = write_log(result, scenario, out_path)
+    path = write_log(result, sc, out_path)
     arrival = result.arrivals[0]
     times_ms = np.array([r.solve_time_s for r in result.solver]) * 1e3
     iters = np.array([r.iterations for r in result.solver])
@@ -86,7 +86,7 @@ def simulate(*, scenario_path: str, source: str | None, target: str, disturbance
     say(f"log: {path}")
     if not result.ok:
         click.echo(f"tubempc: {result.reason}", err=True)
-        raise click.exceptions.Exit(EXIT_NOT_REACHED)
+        leave(EXIT_NOT_REACHED)
 
 
 def _simulate_controller(scenario: Scenario, spec: str, *, source: str | None, targets: list[str],
@@ -98,7 +98,7 @@ def _simulate_controller(scenario: Scenario, spec: str, *, source: str | None, t
     from tubempc.control import Target
     from tubempc.control.user import checked_controller, run_controller
     from tubempc.rosio import write_log
-    from verify.outputs import replace_output_log
+    from tubempc.runtime.outputs import replace_output_log
 
     controller = checked_controller(spec, scenario)
     result = run_controller(scenario, controller, [Target(t.strip()) for t in targets], start_region=source,
@@ -114,4 +114,4 @@ def _simulate_controller(scenario: Scenario, spec: str, *, source: str | None, t
     say(f"log: {path}")
     if not result.ok:
         click.echo(f"tubempc: {result.reason}", err=True)
-        raise click.exceptions.Exit(EXIT_NOT_REACHED)
+        leave(EXIT_NOT_REACHED)

@@ -1,1 +1,0 @@
-"""Subcommands of the ``tubempc`` CLI, one module each; heavy libraries are imported inside the commands."""
