@@ -141,6 +141,9 @@ class Quiet:
         mon = self.mon
         self.pose_seen = self.cmd_seen = self.nom_seen = 0
         self.block = False
+        # the last sample tested in full: (x, y, how far the robot may move before any tested value can reach its
+        # limit, the time from which it must be tested again)
+        self.ref: tuple[float, float, float, float] | None = None
         sel = mon._selected
         self.ws = "workspace" in sel and mon._ws.fail_ns is None
         self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and mon._clear.fail_ns is None
@@ -212,42 +215,55 @@ class Quiet:
         ws, clear, run_open, windows = self.ws, self.clear, self.run_open, self.windows
         x0, x1, y0, y1 = self.box
         x0, x1, y0, y1 = x0 + eta + EPS, x1 - eta - EPS, y0 + eta + EPS, y1 - eta - EPS
-        hypot, isfinite = math.hypot, math.isfinite
+        hypot, isfinite, inf = math.hypot, math.isfinite, math.inf
         prev_t, prev_key = self.prev_t, self.prev_key
         deadline = self.deadline
         unmatched = self.unmatched if self.tube and not self.tube_wait else None
+        ref = self.ref
         start = self.pose_seen
         for t, x, y in zip(mon._pose_t[start:], mon._pose_x[start:], mon._pose_y[start:], strict=True):
             if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
                 return False
-            if ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
-                return False
-            mg = []
-            key = []
-            for cx, cy, off, r, unsafe in discs:
-                d = hypot(x - cx, y - cy)
-                if unsafe and clear and off - d > -EPS:  # obstacle clearance below EPS
+            # still near the last fully tested sample: every margin tested is 1-Lipschitz in the position, so none
+            # has come within EPS of its limit, no region was entered or left, no window argument changed sides
+            if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
+                if ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
                     return False
+                slack = min(x - x0, x1 - x, y - y0, y1 - y) if ws else inf
+                until = deadline
+                mg = []
+                key = []
+                for cx, cy, off, r, unsafe in discs:
+                    d = hypot(x - cx, y - cy)
+                    if unsafe and clear:
+                        if off - d > -EPS:  # obstacle clearance below EPS
+                            return False
+                        slack = min(slack, d - off - EPS)
+                    if run_open:
+                        c = d + eta - r
+                        if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
+                            return False
+                        key.append(c < 0)
+                        slack = min(slack, abs(c) - EPS)
+                    mg.append(off - d)
                 if run_open:
-                    c = d + eta - r
-                    if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
+                    key.append(False)  # the "position unknown" row: a finite sample
+                    if key != prev_key:  # a new timed-run entry
                         return False
-                    key.append(c < 0)
-                mg.append(off - d)
-            if run_open:
-                key.append(False)  # the "position unknown" row: a finite sample
-                if key != prev_key:  # a new timed-run entry
-                    return False
-            for always, lo, hi, value in windows:
-                if t < lo or prev_t + 1 > hi:  # the sample and the gap before it are outside the window
-                    continue
-                v = value(mg)
-                if (v < EPS) if always else (v > -EPS):
-                    return False
+                for always, lo, hi, value in windows:
+                    v = value(mg)
+                    room = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
+                    if room > 0:
+                        slack = min(slack, room)
+                    elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
+                        return False
+                    else:  # the window has not started: test again when it does
+                        until = min(until, lo)
+                ref = (x, y, slack, until) if slack > 0 else None
             if unmatched is not None:
                 unmatched.append((t, x, y))
             prev_t = t
-        self.prev_t, self.prev_key = prev_t, prev_key
+        self.prev_t, self.prev_key, self.ref = prev_t, prev_key, ref
         self.pose_seen = len(mon._pose_t)
         return True
 
