@@ -166,7 +166,11 @@ def _local_cluster(dist: Any, workers: int | None, preload: Sequence[str]) -> An
     dask_config: Any = importlib.import_module("dask.config")
     utils: Any = importlib.import_module("distributed.utils")
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    with dask_config.set({"distributed.worker.multiprocessing-method": method}):
+    # the periodic work of an idle cluster (event-loop ticks every 20 ms, system and memory monitors) costs CPU in
+    # every process for as long as the batch runs; a batch needs none of it at that rate (no dashboard)
+    quiet = {"distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s",
+             "distributed.worker.memory.monitor-interval": "1s"}
+    with dask_config.set({"distributed.worker.multiprocessing-method": method, **quiet}):
         if method == "forkserver":
             utils.get_mp_context().set_forkserver_preload(["distributed", *preload])
         return dist.LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,

@@ -42,13 +42,16 @@ from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, Window
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
 
-__all__ = ["EPS", "Quiet"]
+__all__ = ["EPS", "MAX_WAITING", "Quiet"]
 
 #: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
 #: rounding differences between this scalar arithmetic and the vectorised judging
 EPS = 1e-6
 #: slack (ns) on a window's end: the timed run rounds its times through seconds
 _END_SLACK_NS = 1_000
+#: at most this many pose samples wait for an update that judges (with ``max_pending``, if lower): a judging costs
+#: a fixed few hundred microseconds plus a few per sample, so this bounds the slowest update near 1 ms
+MAX_WAITING = 64
 
 Value = Callable[[list[float]], float]
 
@@ -184,7 +187,8 @@ class Quiet:
     def quiet(self) -> bool:
         """True when judging the buffered samples now decides nothing (see the module docstring)."""
         mon = self.mon
-        if not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra:
+        if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
+                or len(mon._pose_t) >= MAX_WAITING):
             return False
         if mon._nom_t and self.nom_seen < len(mon._nom_t):
             self.noms.extend(zip(mon._nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
