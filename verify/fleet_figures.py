@@ -176,11 +176,14 @@ def render_fleet_figures(cert: Certificate, scenario: Scenario, tables: Mapping[
         if name not in paths or name not in scenario.robot_names:
             continue
         own = scenario.robot_scenario(name)
+        entry = next((r for r in cert.robots or () if r.name == name), None)
+        # the robot's own data quality states its dropout threshold and count (the sampling figure reads them)
+        own_cert = cert if entry is None else cert.model_copy(update={"data_quality": entry.data_quality})
         for stem, caption, png in (
                 (f"clearance-{name}", f"{name}: clearance of its disc from unsafe regions and the workspace edge.",
                  clearance_figure(cert, own, paths[name])),
                 (f"sampling-{name}", f"{name}: pose stamp intervals (data quality).",
-                 sampling_figure(own, paths[name]))):
+                 sampling_figure(own_cert, own, paths[name]))):
             if png is not None:
                 out.append(FigureSpec(stem, caption, png))
     return out

@@ -71,3 +71,15 @@ def test_a_pool_that_breaks_while_items_are_handed_out(monkeypatch: pytest.Monke
 
     monkeypatch.setattr(ProcessPoolExecutor, "submit", submit)
     assert parallel_map(abs, [-1, -5, -2, -3], workers=2, progress=False) == [1, 5, 2, 3]
+
+
+def test_dask_chunks_keep_order_and_balance() -> None:
+    """Dask gets a few contiguous chunks per worker (one task and one pickled scenario per chunk, not per item)."""
+    from tubempc.runtime.executor import _chunks
+
+    items = list(range(203))
+    chunks = _chunks(items, 2)
+    assert len(chunks) == 8 and [x for c in chunks for x in c] == items
+    assert max(map(len, chunks)) - min(map(len, chunks)) <= 1
+    assert _chunks([1, 2], 4) == [[1], [2]]
+    assert _chunks([], 2) == []

@@ -11,7 +11,10 @@ so one bad item cannot take the others down; an item whose lone rerun dies too g
 (without ``on_crash``: ``RuntimeError``, an internal error, exit 70). Dask distributed (the ``dask`` extra):
 ``dask="local"`` (a ``LocalCluster`` on loopback, worker processes, one thread each, no dashboard),
 ``dask="tcp://host:port"`` (an existing scheduler whose workers can import this package and see the same paths),
-or a ``distributed.Client`` the caller owns (used, not closed). Exceptions raised by ``fn`` propagate.
+or a ``distributed.Client`` the caller owns (used, not closed). On Dask the items go in chunks (a few per worker:
+one task, one message and one pickled copy of objects the items share, such as a batch's scenario, per chunk rather
+than per item); a local cluster's worker processes fork from a server that imported ``preload`` once, as the
+process pool's do. Exceptions raised by ``fn`` propagate.
 """
 
 from __future__ import annotations
@@ -69,7 +72,7 @@ def parallel_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | Non
                file=sys.stderr, leave=True)
     try:
         if dask is not None:
-            return _dask_map(fn, items, workers=workers, dask=dask, bar=bar)
+            return _dask_map(fn, items, workers=workers, dask=dask, bar=bar, preload=preload)
         n = min(workers or os.cpu_count() or 1, len(items))
         if n <= 1:
             out = []
@@ -133,13 +136,56 @@ def _run_alone(fn: Callable[[T], R], item: T, context: multiprocessing.context.B
         _shut_down(solo, broken=died)
 
 
-def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any) -> list[R]:
+#: chunks per Dask worker: few enough that the scheduler's per-task cost is negligible, enough to balance the load
+_CHUNKS_PER_WORKER = 4
+
+
+def _run_chunk(fn: Callable[[T], R], chunk: Sequence[T]) -> list[R]:
+    """One Dask task: ``fn`` over a chunk of items, in order."""
+    return [fn(item) for item in chunk]
+
+
+def _chunks(items: Sequence[T], workers: int) -> list[list[T]]:
+    """``items`` cut into at most ``workers * _CHUNKS_PER_WORKER`` contiguous chunks of near-equal size."""
+    count = min(len(items), max(workers, 1) * _CHUNKS_PER_WORKER)
+    if count == 0:
+        return []
+    size, extra = divmod(len(items), count)
+    out: list[list[T]] = []
+    start = 0
+    for k in range(count):
+        stop = start + size + (k < extra)
+        out.append(list(items[start:stop]))
+        start = stop
+    return out
+
+
+def _local_cluster(dist: Any, workers: int | None, preload: Sequence[str]) -> Any:
+    """A ``LocalCluster`` whose worker processes fork from a server that imported ``distributed`` and ``preload``
+    once (distributed's default spawns each worker, which then imports everything again)."""
+    dask_config: Any = importlib.import_module("dask.config")
+    utils: Any = importlib.import_module("distributed.utils")
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    # the periodic work of an idle cluster (event-loop ticks every 20 ms, system and memory monitors) costs CPU in
+    # every process for as long as the batch runs; a batch needs none of it at that rate (no dashboard)
+    quiet = {"distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s",
+             "distributed.worker.memory.monitor-interval": "1s"}
+    with dask_config.set({"distributed.worker.multiprocessing-method": method, **quiet}):
+        if method == "forkserver":
+            utils.get_mp_context().set_forkserver_preload(["distributed", *preload])
+        return dist.LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
+                                 processes=True, host="127.0.0.1", dashboard_address=None,
+                                 silence_logs=logging.ERROR)
+
+
+def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any,
+              preload: Sequence[str] = ()) -> list[R]:
     from tubempc.runtime.extras import require
 
     require("dask", feature="--dask")
     # distributed is only partly typed; treat it as untyped at this one boundary
     dist: Any = importlib.import_module("distributed")
-    Client, LocalCluster, dask_completed = dist.Client, dist.LocalCluster, dist.as_completed
+    Client, dask_completed = dist.Client, dist.as_completed
 
     cluster = None
     owned = isinstance(dask, str)
@@ -147,9 +193,7 @@ def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, 
         if not owned:
             client = dask  # the caller's client: used, not closed
         elif dask == "local":
-            cluster = LocalCluster(n_workers=workers or min(2, os.cpu_count() or 1), threads_per_worker=1,
-                                   processes=True, host="127.0.0.1", dashboard_address=None,
-                                   silence_logs=logging.ERROR)
+            cluster = _local_cluster(dist, workers, preload)
             client = Client(cluster)
         elif re.fullmatch(r"(tcp|tls|inproc|ucx)://\S+", dask):
             client = Client(dask, timeout="20s")
@@ -160,13 +204,15 @@ def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, 
         raise OutputError(f"cannot reach the Dask scheduler ({err.__class__.__name__}: {err})",
                                  path=str(dask)) from err
     try:
+        chunks = _chunks(items, len(client.scheduler_info().get("workers", {})) or workers or 1)
         # ship the inputs as data (certification results carry frames), not embedded in the task graph
-        scattered = client.scatter(list(items)) if items else []
-        futures = client.map(fn, scattered, pure=False)
-        for _ in dask_completed(futures):
-            bar.update()
-        gathered: list[R] = client.gather(futures)
-        return gathered
+        scattered = client.scatter(chunks) if chunks else []
+        futures = client.map(_run_chunk, [fn] * len(chunks), scattered, pure=False)
+        sizes = {fut.key: len(chunk) for fut, chunk in zip(futures, chunks, strict=True)}
+        for fut in dask_completed(futures):
+            bar.update(sizes[fut.key])
+        gathered: list[list[R]] = client.gather(futures)
+        return [r for part in gathered for r in part]
     finally:
         if owned:
             client.close()

@@ -46,6 +46,7 @@ from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
+from verify.online.quiet import Quiet
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
@@ -251,6 +252,7 @@ class OnlineMonitor:
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
         self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+        self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
     def _unit_of(self, formula: Formula) -> str | None:
         units = {self.scenario.signals[n].unit if n in self._feeds else "m" for n in atoms(formula)}
@@ -316,6 +318,7 @@ class OnlineMonitor:
 
     def _unknown_nominal(self, t_ns: int) -> None:
         """Nominal samples that disagree at one time: the nominal state there is unknown."""
+        self._quiet.block = True
         if self._nom_t and self._nom_t[-1] == t_ns:
             self._nom_x[-1] = self._nom_y[-1] = math.nan
             return
@@ -382,8 +385,11 @@ class OnlineMonitor:
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
         """Judge the buffered samples; the checks and obligations decided since the last call (including those
-        decided when ``max_pending`` samples made a push judge the buffer)."""
-        self._process()
+        decided when ``max_pending`` samples made a push judge the buffer). Samples that cannot decide anything
+        (``verify.online.quiet``) may stay buffered until one can or ``max_pending`` wait: the same decisions, at
+        the same call, with the same times, as judging at every call."""
+        if not self._quiet.quiet():
+            self._process()
         out, self._unreturned = self._unreturned, []
         return out
 
@@ -434,6 +440,7 @@ class OnlineMonitor:
             self._feed_cmd(t, u)
         self._resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
+        self._quiet.refresh()
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
                    every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:

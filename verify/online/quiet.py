@@ -1,0 +1,293 @@
+"""Whether judging the buffered samples now could decide anything: the online monitor's cheap per-sample test.
+
+input: the ``OnlineMonitor`` (its scenario, its buffered samples, the state of its heads and checks) -> output:
+``Quiet.quiet()``, True only when judging the buffered samples now cannot make any check or obligation final, so
+that ``update`` may leave them buffered (at most ``max_pending`` of them) and return no decision, exactly as judging
+them would have. Judging them later, together with the samples that follow, gives the same verdicts and the same
+decision times (the monitor's verdicts do not depend on the batching), so decisions come at the same ``update`` as
+when every call judges.
+
+The test is scalar (plain floats, a few operations per sample) and conservative: any doubt -- a value within
+``EPS`` of a limit, a NaN, a duplicate that disagrees, a formula or scenario it does not cover -- says "not quiet".
+Before close a check is decided only by failing, an obligation only by one of its leaf windows (a ``Head`` interval
+only shrinks, so a Boolean combination's verdict changes only when a leaf's does). So a batch is quiet when:
+
+* workspace and obstacle clearance: no new sample's margin (``verify.geometry``) is below ``EPS``;
+* tube: every new pose sample that the next judging can match (a nominal sample at or after it has arrived) is
+  within the tube radius plus tolerance (less ``EPS``) of every nominal sample within the matching distance;
+* input box: every new command is inside the box (``verify.checks.check_input_box``) by ``EPS``;
+* formula, trajectory semantics: for each leaf ``F_I phi`` / ``G_I phi`` not decided and whose window is not complete
+  (``phi`` without temporal operators), ``phi`` is not true (``F``) / false (``G``) within ``EPS`` at a new sample
+  whose span since the previous sample meets the window, and no new sample reaches the window's end. A gap between
+  samples cannot decide it alone: its bounds (``verify.geometry.gap_bounds``: mid-value -/+ half the step, the step
+  at least the distance travelled) exceed 0 only where the 1-Lipschitz margins exceed 0 at both ends, and Kleene's
+  and / or / not keep that, so the sample ending the gap shows it too;
+* formula, timed-run semantics: no new sample changes the set of regions containing the robot (a new entry) and
+  no window end is reached.
+
+Formulas with a temporal operator under a window, signal atoms, polygon regions or a polygon workspace are not
+covered: the monitor then judges at every ``update`` as before.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Not, Or
+from verify.checks import INPUT_COMPONENTS, INPUT_TOLERANCE
+from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, WindowHead
+
+if TYPE_CHECKING:
+    from verify.online.monitor import OnlineMonitor
+
+__all__ = ["EPS", "MAX_WAITING", "Quiet"]
+
+#: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
+#: rounding differences between this scalar arithmetic and the vectorised judging
+EPS = 1e-6
+#: slack (ns) on a window's end: the timed run rounds its times through seconds
+_END_SLACK_NS = 1_000
+#: at most this many pose samples wait for an update that judges (with ``max_pending``, if lower): a judging costs
+#: a fixed few hundred microseconds plus a few per sample, so this bounds the slowest update near 1 ms
+MAX_WAITING = 64
+
+Value = Callable[[list[float]], float]
+
+
+def _source(f: Formula, rows: dict[str, list[int]]) -> str | None:
+    """``f`` without temporal operators as a Python expression of the discs' margins ``mg`` (an atom's margin is
+    its regions' largest, ``verify.geometry.label_margins``); None when ``f`` has a temporal operator."""
+    if isinstance(f, Atom):
+        ks = rows[f.name]
+        return ("-inf" if not ks else f"mg[{ks[0]}]" if len(ks) == 1
+                else "max(" + ", ".join(f"mg[{k}]" for k in ks) + ")")
+    if isinstance(f, Const):
+        return "inf" if f.value else "-inf"
+    if isinstance(f, Not):
+        a = _source(f.arg, rows)
+        return None if a is None else f"-({a})"
+    if isinstance(f, And | Or):
+        parts = [_source(g, rows) for g in f.args]
+        if any(p is None for p in parts):
+            return None
+        texts = [p for p in parts if p is not None]
+        return texts[0] if len(texts) == 1 else ("min(" if isinstance(f, And) else "max(") + ", ".join(texts) + ")"
+    if isinstance(f, Implies):
+        a, b = _source(f.left, rows), _source(f.right, rows)
+        return None if a is None or b is None else f"max(-({a}), {b})"
+    return None
+
+
+def _value_of(f: Formula, rows: dict[str, list[int]]) -> Value | None:
+    """``f`` without temporal operators -> its robustness at a sample from the discs' margins (None: temporal).
+    Compiled from the parsed formula (names become indexes), so evaluating it is one Python expression."""
+    src = _source(f, rows)
+    if src is None:
+        return None
+    fn: Value = eval(compile(f"lambda mg: {src}", "<quiet>", "eval"), {"inf": math.inf, "max": max, "min": min})
+    return fn
+
+
+def _leaves(h: Head) -> list[Head]:
+    if isinstance(h, BoolHead):
+        return [leaf for k in h.kids for leaf in _leaves(k)]
+    return [h]
+
+
+class Quiet:
+    """The per-sample test of one monitor (see the module docstring); ``refresh`` after every judging."""
+
+    def __init__(self, mon: OnlineMonitor) -> None:
+        self.mon = mon
+        sc = mon.scenario
+        rows = {n: list(r) for n, r in zip(mon._names, mon._atom_rows, strict=True)}
+        self.values: dict[int, Value] = {}
+        covered = not mon._feeds and mon._discs and sc.workspace.polygon is None
+        for leaf in _leaves(mon._traj.head):
+            if isinstance(leaf, WindowHead):
+                assert isinstance(leaf.formula, Eventually | Always)
+                value = _value_of(leaf.formula.arg, rows)
+                if value is None:
+                    covered = False
+                else:
+                    self.values[id(leaf)] = value
+            elif not isinstance(leaf, StreamHead | OfflineHead):
+                covered = False
+        self.enabled = covered
+        self.block = False  # a nominal sample made unknown: judge at the next update
+        regions = [r for r in sc.regions if getattr(r, "polygon", None) is None]
+        eta = sc.robot.radius
+        # per disc: centre, offset of its margin (verify.geometry: r + eta for unsafe, r - eta otherwise), radius
+        self.discs = [(float(r.center[0]), float(r.center[1]), float(off), float(r.radius), bool(r.unsafe))
+                      for r, off in zip(regions, mon._offset.tolist(), strict=True)]
+        self.eta = eta
+        self.unsafe = list(mon._unsafe)
+        ws = sc.workspace
+        self.box = (float(ws.x[0]), float(ws.x[1]), float(ws.y[0]), float(ws.y[1]))
+        limits = sc.inputs
+        if limits.model == "holonomic":
+            bounds = [float(b) for b in limits.max_abs]
+            self.cols = [0, 1, 2]
+        else:
+            bounds = [float(limits.max_abs[0]), float(limits.max_abs[1]), float(limits.lateral_tolerance)]
+            self.cols = [0, 2, 1]
+        assert len(INPUT_COMPONENTS[limits.model]) == 3
+        self.cmd_limit = [b + INPUT_TOLERANCE - EPS for b in bounds]
+        self.tube_limit = mon._tube_radius_m + mon._tol_m - EPS
+        self.match_ns = mon._period_ns // 2
+        self.refresh()
+
+    def refresh(self) -> None:
+        """After a judging: what is still open, and the samples the next test starts from."""
+        mon = self.mon
+        self.pose_seen = self.cmd_seen = self.nom_seen = 0
+        self.block = False
+        # the last sample tested in full: (x, y, how far the robot may move before any tested value can reach its
+        # limit, the time from which it must be tested again)
+        self.ref: tuple[float, float, float, float] | None = None
+        sel = mon._selected
+        self.ws = "workspace" in sel and mon._ws.fail_ns is None
+        self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and mon._clear.fail_ns is None
+        self.cmd = "input_box" in sel and mon._input.fail is None
+        self.tube = "tube" in sel and mon._tube.fail is None
+        # no nominal sample yet: none can be matched before the first one arrives, which is then judged at once
+        self.tube_wait = self.tube and mon._nominal_seen == 0
+        t0 = mon.t0_ns
+        self.windows: list[tuple[bool, int, float, Value]] = []  # (G?, window start, end (abs ns), phi)
+        ends: list[float] = []
+        heads = (([mon._traj.head] if "spec_trajectory" in sel else [])
+                 + ([mon._run.head] if "spec_timed_run" in sel else []))
+        if t0 is not None and self.enabled:
+            for root in heads:
+                for leaf in _leaves(root):
+                    if not isinstance(leaf, WindowHead) or leaf.decided or leaf.complete:
+                        continue
+                    end = math.inf if leaf.hi_ns is None else float(t0 + leaf.hi_ns)
+                    ends.append(end)
+                    if root is mon._traj.head:
+                        self.windows.append((leaf.always, t0 + leaf.lo_ns, end, self.values[id(leaf)]))
+        self.deadline = min(ends, default=math.inf) - _END_SLACK_NS
+        self.run_open = "spec_timed_run" in sel and not mon._run.head.decided
+        # the last judged sample (the formula's) and the regions containing it, as the judging saw them
+        self.prev_t = mon._prev[0] if mon._prev is not None else None
+        ps = mon._prev_set
+        self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
+        # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
+        self.unmatched: list[tuple[int, float, float]] = []
+        for t, x, y in mon._tube_pending:
+            self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
+        nt, nx, ny = mon._nominal
+        cut = min([mon._last_pose, *(u[0] for u in self.unmatched[:1])]) - self.match_ns
+        k = int(nt.searchsorted(cut)) if nt.size else 0
+        self.noms: list[tuple[int, float, float]] = list(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
+                                                             strict=True))
+
+    def quiet(self) -> bool:
+        """True when judging the buffered samples now decides nothing (see the module docstring)."""
+        mon = self.mon
+        if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
+                or len(mon._pose_t) >= MAX_WAITING):
+            return False
+        if mon._nom_t and self.nom_seen < len(mon._nom_t):
+            self.noms.extend(zip(mon._nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
+                                 strict=True))
+            self.nom_seen = len(mon._nom_t)
+        if self.tube_wait and mon._nom_t:
+            return False
+        if self.cmd and not self._commands_quiet():
+            return False
+        pt = mon._pose_t
+        if self.pose_seen < len(pt) and not self._poses_quiet():
+            return False
+        return not (self.tube and self.unmatched) or self._tube_quiet()
+
+    def _commands_quiet(self) -> bool:
+        mon = self.mon
+        cols, limit = self.cols, self.cmd_limit
+        for u in mon._cmd_u[self.cmd_seen:]:
+            for c, lim in zip(cols, limit, strict=True):
+                if not abs(u[c]) <= lim:  # also NaN
+                    return False
+        self.cmd_seen = len(mon._cmd_u)
+        return True
+
+    def _poses_quiet(self) -> bool:
+        mon = self.mon
+        eta, discs = self.eta, self.discs
+        ws, clear, run_open, windows = self.ws, self.clear, self.run_open, self.windows
+        x0, x1, y0, y1 = self.box
+        x0, x1, y0, y1 = x0 + eta + EPS, x1 - eta - EPS, y0 + eta + EPS, y1 - eta - EPS
+        hypot, isfinite, inf = math.hypot, math.isfinite, math.inf
+        prev_t, prev_key = self.prev_t, self.prev_key
+        deadline = self.deadline
+        unmatched = self.unmatched if self.tube and not self.tube_wait else None
+        ref = self.ref
+        start = self.pose_seen
+        for t, x, y in zip(mon._pose_t[start:], mon._pose_x[start:], mon._pose_y[start:], strict=True):
+            if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
+                return False
+            # still near the last fully tested sample: every margin tested is 1-Lipschitz in the position, so none
+            # has come within EPS of its limit, no region was entered or left, no window argument changed sides
+            if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
+                if ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
+                    return False
+                slack = min(x - x0, x1 - x, y - y0, y1 - y) if ws else inf
+                until = deadline
+                mg = []
+                key = []
+                for cx, cy, off, r, unsafe in discs:
+                    d = hypot(x - cx, y - cy)
+                    if unsafe and clear:
+                        if off - d > -EPS:  # obstacle clearance below EPS
+                            return False
+                        slack = min(slack, d - off - EPS)
+                    if run_open:
+                        c = d + eta - r
+                        if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
+                            return False
+                        key.append(c < 0)
+                        slack = min(slack, abs(c) - EPS)
+                    mg.append(off - d)
+                if run_open:
+                    key.append(False)  # the "position unknown" row: a finite sample
+                    if key != prev_key:  # a new timed-run entry
+                        return False
+                for always, lo, hi, value in windows:
+                    v = value(mg)
+                    room = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
+                    if room > 0:
+                        slack = min(slack, room)
+                    elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
+                        return False
+                    else:  # the window has not started: test again when it does
+                        until = min(until, lo)
+                ref = (x, y, slack, until) if slack > 0 else None
+            if unmatched is not None:
+                unmatched.append((t, x, y))
+            prev_t = t
+        self.prev_t, self.prev_key, self.ref = prev_t, prev_key, ref
+        self.pose_seen = len(mon._pose_t)
+        return True
+
+    def _tube_quiet(self) -> bool:
+        """The pose samples the next judging can match are inside the tube against every candidate nominal."""
+        noms = self.noms
+        if not noms:
+            return True
+        last_nom = noms[-1][0]
+        match, limit, hypot = self.match_ns, self.tube_limit, math.hypot
+        keep: list[tuple[int, float, float]] = []
+        for t, x, y in self.unmatched:
+            if t > last_nom:  # not matched by the next judging
+                keep.append((t, x, y))
+                continue
+            for nt, nx, ny in noms:
+                if abs(nt - t) <= match and not hypot(x - nx, y - ny) <= limit:  # also NaN
+                    return False
+        self.unmatched = keep
+        cut = min([self.mon._last_pose, *(u[0] for u in keep[:1])]) - match
+        if noms[0][0] < cut:
+            self.noms = [n for n in noms if n[0] >= cut]
+        return True
