@@ -1078,6 +1078,14 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
                         if verbose:
                             print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
                                   file=sys.stderr)
+                    elif case.family == "bytes" and seen.code == 3 and res.code in (0, 1, 2):
+                        # the reverse: certify reads the messages it needs through the index and never parses the
+                        # damaged bytes (a record of a topic it does not read); watch walks every record as it
+                        # completes and refuses the damage with one line naming its byte (counted, listed with -v)
+                        report.counts["watch_refused_damaged"] += 1
+                        if verbose:
+                            print(f"#{i} info: certify exit {res.code}, watch exit 3: {seen.stderr.strip()[:160]}",
+                                  file=sys.stderr)
                     elif seen.code == 2 and "not closed by its recorder" in seen.stdout + seen.stderr and res.code == 0:
                         # a bare .db3 has no metadata.yaml that says the recorder closed it: watch judges it as
                         # --salvage does (partial, never a pass); counted, not a disagreement
@@ -1123,6 +1131,7 @@ def main() -> None:
         print(f"{count:6d}  {key}")
     print("cases per family and format: " + ", ".join(f"{k}={v}" for k, v in sorted(report.per_format.items())))
     print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
+    print(f"watch refused damaged bytes certify did not read (exit 3): {report.counts['watch_refused_damaged']}")
     print(f"watch judged a log certify refused (exit 3): {report.counts['watch_judged_refused']}; watch judged a "
           f"log as not closed by its recorder (partial) where certify passed: {report.counts['watch_partial']}")
     print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")
