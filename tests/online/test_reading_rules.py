@@ -158,7 +158,7 @@ def test_watch_takes_clock_offsets_as_certify(tmp_path: Path, capsys: pytest.Cap
     item = offset if offset.startswith("/") else f"{FUZZ.TEMP_TOPIC}={offset}"
     got = []
     for cmd in ("certify", "watch"):
-        code, out, err = run([cmd, str(log), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok",
+        code, _out, err = run([cmd, str(log), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok",
                               "--clock-offset", item], capsys)
         got.append(code)
         if code == 3:
