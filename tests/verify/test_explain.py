@@ -60,3 +60,26 @@ def test_an_undecided_conjunction_names_its_undecided_argument_not_a_true_one() 
     values = evaluate_at_points(f, pos, atoms)
     e = explain(f, 0, pos, values)
     assert e.subformula == "q" and e.reason.startswith("unknown here"), e
+
+
+# ---- U: exact-zero values are undecided (``_until``'s counting rule) -------------------------------------------------
+def _until_at_0(p: Truth, q: Truth, text: str = "p U[0,3] q") -> Truth:
+    f = parse(text)
+    return evaluate_at_points(f, _pos(4), {"p": p, "q": q})[f]
+
+
+def test_until_is_not_true_on_a_witness_whose_value_is_exactly_zero() -> None:
+    v = _until_at_0(TRUE4, _truth([0.0] * 4, [1.0] * 4))  # q undecided (lower bound exactly 0) everywhere
+    assert v.lo[0] <= 0 < v.hi[0], (v.lo[0], v.hi[0])
+
+
+def test_until_is_not_true_when_its_left_side_is_exactly_zero_before_the_witness() -> None:
+    v = _until_at_0(_truth([0.0] * 4, [1.0] * 4), _truth([-1.0, -1.0, 1.0, 1.0], [-1.0, -1.0, 1.0, 1.0]))
+    assert v.lo[0] <= 0, v.lo[0]
+
+
+def test_until_is_not_false_when_its_left_side_is_only_undecided_and_the_window_runs_past_the_end() -> None:
+    for hi in (0.0, 0.5):  # p undecided at 1 s (not false); q false everywhere; the window ends after the log
+        v = _until_at_0(_truth([1.0, -1.0, 1.0, 1.0], [1.0, hi, 1.0, 1.0]), _truth([-1.0] * 4, [-1.0] * 4),
+                        "p U[0,10] q")
+        assert v.hi[0] >= 0, (hi, v.hi[0])
