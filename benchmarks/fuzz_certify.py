@@ -1078,7 +1078,8 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
                         if verbose:
                             print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
                                   file=sys.stderr)
-                    elif case.family == "bytes" and seen.code == 3 and res.code in (0, 1, 2):
+                    elif (case.family == "bytes" and seen.code == 3 and res.code in (0, 1, 2)
+                          and "malformed" in seen.stderr and "record" in seen.stderr):
                         # the reverse: certify reads the messages it needs through the index and never parses the
                         # damaged bytes (a record of a topic it does not read); watch walks every record as it
                         # completes and refuses the damage with one line naming its byte (counted, listed with -v)

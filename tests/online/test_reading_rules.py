@@ -191,3 +191,22 @@ def test_watch_says_why_without_out(capsys: pytest.CaptureFixture[str]) -> None:
     assert why and any("violated at" in ln for ln in why), out
     code, out, _ = run(["-q", "watch", str(LOGS / "obstacle_touch.bag"), "--scenario", "nexus-sml"], capsys)
     assert code == 1 and "   why    " not in out
+
+
+def test_an_undecodable_nominal_stream_is_not_used_in_watch_as_in_certify(tmp_path: Path) -> None:
+    """certify does not use an optional stream whose messages cannot be decoded (a finding); watch neither (it
+    refused the whole log before)."""
+    from dataclasses import replace
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=True), tmp_path / "run.mcap", "mcap")
+    sc = builtin_scenario()
+    msgs = open_follower(log).poll()
+    k = next(i for i, m in enumerate(msgs) if m.topic == sc.topics.nominal)
+    msgs[k] = replace(msgs[k], payload=b"\x00\x01\x00\x00\x07")
+    monitor = OnlineMonitor(sc, spec=SPEC)
+    feeder = _Feeder(monitor, ReadingRules.of(sc, "auto"), False, log, probe=None)
+    feeder.feed(msgs, final=True)
+    assert "nominal" in feeder.unused and "not used" in feeder.unused["nominal"]
+    res = monitor.close(problems=feeder.problems)
+    tube = next(c for c in res.checks if c.name == "tube")
+    assert tube.verdict == "inconclusive" and res.verdict == "fail"

@@ -91,6 +91,8 @@ class _Feeder:
         self._stamps: list[npt.NDArray[np.int64]] = []  # auto: every pose header stamp and log time read
         self._logs: list[npt.NDArray[np.int64]] = []
         self.problems: dict[str, str] = {}  # stream -> why nothing judged on it can pass (as read_log's)
+        self.unused: dict[str, str] = {}  # optional stream (nominal, cmd_vel) -> why its messages are not used
+        self.pushed: dict[str, int] = {"nominal": 0, "cmd_vel": 0}
         # the signal atoms the formula uses: topic -> [(name, field)]
         self.signals: dict[str, list[tuple[str, str]]] = {}
         for name in monitor.signal_names:
@@ -174,18 +176,38 @@ class _Feeder:
             for topic, fields in self.signals.items():
                 if topic in by_topic:
                     self._push_signals(by_topic[topic], fields)
-            if t.nominal in by_topic:
-                self._push_pose(by_topic[t.nominal], self.monitor.push_nominal, pose=False)
+            if t.nominal in by_topic and "nominal" not in self.unused:
+                self._optional("nominal", by_topic[t.nominal], lambda: self._push_pose(
+                    by_topic[t.nominal], self.monitor.push_nominal, pose=False))
             if self.pose_topic in by_topic:
                 self._push_pose(by_topic[self.pose_topic], self.monitor.push_pose, pose=True)
-            if t.cmd_vel in by_topic:
-                tw = decode_twist(self._raw(by_topic[t.cmd_vel]), self.ros1)
-                tb, cst = self.rules.stream_times(t.cmd_vel, tw.stamp_ns, tw.log_ns, pose_base=self._pose_base)
-                self._problem("cmd_vel", tb)
-                for k in np.argsort(cst, kind="stable").tolist():
-                    self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
+            if t.cmd_vel in by_topic and "cmd_vel" not in self.unused:
+                self._optional("cmd_vel", by_topic[t.cmd_vel], lambda: self._push_cmd(by_topic[t.cmd_vel]))
 
         self._decoded(push_all)
+
+    def _push_cmd(self, msgs: list[SalvagedMessage]) -> None:
+        tw = decode_twist(self._raw(msgs), self.ros1)
+        tb, cst = self.rules.stream_times(msgs[0].topic, tw.stamp_ns, tw.log_ns, pose_base=self._pose_base)
+        self._problem("cmd_vel", tb)
+        for k in np.argsort(cst, kind="stable").tolist():
+            self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
+
+    def _optional(self, stream: str, msgs: list[SalvagedMessage], push: Callable[[], None]) -> None:
+        """An optional stream whose messages cannot be decoded is not used, as ``read_log`` does not use it (a
+        finding, not an error; one topic with two types stays an error, as in ``read_log``); if some of its
+        messages were judged already (following a growing log), the run cannot pass."""
+        topic = msgs[0].topic
+        self._raw(msgs)  # one topic, one type: exit 3 as read_log's reader
+        try:
+            push()
+        except (VerifyError, *READ_ERRORS) as err:
+            words = err.reason if isinstance(err, VerifyError) else in_words(err)
+            self.unused[stream] = f"{topic}: messages cannot be decoded ({words}); the {stream} stream is not used"
+            if self.pushed[stream]:
+                self.problems[stream] = f"messages of {topic} were judged before one that cannot be decoded"
+            return
+        self.pushed[stream] += 1
 
     def _problem(self, stream: str, tb: TimeBase) -> None:
         """An explicit header base whose stamps cannot order a stream's samples: no pass (as read_log)."""
@@ -296,7 +318,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor, *, follow: bool = False,
     else:
         feeder.feed([], final=True)
     mismatch = feeder.base_mismatch()
-    notes += [n for n in (feeder.base_note, mismatch) if n]
+    notes += [n for n in (feeder.base_note, mismatch, *feeder.unused.values()) if n]
     if feeder.pose_topic is None:
         raise rules.missing_pose(feeder.seen_topics, str(p))
     if monitor.counts["pose"] == 0:
