@@ -37,7 +37,7 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from verify.errors import LogReadError, MissingTopicError, VerifyError
+from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
 from verify.ingest.decode import PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
 from verify.ingest.raw import RawTopic, check_log_path
@@ -51,6 +51,8 @@ from verify.online.monitor import Decision, OnlineMonitor, OnlineResult
 __all__ = ["WatchResult", "watch_log"]
 
 T = TypeVar("T")
+#: what makes an optional stream unused rather than the log unusable (as ``verify.ingest.log``)
+_OPTIONAL_ERRORS: tuple[type[BaseException], ...] = (VerifyError, *READ_ERRORS)
 #: ``--time-base auto`` with ``follow``: pose messages whose header stamps decide the time base
 AUTO_PROBE = 50
 
@@ -176,13 +178,15 @@ class _Feeder:
             for topic, fields in self.signals.items():
                 if topic in by_topic:
                     self._push_signals(by_topic[topic], fields)
-            if t.nominal in by_topic and "nominal" not in self.unused:
-                self._optional("nominal", by_topic[t.nominal], lambda: self._push_pose(
-                    by_topic[t.nominal], self.monitor.push_nominal, pose=False))
+            nominal = by_topic.get(t.nominal) if t.nominal is not None else None
+            if nominal and "nominal" not in self.unused:
+                self._optional("nominal", nominal, lambda: self._push_pose(nominal, self.monitor.push_nominal,
+                                                                           pose=False))
             if self.pose_topic in by_topic:
                 self._push_pose(by_topic[self.pose_topic], self.monitor.push_pose, pose=True)
-            if t.cmd_vel in by_topic and "cmd_vel" not in self.unused:
-                self._optional("cmd_vel", by_topic[t.cmd_vel], lambda: self._push_cmd(by_topic[t.cmd_vel]))
+            cmd = by_topic.get(t.cmd_vel) if t.cmd_vel is not None else None
+            if cmd and "cmd_vel" not in self.unused:
+                self._optional("cmd_vel", cmd, lambda: self._push_cmd(cmd))
 
         self._decoded(push_all)
 
@@ -201,8 +205,8 @@ class _Feeder:
         self._raw(msgs)  # one topic, one type: exit 3 as read_log's reader
         try:
             push()
-        except (VerifyError, *READ_ERRORS) as err:
-            words = err.reason if isinstance(err, VerifyError) else in_words(err)
+        except _OPTIONAL_ERRORS as err:
+            words = err.reason if isinstance(err, UnusableInputError) else in_words(err)
             self.unused[stream] = f"{topic}: messages cannot be decoded ({words}); the {stream} stream is not used"
             if self.pushed[stream]:
                 self.problems[stream] = f"messages of {topic} were judged before one that cannot be decoded"
