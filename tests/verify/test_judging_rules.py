@@ -87,3 +87,16 @@ def test_check_explanation() -> None:
     assert got == "no nominal state logged: tube; log the MPC's nominal state on topics.nominal"
     got = check_explanation({"verdict": "inconclusive"})
     assert got == "not decided; more or better data would decide it"
+
+
+@pytest.mark.parametrize(("reason", "decide"), [
+    ("no nominal state logged: tube containment cannot be checked", "log the MPC's nominal state on topics.nominal"),
+    ("no cmd_vel logged: the input box cannot be checked", "log the applied commands on topics.cmd_vel"),
+    ("no samples", "a log with pose samples"),
+    ("the robot may have crossed the limit between samples",
+     "samples closer together there (or a lower speed bound) would decide it"),
+    ("a NaN position", "usable values there would decide it"),
+    ("3 pose sample(s) without a usable nominal", "a nominal sample within half a MoCap period of each pose sample"),
+])
+def test_an_undecided_check_says_what_would_decide_it(reason: str, decide: str) -> None:
+    assert check_explanation({"verdict": "inconclusive", "reason": reason}) == f"{reason}; {decide}"
