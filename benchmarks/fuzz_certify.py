@@ -21,7 +21,12 @@ format; message-content faults (header stamps: a repeated stamp hiding an obstac
 negative / 1970 / reordered stamps; NaN positions, zero quaternions, invalid UTF-8 frame ids, bad bytes in an
 optional topic, a wrong type on the pose topic, a missing topic); formula mutations (edits, deep nesting, long
 chains, huge bounds); scenario YAML mutations (edits, many regions, alias bombs, bad bytes); output paths and
-non-regular log paths. The last line is ``cases=N crashes=N hangs=N false_pass=N``.
+non-regular log paths; stamp faults on every stream, two types on one topic, option values at and past their limits,
+symlinks in output folders, signal data outside the pose's span; constant and degenerate formulas (``true``,
+``false``, ``G !true``, windows past the log's end: the exact verdict is required), all-infinite and NaN-only
+streams (poses, a signal, commands), scenario values at and past the validator's limits. Every certify case is run
+again on the other ingest path and under ``tubempc watch`` (same formula, checks, time base, clock offsets). The
+last line is ``cases=N crashes=N hangs=N false_pass=N path_disagreements=N watch_disagreements=N``.
 """
 
 from __future__ import annotations
@@ -841,11 +846,109 @@ def span_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Pat
     return Case("span", "after" if after else "before", argv, "undecidable", [path, scenario])
 
 
+
+#: constant and degenerate formulas: (text, the verdict certify must give on a clean run judged on spec alone)
+CONSTANT_FORMULAS = [("true", 0), ("false", 1), ("G !true", 1), ("F[0,5] false", 1), ("X (F (false))", 1),
+                     ("G[0,inf) !obs_1 & false", 1), ("!false", 0), ("G[0,inf) true", 0), ("F[0,5] true", 0),
+                     ("true U[0,5] false", 1), ("false U[0,5] true", 0), ("G[0,inf) (false -> obs_1)", 0),
+                     ("F[5,inf) false", 1), ("X(2,2.5] true", 1), ("G[0,inf) (true | obs_1)", 0),
+                     ("F[100,200] mission_1", 2), ("G[100,200] false", 2), ("F[0,inf) false", 1)]
+
+
+def constant_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Constant and degenerate formulas (``true``, ``false``, ``G !true``, windows past the log's end) on a clean
+    seed: the verdict is known exactly (``CONSTANT_FORMULAS``); never exit 70, never a pass for a false formula."""
+    text, want = rng.choice(CONSTANT_FORMULAS)
+    fmt = rng.choice(FORMATS[:4])
+    seed = seeds[fmt, False]
+    argv = ["certify", str(seed), "--scenario", "nexus-sml", "--spec", text, "--checks", "spec"]
+
+    def exact(res: Outcome) -> str | None:
+        return None if res.code == want else f"{text!r}: exit {res.code}, expected {want}"
+
+    truth = "violating" if want == 1 else "undecidable" if want == 2 else "any"
+    return Case("constant", f"{fmt}:{text}", argv, truth, [seed], exact)
+
+
+def infinite_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Streams whose values are all infinite or NaN (poses, a signal, commands), or infinite in one stretch:
+    never exit 70; a run whose data is all NaN, or whose signal is NaN, is never a pass."""
+    fmt = rng.choice(FORMATS[:4])
+    run = base_run(violating=False)
+    kind = rng.choice(["pose_inf", "pose_-inf", "pose_nan", "pose_mixed", "pose_inf_stretch", "signal_inf",
+                       "signal_-inf", "signal_nan", "cmd_inf", "cmd_nan", "all_nan"])
+    spec, truth, checks = SPEC, "any", "spec"
+    argv_extra: list[str] = []
+    scenario = "nexus-sml"
+    inputs: list[Path] = []
+    if kind.startswith("pose_"):
+        value = {"pose_inf": math.inf, "pose_-inf": -math.inf, "pose_nan": math.nan}.get(kind)
+        if value is not None:
+            run.xy[:] = value
+        elif kind == "pose_mixed":
+            run.xy[:, 0], run.xy[:, 1] = math.inf, -math.inf
+        else:
+            k = rng.randrange(run.xy.shape[0] - 20)
+            run.xy[k: k + 20] = rng.choice([math.inf, -math.inf])
+        truth = "undecidable" if kind == "pose_nan" else "any"
+    elif kind.startswith("signal_"):
+        value = {"signal_inf": math.inf, "signal_-inf": -math.inf, "signal_nan": math.nan}[kind]
+        run.extra = temperature_stream(run, value)
+        path_s = work / "signal.yaml"
+        path_s.write_text(signal_scenario_text())
+        scenario, spec = str(path_s), "G[0,inf) motor_ok"
+        truth = "violating" if kind == "signal_inf" else "undecidable" if kind == "signal_nan" else "any"
+        inputs.append(path_s)
+    elif kind.startswith("cmd_"):
+        run.cmd[:] = math.inf if kind == "cmd_inf" else math.nan
+        checks = "input_box"
+        truth = "violating" if kind == "cmd_inf" else "undecidable"
+    else:
+        run.xy[:] = math.nan
+        run.cmd[:] = math.nan
+        checks = "spec,input_box,workspace,obstacle_clearance"
+        truth = "undecidable"
+    path = write_run(run, work / f"inf_{kind}{SUFFIX[fmt]}", fmt)
+    argv = ["certify", str(path), "--scenario", scenario, "--spec", spec, "--checks", checks, *argv_extra]
+    return Case("infinite", f"{fmt}:{kind}", argv, truth, [path, *inputs])
+
+
+#: scenario fields at and past the limits the validator accepts: (dotted YAML path as text to replace, values)
+SCENARIO_LIMITS = [("mocap: {rate_hz: 100.0}", [f"mocap: {{rate_hz: {v}}}" for v in
+                                                 ("1e-300", "1e-9", "1e300", "0", "9" * 5000, ".inf")]
+                    + [f"mocap: {{rate_hz: 100.0, noise_std: {v}}}" for v in ("1e308", "0", "-1", ".nan", "5e-324")]),
+                   ("radius: 0.45", ["radius: 1e308", "radius: 1e-300", "radius: 0", "radius: 5e-324"]),
+                   ("robot: {radius: 0.27}", ["robot: {radius: 1e308}", "robot: {radius: 0}",
+                                              "robot: {radius: 1e-300}", "robot: {radius: 1e300, max_speed_mps: 0}"]),
+                   ("disturbance: {bound: 0.02}", ["disturbance: {bound: 1e308}", "disturbance: {bound: 0}"]),
+                   ("sigma_low: 2.0", ["sigma_low: 1e-308", "sigma_low: 1e308"]),
+                   ("max_abs: [0.2, 0.2, 0.2]", ["max_abs: [1e308, 1e308, 1e308]", "max_abs: [0, 0, 0]",
+                                                 "max_abs: [5e-324, 0.2, 0.2]"]),
+                   ("center: [-1.99, -1.78]", ["center: [1e308, -1e308]", "center: [-1.99, " + "1" * 5000 + "]"])]
+
+
+def scenario_limits_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Scenario values at and past the limits of the validator (rates, noise, radii, speeds, centres, integers of
+    thousands of digits): exit 3 naming the field, or a verdict; never exit 70. A value the field's text does not
+    hold in this scenario is replaced in the first place it appears."""
+    base = builtin_scenario_text("nexus-sml")
+    present = [(old, new) for old, news in SCENARIO_LIMITS if old in base for new in news]
+    old, new = rng.choice(present)
+    scen = work / "limits.yaml"
+    scen.write_text(base.replace(old, new, 1))
+    fmt = rng.choice(FORMATS[:4])
+    seed = seeds[fmt, True]
+    argv = ["certify", str(seed), "--scenario", str(scen), "--spec", SPEC]
+    return Case("scenario_limits", new[:50], argv, "any",
+                [seed, scen])
+
+
 FAMILIES: list[tuple[str, float, Callable[[random.Random, dict[tuple[str, bool], Path], Path], Case]]] = [
-    ("bytes", 0.4, byte_case), ("content", 0.15, content_case), ("formula", 0.07, formula_case),
-    ("scenario", 0.07, scenario_case), ("paths", 0.04, path_case), ("streams", 0.08, stream_case),
-    ("types", 0.05, types_case), ("limits", 0.06, limits_case), ("outputs", 0.04, outputs_case),
-    ("span", 0.04, span_case)]
+    ("bytes", 0.34, byte_case), ("content", 0.13, content_case), ("formula", 0.06, formula_case),
+    ("scenario", 0.06, scenario_case), ("paths", 0.04, path_case), ("streams", 0.07, stream_case),
+    ("types", 0.05, types_case), ("limits", 0.05, limits_case), ("outputs", 0.04, outputs_case),
+    ("span", 0.04, span_case), ("constant", 0.06, constant_case), ("infinite", 0.06, infinite_case),
+    ("scenario_limits", 0.04, scenario_limits_case)]
 
 
 @contextlib.contextmanager
@@ -907,7 +1010,7 @@ def other_path(argv: list[str], timeout_s: float) -> Outcome:
 def watch_argv(argv: list[str]) -> list[str]:
     """``tubempc watch`` on the same log, scenario, formula, time base and checks as a certify argv."""
     out = ["watch", argv[1]]
-    keep = {"--scenario", "--spec", "--time-base", "--checks"}
+    keep = {"--scenario", "--spec", "--time-base", "--checks", "--clock-offset"}
     for k, a in enumerate(argv[2:-1], start=2):
         if a in keep:
             out += [a, argv[k + 1]]
@@ -975,6 +1078,15 @@ def run_campaign(cases: int, seed: int, *, root: Path, timeout_s: float = 30.0, 
                         if verbose:
                             print(f"#{i} info: certify exit 3, watch exit {seen.code} [{' '.join(watched)}]",
                                   file=sys.stderr)
+                    elif (case.family == "bytes" and seen.code == 3 and res.code in (0, 1, 2)
+                          and "malformed" in seen.stderr and "record" in seen.stderr):
+                        # the reverse: certify reads the messages it needs through the index and never parses the
+                        # damaged bytes (a record of a topic it does not read); watch walks every record as it
+                        # completes and refuses the damage with one line naming its byte (counted, listed with -v)
+                        report.counts["watch_refused_damaged"] += 1
+                        if verbose:
+                            print(f"#{i} info: certify exit {res.code}, watch exit 3: {seen.stderr.strip()[:160]}",
+                                  file=sys.stderr)
                     elif seen.code == 2 and "not closed by its recorder" in seen.stdout + seen.stderr and res.code == 0:
                         # a bare .db3 has no metadata.yaml that says the recorder closed it: watch judges it as
                         # --salvage does (partial, never a pass); counted, not a disagreement
@@ -1020,6 +1132,7 @@ def main() -> None:
         print(f"{count:6d}  {key}")
     print("cases per family and format: " + ", ".join(f"{k}={v}" for k, v in sorted(report.per_format.items())))
     print("exit codes per family: " + ", ".join(f"{k}={v}" for k, v in sorted(report.exit_codes.items())))
+    print(f"watch refused damaged bytes certify did not read (exit 3): {report.counts['watch_refused_damaged']}")
     print(f"watch judged a log certify refused (exit 3): {report.counts['watch_judged_refused']}; watch judged a "
           f"log as not closed by its recorder (partial) where certify passed: {report.counts['watch_partial']}")
     print(f"seed={args.seed} seconds={time.perf_counter() - start:.0f}")

@@ -28,6 +28,9 @@ SC = builtin_scenario()
 T0 = 1_767_225_600 * 10**9
 FORMULAS = [
     SC.spec,
+    "G[0,inf) F[0,1.5] mission_1 & G[0,2] G[0,0.5] !obs_1",
+    "G[0,3] !(F[0,1] mission_2) | F[1,2] G[0,0.4] mission_1",
+    "G[0,inf) (F[0,0.5] mission_1 & !obs_2) & (mission_1 U[0,2] mission_2)",
     "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)",
     "F[1,3] mission_1 & G[0,2] !obs_1",
     "G[0,inf) F[0,1.5] mission_1",
@@ -210,17 +213,18 @@ def test_close_equals_offline_on_random_runs(seed: int, n: int, spec: str, updat
         assert _same(got.margin, want["margin"]), (got.name, got.margin, want["margin"])
         first = None if got.first_violation_ns is None else round((got.first_violation_ns - int(run["t"][0])) * 1e-9,
                                                                    9)  # type: ignore[index]
-        if not got.name.startswith("spec_"):
-            assert first == want["first_violation_time"], got.name
+        # every check's first violation too, the formula's (nested windows: G(F ...), U, X) included
+        assert first == want["first_violation_time"], (got.name, first, want["first_violation_time"])
     if not late:
         assert res.verdict == cert["verdict"]
-        # every obligation's final verdict and margin are the certificate's (its obligations: the whole formula,
-        # then the conjuncts), whatever the batching
+        # every obligation's final verdict, margin and first violation are the certificate's (its obligations: the
+        # whole formula, then the conjuncts), whatever the batching
         offline = {o["formula"]: o for o in cert["obligations"]}  # type: ignore[index]
         for ob in res.state.obligations:
             want = offline[ob.name]
             assert ob.verdict == want["verdict"], (ob.name, ob.verdict, want["verdict"])
             assert _same(ob.margin, want["margin"]), (ob.name, ob.margin, want["margin"])
+            assert _same(ob.first_violation_s, want["first_violation_time"]), (ob.name, ob.first_violation_s, want)
     final = {c.name: c.verdict for c in (*res.state.checks, *res.state.obligations)}
     for name, verdict in seen:
         assert final[name] == verdict, name  # monotone: a decision made during the run is the final one

@@ -13,7 +13,6 @@ under ``--out``, and the worst exit code by severity: pass 0 < inconclusive 2 < 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NoReturn, cast
 
@@ -47,19 +46,9 @@ def _single_log(logs: tuple[Path, ...]) -> bool:
 
 
 def _parse_offsets(items: tuple[str, ...]) -> dict[str, float]:
-    from verify.errors import ScenarioInputError
+    from verify.ingest.clocks import parse_clock_offsets
 
-    out: dict[str, float] = {}
-    for item in items:
-        topic, sep, value = item.partition("=")
-        try:
-            seconds = float(value)
-        except ValueError:
-            seconds = float("nan")
-        if not sep or not topic.startswith("/") or not math.isfinite(seconds):
-            raise ScenarioInputError(f"--clock-offset {item!r}: expected TOPIC=SECONDS, e.g. /cmd_vel=2.0")
-        out[topic] = seconds
-    return out
+    return parse_clock_offsets(items)
 
 
 def _write_one(result: CertifyResult, sc: Scenario, log: Path, out_dir: Path, *, reports: bool,

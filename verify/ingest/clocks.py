@@ -31,6 +31,7 @@ __all__ = [
     "clock_offsets_ns",
     "clock_report",
     "median_offset_s",
+    "parse_clock_offsets",
 ]
 
 IntArray = npt.NDArray[np.int64]
@@ -52,6 +53,22 @@ def clock_offsets_ns(scenario_s: Mapping[str, float], option_s: Mapping[str, flo
                 raise ScenarioInputError(f"{where} {topic}={sec!r} s is out of range: a clock offset is finite and "
                                          f"at most {CLOCK_OFFSET_LIMIT_S:g} s in size")
             out[topic] = round(sec * 1e9)
+    return out
+
+
+def parse_clock_offsets(items: Iterable[str]) -> dict[str, float]:
+    """``--clock-offset TOPIC=SECONDS`` items (certify, watch) -> topic -> seconds; a malformed item is exit 3 naming
+    the option (the range is ``clock_offsets_ns``'s)."""
+    out: dict[str, float] = {}
+    for item in items:
+        topic, sep, value = item.partition("=")
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = float("nan")
+        if not sep or not topic.startswith("/") or not math.isfinite(seconds):
+            raise ScenarioInputError(f"--clock-offset {item!r}: expected TOPIC=SECONDS, e.g. /cmd_vel=2.0")
+        out[topic] = seconds
     return out
 
 

@@ -25,12 +25,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.scenario import Scenario, SignalSpec
+from tubempc.scenario import SignalSpec
 from verify.errors import LogReadError, MissingTopicError, ScenarioInputError, UnusableInputError
 from verify.ingest.decode import _joined, _size_ok, _strings_ok, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.ingest.raw import RawLog, RawTopic, fast_ingest
-from verify.ingest.timebase import TimeBase, judged_samples, stream_time_base
+from verify.ingest.rules import ReadingRules
+from verify.ingest.timebase import TimeBase, judged_samples
 
 __all__ = ["HOLD_FOREVER_NS", "RATE_HZ_RANGE", "FieldSamples", "SignalStream", "decode_field", "median_period_ns",
            "outside_span", "parse_field_path", "read_signals", "signal_margin", "signal_period_ns"]
@@ -320,18 +321,17 @@ def signal_period_ns(name: str, spec: SignalSpec, t_ns: IntArray) -> int:
     return round(1e9 / spec.rate_hz)
 
 
-def read_signals(raw: RawLog, scenario: Scenario, base: TimeBase, path: str,
-                 offsets_ns: dict[str, int] | None = None, *, pose_topic: str | None = None,
+def read_signals(raw: RawLog, rules: ReadingRules, base: TimeBase, path: str, *, pose_topic: str | None = None,
                  ) -> tuple[dict[str, SignalStream], dict[str, Any]]:
     """Every signal atom of the scenario from the raw log: streams under the time rules of every stream
-    (``verify.ingest.timebase.stream_time_base``; ``base``: the pose's), with ``offsets_ns[topic]`` added; and their
+    (``verify.ingest.rules.ReadingRules.stream_times``; ``base``: the pose's), clock corrections added; and their
     data-quality notes (``problems``: why the stream's stamps cannot order it on an explicit header base). A signal
     on ``pose_topic`` shares the pose's samples (``SignalStream.follows_pose``).
     A topic absent from the log (or without messages) or a field that does not resolve is exit 3 naming both."""
     streams: dict[str, SignalStream] = {}
     quality: dict[str, Any] = {}
     cache: dict[tuple[str, str], FieldSamples] = {}
-    for name, spec in sorted(scenario.signals.items()):
+    for name, spec in sorted(rules.scenario.signals.items()):
         topic = raw.topics.get(spec.topic)
         if topic is None or not topic.payloads:
             why = "is absent from the log" if topic is None else "has no messages"
@@ -344,8 +344,7 @@ def read_signals(raw: RawLog, scenario: Scenario, base: TimeBase, path: str,
             except UnusableInputError as err:
                 raise type(err)(f"signal {name}: {err.reason}", path=path) from err
         cols = cache[key]
-        tb = stream_time_base(cols.stamp_ns, cols.log_ns, requested=base.requested, pose_base=base.name)
-        t = tb.t_ns + (offsets_ns or {}).get(spec.topic, 0)
+        tb, t = rules.stream_times(spec.topic, cols.stamp_ns, cols.log_ns, pose_base=base.name)
         offset_vs_log = round(float(np.median((t - cols.log_ns).astype(np.float64))) * 1e-9, 9)
         # one value per instant; duplicates of an instant that disagree make the atom unknown there (NaN)
         js = judged_samples(t, cols.value, agree_tol=0.0)

@@ -21,8 +21,8 @@ import numpy.typing as npt
 
 from tubempc.scenario import Scenario
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
-from verify.ingest.clocks import check_offset_topics, clock_offsets_ns, clock_report, median_offset_s
-from verify.ingest.decode import TF, TRANSFORM_STAMPED, decode_pose, decode_strings, decode_twist
+from verify.ingest.clocks import clock_report, median_offset_s
+from verify.ingest.decode import decode_pose, decode_strings, decode_twist
 from verify.ingest.digest import (
     DEFAULT_DIGEST,
     DIGESTS,
@@ -37,13 +37,13 @@ from verify.ingest.fields import SignalStream, outside_span, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, check_bag_folder, read_raw, special_file_kind
 from verify.ingest.readerrors import READ_ERRORS, in_words
-from verify.ingest.timebase import TIME_BASES, JudgedSamples, choose_time_base, judged_samples, stream_time_base
+from verify.ingest.rules import TF_TOPIC, ReadingRules
+from verify.ingest.timebase import JudgedSamples, judged_samples
 
 __all__ = ["LogData", "PoseStream", "file_sha256", "log_digest", "read_log", "wanted_topics"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-TF_TOPIC = "/tf"
 T = TypeVar("T")
 _OPTIONAL_ERRORS: tuple[type[BaseException], ...] = (VerifyError, *READ_ERRORS)
 
@@ -110,15 +110,11 @@ def file_sha256(path: Path) -> str:
     return got.hex
 
 
-def _pose_topic(raw: RawLog, scenario: Scenario, path: str) -> str:
-    topics = scenario.topics
-    if topics.pose in raw.topics:
-        return topics.pose
-    if TF_TOPIC in raw.topics and topics.tf_child_frame:
-        return TF_TOPIC
-    hint = "" if TF_TOPIC not in raw.available else " (/tf is present: set topics.tf_child_frame in the scenario)"
-    raise MissingTopicError(f"pose topic {topics.pose} is absent{hint}; the log has: "
-                            f"{', '.join(sorted(raw.available)) or 'no topics'}", path=path)
+def _pose_topic(raw: RawLog, rules: ReadingRules, path: str) -> str:
+    topic = rules.pose_topic(raw.topics)
+    if topic is None:
+        raise rules.missing_pose(raw.available, path)
+    return topic
 
 
 def _stream(t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, theta_rad: FloatArray
@@ -161,17 +157,14 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
     "blake3-messages", of the messages read; "blake3" or "sha256", of the file, computed in a thread beside the
     reading: ``verify.ingest.digest``). ``clock_offsets`` (topic -> seconds, added to that topic's
     times) extends and overrides the scenario's ``clock_offsets`` (``verify.ingest.clocks``)."""
-    if time_base not in TIME_BASES:
-        raise UnusableInputError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}")
-    clock_offsets_ns(scenario.clock_offsets, clock_offsets)  # their ranges, before the log is read
+    rules = ReadingRules.of(scenario, time_base, clock_offsets)  # the offsets' ranges, before the log is read
     p = Path(path)
     _check_path(p)
     if digest not in DIGESTS:
         raise UnusableInputError(f"digest={digest!r}: expected one of {', '.join(DIGESTS)}")
     job = None if digest == MESSAGES_DIGEST else start_digest(p, digest)
     try:
-        return _read_log(p, scenario, time_base=time_base, salvage=salvage, time0_ns=time0_ns, job=job,
-                         option_offsets_s=dict(clock_offsets or {}))
+        return _read_log(p, rules, salvage=salvage, time0_ns=time0_ns, job=job)
     except BaseException as err:
         if job is not None:
             job.cancel()  # the file digest of a log that cannot be certified is not needed
@@ -199,7 +192,8 @@ def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DI
     try:
         if algorithm == MESSAGES_DIGEST:
             raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
-            _pose_topic(raw, scenario, str(p))  # as certify: a log without the pose topic has nothing to digest
+            # as certify: a log without the pose topic has nothing to digest
+            _pose_topic(raw, ReadingRules.of(scenario), str(p))
             got: LogDigest | None = messages_digest(raw)
         else:
             got = digest_path(p, algorithm)
@@ -231,25 +225,25 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
         return None
 
 
-def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, time0_ns: int | None,
-              job: DigestJob | None, option_offsets_s: dict[str, float]) -> LogData:
-    offsets_s = {**scenario.clock_offsets, **option_offsets_s}
-    offsets_ns = clock_offsets_ns(scenario.clock_offsets, option_offsets_s)
+def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | None, job: DigestJob | None
+              ) -> LogData:
+    scenario = rules.scenario
+    time_base = rules.requested
     clock_streams: dict[str, tuple[str, float | None]] = {}
     t = scenario.topics
     raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
-    check_offset_topics(scenario.clock_offsets, option_offsets_s, raw.available, str(p))
+    rules.check_offset_topics(raw.available, str(p))
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
     for topic in raw.topics.values():
         if not topic.has_definition:
             quality["missing_definitions"].append(
                 f"{topic.topic}: the bag has no definition of {topic.msgtype}; decoded with our own type store")
 
-    pose_topic = _pose_topic(raw, scenario, str(p))
+    pose_topic = _pose_topic(raw, rules, str(p))
     praw = raw.topics[pose_topic]
     if not praw.payloads:
         raise MissingTopicError(f"pose topic {pose_topic} has no messages", path=str(p))
-    child = t.tf_child_frame if praw.msgtype in (TF, TRANSFORM_STAMPED) else None
+    child = rules.child_frame(praw.msgtype)
     try:
         cols = decode_pose(praw, raw.ros1, child_frame=child)
     except LogReadError as err:
@@ -259,8 +253,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                            path=str(p)) from err
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
-    base = choose_time_base(cols.stamp_ns, cols.log_ns, time_base)
-    stamps = base.t_ns + offsets_ns.get(pose_topic, 0)
+    base, stamps = rules.pose_times(pose_topic, cols.stamp_ns, cols.log_ns)
     clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
     pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
@@ -298,8 +291,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         nominal_topic = t.nominal
         ncols = _decode_optional("nominal", nominal_topic, lambda: decode_pose(nraw, raw.ros1), quality)
     if ncols is not None:
-        nbase = stream_time_base(ncols.stamp_ns, ncols.log_ns, requested=base.requested, pose_base=base.name)
-        nst = nbase.t_ns + offsets_ns.get(nominal_topic, 0)
+        nbase, nst = rules.stream_times(nominal_topic, ncols.stamp_ns, ncols.log_ns, pose_base=base.name)
         clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
         nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
         nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
@@ -320,10 +312,8 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
         cmd_topic = t.cmd_vel
         tw = _decode_optional("cmd_vel", cmd_topic, lambda: decode_twist(craw, raw.ros1), quality)
     if tw is not None:
-        # TwistStamped carries a header: under the rules of every stream (Twist has only log time)
-        cbase = stream_time_base(tw.stamp_ns, tw.log_ns, requested=base.requested, pose_base=base.name)
+        cbase, cst = rules.stream_times(cmd_topic, tw.stamp_ns, tw.log_ns, pose_base=base.name)  # TwistStamped/Twist
         header_cmd = cbase.name == "header"
-        cst = cbase.t_ns + offsets_ns.get(cmd_topic, 0)
         clock_streams[cmd_topic] = (cbase.name, median_offset_s(cst, tw.log_ns))
         corder = clean_order(cst)
         cjs = judged_samples(cst, tw.u)
@@ -344,7 +334,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
     elif "cmd_vel" not in quality:
         quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
 
-    signals, signal_quality = read_signals(raw, scenario, base, str(p), offsets_ns, pose_topic=pose_topic)
+    signals, signal_quality = read_signals(raw, rules, base, str(p), pose_topic=pose_topic)
     if signal_quality:
         quality["signals"] = signal_quality
         for name, sq in signal_quality.items():
@@ -362,7 +352,7 @@ def _read_log(p: Path, scenario: Scenario, *, time_base: str, salvage: bool, tim
                                     "(the run) are not judged")
         if at_ns is not None:  # judged in verify.certify (the formula's checks cannot pass where it uses the signal)
             signal_quality[name]["outside_pose_span_violating"] = violating
-    clocks = clock_report(pose_topic, clock_streams, offsets_s)
+    clocks = clock_report(pose_topic, clock_streams, rules.offsets_s)
     quality["clocks"] = clocks
     quality["notes"].extend(clocks["findings"])
 

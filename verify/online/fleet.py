@@ -162,8 +162,11 @@ class FleetMonitor:
         return [d for r in self.scenario.robot_names for d in self._renamed(r, self.monitors[r].update())]
 
     # ---- end of the run -------------------------------------------------------------------------------------------
-    def close(self, *, partial: bool = False) -> FleetResult:
-        """The final verdict of every check, as ``certify_log`` gives for a log with the same samples."""
+    def close(self, *, partial: bool = False,
+              stream_problems: Mapping[str, Mapping[str, str]] | None = None) -> FleetResult:
+        """The final verdict of every check, as ``certify_log`` gives for a log with the same samples
+        (``stream_problems``: robot -> stream -> why nothing judged on it can pass, as ``OnlineMonitor.close`` takes them; as certify, a
+        signal's problem counts when the formula uses that robot's signal)."""
         if self._result is not None:
             return self._result
         sc = self.scenario
@@ -171,7 +174,11 @@ class FleetMonitor:
         problems: dict[str, str] = {}
         tracks = {}
         for r in sc.robots:
-            res = self.monitors[r.name].close(partial=partial)
+            mine = dict((stream_problems or {}).get(r.name, {}))
+            res = self.monitors[r.name].close(partial=partial, problems=mine)
+            for k, v in mine.items():
+                if not k.startswith("signal ") or f"{r.name}.{k.removeprefix('signal ')}" in self._feeds:
+                    problems[f"{r.name}: {k}"] = v
             checks += [CheckResult(f"{r.name}/{c.name}", c.verdict, c.margin, c.first_violation_ns, c.details)
                        for c in res.checks]
             t, x, y, yaw = (np.asarray(v) for v in self._poses[r.name])

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left, bisect_right
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -711,9 +711,10 @@ class OnlineMonitor:
         return self._traj.evaluation.retained() + self._run.evaluation.retained()
 
     # ---- end of the run --------------------------------------------------------------------------------------------
-    def close(self, *, partial: bool = False) -> OnlineResult:
+    def close(self, *, partial: bool = False, problems: Mapping[str, str] | None = None) -> OnlineResult:
         """End of observation at the last pose sample: the final verdict of every check, as ``certify_log`` gives
-        for a log with the same samples (``partial``: the log was salvaged, never a pass)."""
+        for a log with the same samples (``partial``: the log was salvaged, never a pass; ``problems``: stream ->
+        why nothing judged on it can pass, as ``LogData.stream_problems``)."""
         if self._result is not None:
             return self._result
         self._process(closing=True)
@@ -725,8 +726,10 @@ class OnlineMonitor:
         self._final = checks
         self._final_decisions = self._unreturned + self._new_decisions()
         self._unreturned = []
-        problems = ({"pose": f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
-                             f"judged"} if self.out_of_order["pose"] else {})
+        problems = dict(problems or {})
+        if self.out_of_order["pose"]:
+            problems["pose"] = (f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
+                                f"judged")
         for name, feed in sorted(self._feeds.items()):  # as certify: the run is the pose's span, and cannot pass
             if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
                 problems[f"signal {name}"] = ("messages outside the pose's span violate its predicate: the run is "

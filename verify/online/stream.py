@@ -24,12 +24,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Interval, Next, Not, Or, Until
-from verify.monitor.engine import Positions, Truth, _eventually, _windows, bounds_ns, evaluate_at_points, range_reduce
+from verify.monitor.engine import (
+    Positions,
+    Truth,
+    _eventually,
+    _windows,
+    bounds_ns,
+    evaluate_at_points,
+    explain,
+    range_reduce,
+)
 
 __all__ = ["Buffer", "Evaluation", "Head", "Track", "build_head"]
 
@@ -38,6 +48,8 @@ IntArray = npt.NDArray[np.int64]
 INF = math.inf
 #: "never known" for the known-time arrays
 _NEVER = np.iinfo(np.int64).max
+#: a witness at the position's own start
+_AT = np.iinfo(np.int64).min
 
 
 class Buffer:
@@ -145,6 +157,7 @@ class Node:
         self.lo = Buffer(np.float64)
         self.hi = Buffer(np.float64)
         self.known = Buffer(np.int64)
+        self.wit = Buffer(np.int64)  # where a false value is shown (``verify.monitor.engine.explain``); _AT: its start
         self.final = 0
         self.keep_from = 0  # set by the consumers: the first position any of them still needs
 
@@ -175,14 +188,22 @@ class Node:
         plo, phi, pkn = self.provisional(track)
         return np.concatenate((lo, plo)), np.concatenate((hi, phi)), np.concatenate((known, pkn))
 
-    def emit(self, lo: FloatArray, hi: FloatArray, known: IntArray) -> None:
+    def emit(self, lo: FloatArray, hi: FloatArray, known: IntArray, wit: IntArray | None = None) -> None:
         self.lo.extend(lo)
         self.hi.extend(hi)
         self.known.extend(known)
+        self.wit.extend(np.full(lo.shape[0], _AT, dtype=np.int64) if wit is None else wit)
         self.final += lo.shape[0]
 
+    def witness(self, track: Track, g0: int, g1: int) -> IntArray:
+        """For the final positions ``[g0, g1)``: the time a false value is shown, as the offline ``explain`` walks
+        down to it (a position's own start for an atom, a negation, an or; the earliest among the false conjuncts;
+        an implication's conclusion; the end of an ``F``'s window; a ``G``'s first false argument)."""
+        w = _i(self.wit, g0, g1)
+        return np.where(w == _AT, _i(track.start, g0, g1), w)
+
     def trim(self) -> None:
-        for b in (self.lo, self.hi, self.known):
+        for b in (self.lo, self.hi, self.known, self.wit):
             b.drop_before(self.keep_from)
 
 
@@ -228,10 +249,11 @@ class NotNode(Node):
 class BoolNode(Node):
     """And / Or of several children (min / max of the intervals: Kleene's logic)."""
 
-    def __init__(self, args: list[Node], op: np.ufunc) -> None:
+    def __init__(self, args: list[Node], op: np.ufunc, *, implies: bool = False) -> None:
         super().__init__()
         self.args = args
         self.op = op
+        self.implies = implies  # [!left, right]: a false implication is shown where its conclusion is
 
     def children(self) -> tuple[Node, ...]:
         return tuple(self.args)
@@ -248,7 +270,15 @@ class BoolNode(Node):
             lo = self.op(lo, _f(a.lo, p, c))
             hi = self.op(hi, _f(a.hi, p, c))
             known = np.maximum(known, _i(a.known, p, c))
-        self.emit(np.array(lo, copy=True), np.array(hi, copy=True), np.array(known, copy=True))
+        wit = None
+        if self.implies:
+            wit = self.args[1].witness(track, p, c)
+        elif self.op is np.minimum:  # and: the earliest witness among the false conjuncts
+            wit = np.full(c - p, _NEVER, dtype=np.int64)
+            for a in self.args:
+                wit = np.where(_f(a.hi, p, c) < 0, np.minimum(wit, a.witness(track, p, c)), wit)
+            wit = np.where(wit == _NEVER, _AT, wit)
+        self.emit(np.array(lo, copy=True), np.array(hi, copy=True), np.array(known, copy=True), wit)
 
     def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Kleene's and/or; decided false (and) as soon as one argument is, true once all are (or: the dual)."""
@@ -315,7 +345,27 @@ class WindowNode(Node):
             known = np.maximum(known, end)
         if closing:
             known = np.minimum(known, end)
-        self.emit(lo, hi, known.astype(np.int64))
+        self.emit(lo, hi, known.astype(np.int64), self._witness(track, pos, w, hi_a=hi_a, span=(p, c)))
+
+    def _witness(self, track: Track, pos: Positions, w: Any, *, hi_a: FloatArray, span: tuple[int, int]
+                 ) -> IntArray:
+        """Where each of the ``k`` new values is shown false (``explain``): ``F``, the end of its window (clipped to
+        the log's end); ``G``, the witness of its argument at the first false position of the window."""
+        p, c = span
+        k = w.in0.shape[0]
+        stop = pos.stop_ns[:k]
+        ends = (np.full(k, pos.end_ns, dtype=np.int64) if self.hi_ns is None
+                else np.minimum(stop + self.hi_ns, pos.end_ns))
+        if not self.always:
+            return ends.astype(np.int64)
+        fail = np.flatnonzero(hi_a < 0)  # the argument false (its own bounds, not negated)
+        if fail.size == 0:
+            return ends.astype(np.int64)
+        j = np.searchsorted(fail, w.in0[:k])  # the first false argument at or after each window's start
+        first = fail[np.minimum(j, fail.size - 1)]
+        hit = (j < fail.size) & (first < w.in1[:k])
+        arg_wit = self.arg.witness(track, p, c)
+        return np.where(hit, arg_wit[first], ends).astype(np.int64)
 
     def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
         """A window not yet observed to its end: ``F`` is certain once its argument is certainly true at a position
@@ -471,7 +521,8 @@ class WindowHead(Head):
                 run_lo = np.maximum.accumulate(lo_a[sel])
                 if self.acc_lo <= 0 < run_lo[-1]:  # the argument decides it in this batch: at which position
                     k = int(sel[int(np.argmax(run_lo > 0))])
-                    self._decide(int(_i(self.node.known, p, c)[k]), int(start[k]))
+                    where = int(self.node.witness(track, p + k, p + k + 1)[0]) if self.always else int(start[k])
+                    self._decide(int(_i(self.node.known, p, c)[k]), where)
                 self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
                 self.acc_hi = max(self.acc_hi, float(hi_a[sel].max()))
                 self.acc_known = max(self.acc_known, int(_i(self.node.known, p, c)[sel].max()))
@@ -538,18 +589,23 @@ class BoolHead(Head):
             op = min if self.kind == "and" else max
             self.lo, self.hi = op(p[0] for p in parts), op(p[1] for p in parts)
         if self.decided_ns is None and (self.lo > 0 or self.hi < 0):
-            self.decided_ns, self.witness_ns = self._when()
+            self.decided_ns, self.witness_ns = self._when(track)
         if closing:
             self.closed = True
             if self.decided_ns is None:
                 self.decided_ns = track.end_ns
+            if self.kind == "and" and self.hi < 0:  # every conjunct is settled now: the earliest witness
+                self.witness_ns = min((k.witness_ns for k in self.kids if k.hi < 0 and k.witness_ns is not None),
+                                      default=self.witness_ns)
 
-    def _when(self) -> tuple[int | None, int | None]:
-        """The decision time: the earliest deciding child for a decisive one, else the last child decided."""
+    def _when(self, track: Track) -> tuple[int | None, int | None]:
+        """The decision time: the earliest deciding child for a decisive one, else the last child decided; and
+        where a false one is shown, as ``verify.monitor.engine.explain``: a negation or a disjunction at the first
+        position, an implication where its conclusion is, a conjunction at the earliest false conjunct's."""
         true = self.lo > 0
         signs = [(k, k.lo > 0, k.hi < 0) for k in self.kids]
         if self.kind == "not":
-            return self.kids[0].decided_ns, self.kids[0].witness_ns if true else None
+            return self.kids[0].decided_ns, None if true else track.first_ns
         if self.kind == "implies":
             (a, _a_t, a_f), (b, b_t, _b_f) = signs
             decisive = [k for k, ok in ((a, a_f), (b, b_t)) if ok] if true else []
@@ -560,8 +616,10 @@ class BoolHead(Head):
         if short:
             deciding = [k for k, t, f in signs if (f if self.kind == "and" else t)]
             first = min(deciding, key=_d)
-            return _d(first), first.witness_ns if not true else None
-        return max(_d(k) for k in self.kids), None
+            if true:
+                return _d(first), None
+            return _d(first), min((k.witness_ns for k in deciding if k.witness_ns is not None), default=None)
+        return max(_d(k) for k in self.kids), None if true else track.first_ns
 
 
 def _d(h: Head) -> int:
@@ -584,9 +642,12 @@ class OfflineHead(Head):
         n = track.count
         pos = track.positions(0, n, track.end_ns)
         atoms = {name: Truth(_f(node.lo, 0, n), _f(node.hi, 0, n)) for name, node in self.atom_nodes.items()}
-        root = evaluate_at_points(self.formula, pos, atoms)[self.formula]
+        values = evaluate_at_points(self.formula, pos, atoms)
+        root = values[self.formula]
         self.lo, self.hi = float(root.lo[0]), float(root.hi[0])
         self.decided_ns = track.end_ns
+        if self.hi < 0:  # where the certificate shows the violation
+            self.witness_ns = explain(self.formula, 0, pos, values).time_ns
         self.closed = True
 
 
@@ -632,7 +693,7 @@ def build_head(formula: Formula, atom: Callable[[str], AtomNode]) -> Head:
         elif isinstance(f, And | Or):
             node = BoolNode([stream(g) for g in f.args], np.minimum if isinstance(f, And) else np.maximum)
         elif isinstance(f, Implies):
-            node = BoolNode([NotNode(stream(f.left)), stream(f.right)], np.maximum)
+            node = BoolNode([NotNode(stream(f.left)), stream(f.right)], np.maximum, implies=True)
         elif isinstance(f, Eventually | Always):
             node = WindowNode(stream(f.arg), f.interval, isinstance(f, Always))
         else:

@@ -7,11 +7,18 @@ result, whether the log was finished by its recorder). ``watch_log`` reads the r
 topics and the topics of the signal atoms the formula uses), pushes them into an ``OnlineMonitor`` and reports each
 decision through ``on_decision``.
 
-Time base: ``header`` or ``log`` as given; ``auto`` is certify's rule (``verify.ingest.timebase.choose_time_base``:
-header stamps unless they cannot order the samples) applied to the first ``AUTO_PROBE`` pose messages (or all of
-them, if the log ends first): the messages are held until then, and the base chosen is kept for the rest of the
-log. Certify applies the rule to the whole stream; if the stamps read after the choice repeat, go backwards or are
-zero in more than ``UNORDERABLE_FRACTION`` of the stream, a note says that certify would choose log time.
+Reading rules: certify's (``verify.ingest.rules.ReadingRules``: the pose topic, the transform's child frame, each
+stream's time base, ``TwistStamped`` commands, clock corrections: the scenario's ``clock_offsets`` and
+``clock_offsets``, as ``--clock-offset`` gives them).
+
+Time base: ``header`` or ``log`` as given. ``auto`` is certify's rule (``verify.ingest.timebase.choose_time_base``:
+header stamps unless they cannot order the samples), which certify applies to the whole pose stream:
+- without ``follow`` (a log read once, complete or not) the messages are held until the end of the reading and the
+  rule is applied to the whole pose stream, as certify does: the same base by construction;
+- with ``follow`` the rule is applied to the pose messages read when ``AUTO_PROBE`` of them are in (all of them, if
+  the log ends first) and the base chosen is kept. At the end the rule is applied again to every pose stamp read;
+  if certify would choose the other base, the decisions were made on a base certify would not use, and the run's
+  verdict is inconclusive (a fail too), with a note that says so.
 
 It stops when every check and obligation is decided, when the recorder has closed the log, when the log has not
 grown for ``idle_timeout`` seconds (its bytes: ``verify.online.follow.log_bytes``; ``follow``), or after one read
@@ -22,30 +29,32 @@ partial, never a pass.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.scenario import Scenario
-from verify.errors import LogReadError, MissingTopicError, VerifyError
-from verify.ingest.clocks import clock_offsets_ns
-from verify.ingest.decode import TF, TRANSFORM_STAMPED, PoseColumns, decode_pose, decode_twist
+from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
+from verify.ingest.decode import PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import decode_field
 from verify.ingest.raw import RawTopic, check_log_path
 from verify.ingest.readerrors import READ_ERRORS, in_words, one_type_per_topic
+from verify.ingest.rules import ReadingRules
 from verify.ingest.salvage import SalvagedMessage
-from verify.ingest.timebase import TIME_BASES, UNORDERABLE_FRACTION, choose_time_base, stream_time_base
+from verify.ingest.timebase import TIME_BASES, TimeBase, choose_time_base
 from verify.online.fleet import FleetMonitor, FleetResult, RobotFeed
 from verify.online.follow import log_bytes, open_follower
 from verify.online.monitor import Decision, OnlineMonitor, OnlineResult
 
 __all__ = ["WatchResult", "watch_log"]
 
-TF_TOPIC = "/tf"
-#: ``--time-base auto``: pose messages whose header stamps decide the time base
+T = TypeVar("T")
+#: what makes an optional stream unused rather than the log unusable (as ``verify.ingest.log``)
+_OPTIONAL_ERRORS: tuple[type[BaseException], ...] = (VerifyError, *READ_ERRORS)
+#: ``--time-base auto`` with ``follow``: pose messages whose header stamps decide the time base
 AUTO_PROBE = 50
 
 
@@ -64,28 +73,33 @@ class WatchResult:
 
 
 class _Feeder:
-    """Decodes the messages of one poll and pushes them, stream by stream in stamp order, into the monitor."""
+    """Decodes the messages of one poll and pushes them, stream by stream in stamp order, into the monitor, under
+    the reading rules certify applies (``verify.ingest.rules.ReadingRules``)."""
 
-    def __init__(self, monitor: OnlineMonitor | RobotFeed, scenario: Scenario, ros1: bool, time_base: str,
-                 path: Path) -> None:
+    def __init__(self, monitor: OnlineMonitor | RobotFeed, rules: ReadingRules, ros1: bool, path: Path, *,
+                 probe: int | None) -> None:
         self.monitor = monitor
-        self.scenario = scenario
+        self.rules = rules
+        self.scenario = rules.scenario
         self.ros1 = ros1
-        self.requested = time_base
-        self.time_base: str | None = None if time_base == "auto" else time_base  # None: not chosen yet (auto)
+        self.requested = rules.requested
+        self.probe = probe  # auto: pose messages read before the base is chosen (None: the whole stream)
+        self.time_base: str | None = None if rules.requested == "auto" else rules.requested  # None: not chosen yet
+        self.chosen_on: int | None = None  # auto: how many pose messages the base was chosen on
         self.base_note: str | None = None
         self.path = path
-        # as read_log: the scenario's clock_offsets (topic -> s) added to that topic's times
-        self.offsets_ns = clock_offsets_ns(scenario.clock_offsets, None)  # range-checked as read_log's
         self.pose_topic: str | None = None
         self.seen_topics: dict[str, str] = {}
         self._held: list[SalvagedMessage] = []  # auto: the messages read before the base is chosen
-        self._last_stamp: int | None = None  # auto with header chosen: the stamps' order over the whole stream
-        self._stamps = self._bad_stamps = 0
+        self._stamps: list[npt.NDArray[np.int64]] = []  # auto: every pose header stamp and log time read
+        self._logs: list[npt.NDArray[np.int64]] = []
+        self.problems: dict[str, str] = {}  # stream -> why nothing judged on it can pass (as read_log's)
+        self.unused: dict[str, str] = {}  # optional stream (nominal, cmd_vel) -> why its messages are not used
+        self.pushed: dict[str, int] = {"nominal": 0, "cmd_vel": 0}
         # the signal atoms the formula uses: topic -> [(name, field)]
         self.signals: dict[str, list[tuple[str, str]]] = {}
         for name in monitor.signal_names:
-            spec = scenario.signals[name]
+            spec = self.scenario.signals[name]
             self.signals.setdefault(spec.topic, []).append((name, spec.field))
 
     def feed(self, messages: list[SalvagedMessage], *, final: bool = False) -> None:
@@ -96,7 +110,7 @@ class _Feeder:
                 self.seen_topics.setdefault(m.topic, m.msgtype)
             self._find_pose_topic()
             pose = [m for m in self._held if m.topic == self.pose_topic]
-            if len(pose) < AUTO_PROBE and not final:
+            if not final and (self.probe is None or len(pose) < self.probe):
                 return
             self.time_base = self._choose(pose)
             messages, self._held = self._held, []
@@ -105,39 +119,45 @@ class _Feeder:
     def _choose(self, pose: list[SalvagedMessage]) -> str:
         if not pose:
             return "header"
+        cols = self._decoded(lambda: self._decode_pose(pose))
+        base = choose_time_base(cols.stamp_ns, np.asarray(cols.log_ns, dtype=np.int64), "auto")
+        self.chosen_on = len(pose)
+        on = "the whole pose stream" if self.probe is None else "the first"
+        self.base_note = (f"--time-base auto: {base.name} time, chosen on {on} {len(pose)} pose messages"
+                          + (" as certify chooses" if self.probe is None else "")
+                          + (f" ({base.note})" if base.note else ""))
+        return base.name
+
+    def _decoded(self, decode: Callable[[], T]) -> T:
         try:
-            cols = self._decode_pose(pose)
+            return decode()
         except LogReadError as err:
             raise LogReadError(err.reason, path=str(self.path)) from err
         except READ_ERRORS as err:  # a decoder's error on damaged bytes: one line, as read_log words it
             if isinstance(err, VerifyError):
                 raise
             raise LogReadError(f"messages cannot be decoded: {in_words(err)}", path=str(self.path)) from err
-        base = choose_time_base(cols.stamp_ns, np.asarray(cols.log_ns, dtype=np.int64), "auto")
-        self.base_note = (f"--time-base auto: {base.name} time, chosen on the first {len(pose)} pose messages"
-                          + (f" ({base.note})" if base.note else ""))
-        return base.name
 
     def _find_pose_topic(self) -> None:
-        t = self.scenario.topics
         if self.pose_topic is None:
-            if t.pose in self.seen_topics:
-                self.pose_topic = t.pose
-            elif TF_TOPIC in self.seen_topics and t.tf_child_frame:
-                self.pose_topic = TF_TOPIC
+            self.pose_topic = self.rules.pose_topic(self.seen_topics)
 
     def _decode_pose(self, msgs: list[SalvagedMessage]) -> PoseColumns:
-        child = self.scenario.topics.tf_child_frame if msgs[0].msgtype in (TF, TRANSFORM_STAMPED) else None
-        return decode_pose(self._raw(msgs), self.ros1, child_frame=child)
+        return decode_pose(self._raw(msgs), self.ros1, child_frame=self.rules.child_frame(msgs[0].msgtype))
 
-    def auto_findings(self) -> str | None:
-        """auto, header chosen: whether the whole stream's stamps would make certify choose log time."""
-        if self.requested != "auto" or self.time_base != "header" or not self._stamps:
+    def base_mismatch(self) -> str | None:
+        """auto, chosen before the whole pose stream was read: why certify, which decides on the whole stream, would
+        judge this log on another time base (None: it would choose the same)."""
+        if self.requested != "auto" or self.time_base is None or not self._stamps:
             return None
-        if self._bad_stamps > UNORDERABLE_FRACTION * self._stamps:
-            return (f"{self._bad_stamps} of {self._stamps} pose stamps are zero, repeat or go backwards: certify "
-                    f"--time-base auto would judge this log on log time")
-        return None
+        whole = choose_time_base(np.concatenate(self._stamps), np.concatenate(self._logs), "auto")
+        if whole.name == self.time_base:
+            return None
+        count = sum(len(s) for s in self._stamps)
+        return (f"--time-base auto: the decisions were made on {self.time_base} time, chosen on the first "
+                f"{self.chosen_on} pose messages, but on the whole stream ({count} messages) certify chooses "
+                f"{whole.name} time ({whole.note or 'the header stamps order the samples'}): the verdict is "
+                f"undecided here; run certify, or watch without --follow on the complete log")
 
     def _raw(self, msgs: list[SalvagedMessage]) -> RawTopic:
         m0 = msgs[0]
@@ -152,84 +172,96 @@ class _Feeder:
             self.seen_topics.setdefault(m.topic, m.msgtype)
             by_topic.setdefault(m.topic, []).append(m)
         self._find_pose_topic()
-        try:
+
+        def push_all() -> None:
             # the signals first: a pose sample is judged once they reach its time (or the lag bound) -- a message
             # pushed after the pose samples of its poll could arrive for a time judged already (late)
             for topic, fields in self.signals.items():
                 if topic in by_topic:
                     self._push_signals(by_topic[topic], fields)
-            if t.nominal in by_topic:
-                self._push_pose(by_topic[t.nominal], self.monitor.push_nominal, None)
+            nominal = by_topic.get(t.nominal) if t.nominal is not None else None
+            if nominal and "nominal" not in self.unused:
+                self._optional("nominal", nominal, lambda: self._push_pose(nominal, self.monitor.push_nominal,
+                                                                           pose=False))
             if self.pose_topic in by_topic:
-                msgs = by_topic[self.pose_topic]
-                child = t.tf_child_frame if msgs[0].msgtype in (TF, TRANSFORM_STAMPED) else None
-                self._push_pose(msgs, self.monitor.push_pose, child)
-            if t.cmd_vel in by_topic:
-                tw = decode_twist(self._raw(by_topic[t.cmd_vel]), self.ros1)
-                cst = self._times(tw.stamp_ns, tw.log_ns) + self.offsets_ns.get(t.cmd_vel, 0)
-                for k in np.argsort(cst, kind="stable").tolist():
-                    self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
-        except LogReadError as err:
-            raise LogReadError(err.reason, path=str(self.path)) from err
-        except READ_ERRORS as err:  # a decoder's error on damaged bytes: one line, as read_log words it
-            if isinstance(err, VerifyError):
-                raise
-            raise LogReadError(f"messages cannot be decoded: {in_words(err)}", path=str(self.path)) from err
+                self._push_pose(by_topic[self.pose_topic], self.monitor.push_pose, pose=True)
+            cmd = by_topic.get(t.cmd_vel) if t.cmd_vel is not None else None
+            if cmd and "cmd_vel" not in self.unused:
+                self._optional("cmd_vel", cmd, lambda: self._push_cmd(cmd))
+
+        self._decoded(push_all)
+
+    def _push_cmd(self, msgs: list[SalvagedMessage]) -> None:
+        tw = decode_twist(self._raw(msgs), self.ros1)
+        tb, cst = self.rules.stream_times(msgs[0].topic, tw.stamp_ns, tw.log_ns, pose_base=self._pose_base)
+        self._problem("cmd_vel", tb)
+        for k in np.argsort(cst, kind="stable").tolist():
+            self.monitor.push_cmd(int(cst[k]), *(float(v) for v in tw.u[k]))
+
+    def _optional(self, stream: str, msgs: list[SalvagedMessage], push: Callable[[], None]) -> None:
+        """An optional stream whose messages cannot be decoded is not used, as ``read_log`` does not use it (a
+        finding, not an error; one topic with two types stays an error, as in ``read_log``); if some of its
+        messages were judged already (following a growing log), the run cannot pass."""
+        topic = msgs[0].topic
+        self._raw(msgs)  # one topic, one type: exit 3 as read_log's reader
+        try:
+            push()
+        except _OPTIONAL_ERRORS as err:
+            words = err.reason if isinstance(err, UnusableInputError) else in_words(err)
+            self.unused[stream] = f"{topic}: messages cannot be decoded ({words}); the {stream} stream is not used"
+            if self.pushed[stream]:
+                self.problems[stream] = f"messages of {topic} were judged before one that cannot be decoded"
+            return
+        self.pushed[stream] += 1
+
+    def _problem(self, stream: str, tb: TimeBase) -> None:
+        """An explicit header base whose stamps cannot order a stream's samples: no pass (as read_log)."""
+        if not tb.usable and self.requested != "auto" and tb.note:
+            self.problems.setdefault(stream, tb.note)
+
+    @property
+    def _pose_base(self) -> str:
+        return self.time_base or "header"
 
     def _push_signals(self, msgs: list[SalvagedMessage], fields: list[tuple[str, str]]) -> None:
-        """Times under the rules of every stream (``_times``), plus the topic's clock offset."""
+        """Times under the rules of every stream, the topic's clock correction included."""
         raw = self._raw(msgs)
         decoded: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         for name, fld in fields:
             if fld not in decoded:
                 cols = decode_field(raw, self.ros1, fld)
-                offset = self.offsets_ns.get(msgs[0].topic, 0)
-                decoded[fld] = (self._times(cols.stamp_ns, cols.log_ns) + offset, cols.value)
+                tb, times = self.rules.stream_times(msgs[0].topic, cols.stamp_ns, cols.log_ns,
+                                                    pose_base=self._pose_base)
+                decoded[fld] = (times, cols.value)
+                self._problem(f"signal {name}", tb)
             stamps, values = decoded[fld]
             for k in np.argsort(stamps, kind="stable").tolist():
                 self.monitor.push_signal(name, int(stamps[k]), float(values[k]))
 
-    def _push_pose(self, msgs: list[SalvagedMessage], push: Callable[..., None], child: str | None) -> None:
-        cols = decode_pose(self._raw(msgs), self.ros1, child_frame=child)
-        log_ns = np.asarray(cols.log_ns, dtype=np.int64)
-        if push == self.monitor.push_pose:  # the pose: its stamps' outliers re-timed on the base chosen
-            times = choose_time_base(cols.stamp_ns, log_ns, self.time_base or "header").t_ns
+    def _push_pose(self, msgs: list[SalvagedMessage], push: Callable[..., None], *, pose: bool) -> None:
+        topic = msgs[0].topic
+        if pose:  # the pose: on the base chosen, its stamps' outliers re-timed
+            cols = self._decode_pose(msgs)
+            tb, stamps = self.rules.pose_times(topic, cols.stamp_ns, cols.log_ns, base=self._pose_base)
+            self._problem("pose", tb)
+            if self.requested == "auto":
+                self._stamps.append(np.asarray(cols.stamp_ns, dtype=np.int64))
+                self._logs.append(np.asarray(cols.log_ns, dtype=np.int64))
         else:
-            times = self._times(cols.stamp_ns, log_ns)
-        stamps = times + self.offsets_ns.get(msgs[0].topic, 0)
-        if self.requested == "auto" and self.time_base == "header" and push == self.monitor.push_pose:
-            self._count_stamps(np.asarray(cols.stamp_ns, dtype=np.int64))
+            cols = decode_pose(self._raw(msgs), self.ros1)
+            tb, stamps = self.rules.stream_times(topic, cols.stamp_ns, cols.log_ns, pose_base=self._pose_base)
+            self._problem("nominal", tb)
         for k in np.argsort(stamps, kind="stable").tolist():
             push(int(stamps[k]), float(cols.x_m[k]), float(cols.y_m[k]))
 
 
-    def _times(self, stamps_ns: npt.NDArray[np.int64] | None, log_ns: npt.ArrayLike) -> npt.NDArray[np.int64]:
-        """A stream beside the pose, under the rules of every stream (``verify.ingest.timebase.stream_time_base``),
-        applied to the messages of one poll (all of them when the log is read once)."""
-        base = stream_time_base(stamps_ns, np.asarray(log_ns, dtype=np.int64),
-                                requested="log" if self.time_base == "log" else self.requested,
-                                pose_base=self.time_base or "header")
-        return base.t_ns
-
-    def _count_stamps(self, stamps: npt.NDArray[np.int64]) -> None:
-        """Stamps that are zero or negative, repeat the previous one or go back (reading order)."""
-        prev = np.concatenate(([self._last_stamp], stamps[:-1])) if self._last_stamp is not None else None
-        bad = stamps <= 0
-        if prev is not None:
-            bad |= stamps <= prev
-        elif stamps.size > 1:
-            bad[1:] |= stamps[1:] <= stamps[:-1]
-        self._stamps += int(stamps.size)
-        self._bad_stamps += int(np.count_nonzero(bad))
-        if stamps.size:
-            self._last_stamp = int(stamps[-1])
-
-
 def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow: bool = False,
               idle_timeout_s: float = 10.0,
-              poll_s: float = 0.2, time_base: str = "header",
+              poll_s: float = 0.2, time_base: str = "header", clock_offsets: Mapping[str, float] | None = None,
               on_decision: Callable[[Decision], None] | None = None) -> WatchResult:
-    """Judge the log at ``path`` as it grows (see the module docstring); never modifies it."""
+    """Judge the log at ``path`` as it grows (see the module docstring); never modifies it. ``clock_offsets``
+    (topic -> seconds added to that topic's times) extends and overrides the scenario's, as certify's
+    ``--clock-offset`` does."""
     p = Path(path)
     waited = time.monotonic()
     while follow and not p.exists() and time.monotonic() - waited < idle_timeout_s:
@@ -239,15 +271,18 @@ def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow
                            path=str(p))
     if time_base not in TIME_BASES:
         raise LogReadError(f"time_base={time_base!r} must be one of {', '.join(TIME_BASES)}", path=str(p))
+    rules = ReadingRules.of(monitor.scenario, time_base, clock_offsets)  # the offsets' ranges, before reading
     check_log_path(p)
     follower = open_follower(p)
-    ros1 = follower.format == "ros1"
-    # several robots: one feeder per robot (its topics, under its one-robot scenario), all into the fleet monitor
+    ros1, probe = follower.format == "ros1", AUTO_PROBE if follow else None
+    # several robots: one feeder per robot (its topics, under its one-robot scenario's reading rules), all into the
+    # fleet monitor
     if isinstance(monitor, FleetMonitor):
         robots = [monitor.robot_feed(name) for name in monitor.scenario.robot_names]
-        feeders = [_Feeder(f, f.scenario, ros1, time_base, p) for f in robots]
+        feeders = [_Feeder(f, ReadingRules.of(f.scenario, time_base, clock_offsets), ros1, p, probe=probe)
+                   for f in robots]
     else:
-        feeders = [_Feeder(monitor, monitor.scenario, ros1, time_base, p)]
+        feeders = [_Feeder(monitor, rules, ros1, p, probe=probe)]
     decisions: list[Decision] = []
     count = 0
 
@@ -272,7 +307,7 @@ def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow
         if msgs:
             count += len(msgs)
             for feeder in feeders:
-                feeder.feed(msgs)
+                feeder.feed(msgs, final=follower.finished)
             report(monitor.update())
         if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes (and mtime)
             last_bytes, last_growth = now_bytes, time.monotonic()
@@ -299,17 +334,30 @@ def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow
     else:
         for feeder in feeders:
             feeder.feed([], final=True)
+    mismatches: list[str] = []
     for feeder in feeders:
-        notes += [n for n in (feeder.base_note, feeder.auto_findings()) if n and n not in notes]
-        if feeder.pose_topic is None or feeder.monitor.counts["pose"] == 0:
-            have = ", ".join(sorted(feeder.seen_topics)) or "no topics"
-            raise MissingTopicError(f"pose topic {feeder.scenario.topics.pose} is absent; the log has: {have}",
-                                    path=str(p))
+        mismatch = feeder.base_mismatch()
+        mismatches += [mismatch] if mismatch else []
+        notes += [n for n in (feeder.base_note, mismatch, *feeder.unused.values()) if n and n not in notes]
+        if feeder.pose_topic is None:
+            raise feeder.rules.missing_pose(feeder.seen_topics, str(p))
+        if feeder.monitor.counts["pose"] == 0:
+            raise MissingTopicError(f"pose topic {feeder.pose_topic} has no messages", path=str(p))
+        if reason != "every check and obligation is decided":  # every topic of the log seen: as certify, first
+            feeder.rules.check_offset_topics(feeder.seen_topics, str(p))
         for topic, fields in feeder.signals.items():
             if topic not in feeder.seen_topics:
                 have = ", ".join(sorted(feeder.seen_topics)) or "no topics"
                 raise MissingTopicError(f"signal {fields[0][0]}: topic {topic} (field {fields[0][1]}) is absent "
                                         f"from the log; the log has: {have}", path=str(p))
-    result = monitor.close(partial=not follower.finished)
+    result: OnlineResult | FleetResult
+    if isinstance(monitor, FleetMonitor):
+        result = monitor.close(partial=not follower.finished,
+                               stream_problems={f.monitor.robot: f.problems for f in feeders
+                                         if isinstance(f.monitor, RobotFeed)})
+    else:
+        result = monitor.close(partial=not follower.finished, problems=feeders[0].problems)
+    if mismatches and result.verdict != "inconclusive":
+        result = replace(result, verdict="inconclusive", verdict_reason=mismatches[0])
     report(monitor.final_decisions)
     return WatchResult(result, decisions, follower.finished, reason, count, notes)

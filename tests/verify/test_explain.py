@@ -1,0 +1,85 @@
+"""``verify.monitor.engine.explain`` walks from a false or undecided formula to the sub-formula and time that decide
+it: an exact-zero value is undecided, never false; an undecided conjunction or disjunction names its undecided
+argument; a false conjunction its earliest false conjunct (not an undecided one)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tubempc.mitl import parse
+from verify.monitor.engine import Positions, Truth, evaluate_at_points, explain
+
+S = 1_000_000_000
+
+
+def _pos(n: int) -> Positions:
+    """``n`` sample points 1 s apart (no gaps)."""
+    t = np.arange(n, dtype=np.int64) * S
+    return Positions(t, t.copy(), np.ones(n, dtype=bool), int(t[-1]))
+
+
+def _truth(lo: list[float], hi: list[float]) -> Truth:
+    return Truth(np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64))
+
+
+TRUE4 = _truth([1.0] * 4, [1.0] * 4)
+
+
+def test_an_exact_zero_or_a_positive_upper_bound_is_undecided_not_false() -> None:
+    pos = _pos(4)
+    for hi in (0.0, 0.5):
+        atoms = {"p": _truth([-1.0, -1.0, -1.0, -1.0], [hi, hi, hi, hi])}
+        values = evaluate_at_points(parse("p"), pos, atoms)
+        e = explain(parse("p"), 0, pos, values)
+        assert e.reason.startswith("unknown here"), (hi, e)
+
+
+def test_a_false_conjunction_names_its_earliest_false_conjunct_not_an_undecided_one() -> None:
+    pos = _pos(4)
+    f = parse("p & G[0,3] q")
+    for hi in (0.0, 0.5):  # p undecided at 0 (its upper bound is not below zero); q false at 2 s
+        atoms = {"p": _truth([-1.0] * 4, [hi] * 4), "q": _truth([1.0, 1.0, -1.0, 1.0], [1.0, 1.0, -1.0, 1.0])}
+        values = evaluate_at_points(f, pos, atoms)
+        e = explain(f, 0, pos, values)
+        assert (e.subformula, e.time_ns) == ("q", 2 * S), (hi, e)
+
+
+def test_an_undecided_disjunction_names_its_undecided_argument() -> None:
+    pos = _pos(4)
+    f = parse("p | q")
+    atoms = {"p": _truth([0.0] * 4, [1.0] * 4), "q": _truth([-1.0] * 4, [-1.0] * 4)}  # p: lower bound exactly 0
+    values = evaluate_at_points(f, pos, atoms)
+    e = explain(f, 0, pos, values)
+    assert e.subformula == "p" and e.reason.startswith("unknown here"), e
+
+
+def test_an_undecided_conjunction_names_its_undecided_argument_not_a_true_one() -> None:
+    pos = _pos(4)
+    f = parse("p & q")
+    atoms = {"p": _truth([0.5] * 4, [1.0] * 4), "q": _truth([-1.0] * 4, [1.0] * 4)}  # p true (0.5), q unknown
+    values = evaluate_at_points(f, pos, atoms)
+    e = explain(f, 0, pos, values)
+    assert e.subformula == "q" and e.reason.startswith("unknown here"), e
+
+
+# ---- U: exact-zero values are undecided (``_until``'s counting rule) -------------------------------------------------
+def _until_at_0(p: Truth, q: Truth, text: str = "p U[0,3] q") -> Truth:
+    f = parse(text)
+    return evaluate_at_points(f, _pos(4), {"p": p, "q": q})[f]
+
+
+def test_until_is_not_true_on_a_witness_whose_value_is_exactly_zero() -> None:
+    v = _until_at_0(TRUE4, _truth([0.0] * 4, [1.0] * 4))  # q undecided (lower bound exactly 0) everywhere
+    assert v.lo[0] <= 0 < v.hi[0], (v.lo[0], v.hi[0])
+
+
+def test_until_is_not_true_when_its_left_side_is_exactly_zero_before_the_witness() -> None:
+    v = _until_at_0(_truth([0.0] * 4, [1.0] * 4), _truth([-1.0, -1.0, 1.0, 1.0], [-1.0, -1.0, 1.0, 1.0]))
+    assert v.lo[0] <= 0, v.lo[0]
+
+
+def test_until_is_not_false_when_its_left_side_is_only_undecided_and_the_window_runs_past_the_end() -> None:
+    for hi in (0.0, 0.5):  # p undecided at 1 s (not false); q false everywhere; the window ends after the log
+        v = _until_at_0(_truth([1.0, -1.0, 1.0, 1.0], [1.0, hi, 1.0, 1.0]), _truth([-1.0] * 4, [-1.0] * 4),
+                        "p U[0,10] q")
+        assert v.hi[0] >= 0, (hi, v.hi[0])
