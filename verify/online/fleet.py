@@ -165,8 +165,8 @@ class FleetMonitor:
     def close(self, *, partial: bool = False,
               stream_problems: Mapping[str, Mapping[str, str]] | None = None) -> FleetResult:
         """The final verdict of every check, as ``certify_log`` gives for a log with the same samples
-        (``stream_problems``: robot -> stream -> why nothing judged on it can pass, as ``OnlineMonitor.close`` takes them; as certify, a
-        signal's problem counts when the formula uses that robot's signal)."""
+        (``stream_problems``: robot -> stream -> why nothing judged on it can pass, as ``OnlineMonitor.close``
+        takes them; as certify, a signal's problem counts when the formula uses that robot's signal)."""
         if self._result is not None:
             return self._result
         sc = self.scenario
