@@ -110,6 +110,18 @@ def test_out_of_range_numbers_are_exit_3_naming_the_field(tmp_path: Path, capsys
     assert "mocap.rate_hz" in line and str(path) in line
 
 
+@pytest.mark.parametrize("value", ["1e308", "1001"])
+def test_noise_std_past_its_limit_is_exit_3_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                             value: str) -> None:
+    """mocap.noise_std: 1e308 made the tube check's stated tolerance (3 sigma) infinite and the certificate
+    invalid (exit 70, found by the fault campaign's scenario-limits family)."""
+    builtin = (ROOT / "tubempc" / "scenario" / "builtin" / "nexus-sml.yaml").read_text()
+    path = _scenario(tmp_path, builtin.replace("mocap: {rate_hz: 100.0}",
+                                               f"mocap: {{rate_hz: 100.0, noise_std: {value}}}"))
+    line = _one_error_line(*cli(capsys, "certify", ROOT / "logs" / "demo.mcap", "--scenario", path)[::2])
+    assert "mocap.noise_std" in line and str(path) in line
+
+
 def test_digest_without_a_scenario_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     """It printed the digest of the Nexus topics, which the log lacks: the same value for any such log."""
     line = _one_error_line(*cli(capsys, "digest", LOG)[::2])

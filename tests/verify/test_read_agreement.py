@@ -7,12 +7,9 @@ by the two paths; the logs are the campaign's seed logs, damaged at a chosen rec
 
 from __future__ import annotations
 
-import importlib.util
 import sqlite3
 import struct
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import pytest
@@ -22,22 +19,12 @@ from verify.errors import LogReadError
 from verify.ingest.mcaprecords import CHUNK_FIXED, MAGIC, MESSAGE_HEAD, RECORD_HEAD, Op, Scan, scan, walk
 from verify.ingest.raw import read_raw
 
+from .support import FUZZ
+
 ROOT = Path(__file__).resolve().parents[2]
 POSE, CAMERA = "/qualisys/nexus/pose", "/camera/image_raw"
 TOPICS = (POSE, "/nexus/nominal_pose", "/nexus/cmd_vel", "/nexus/mpc_status", "/tubempc/metadata")
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
-
-
-def _fuzz() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fuzz_certify", ROOT / "benchmarks" / "fuzz_certify.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("fuzz_certify", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-FUZZ = _fuzz()
 
 
 @pytest.fixture(scope="module")

@@ -342,9 +342,14 @@ def unit_problem(field: str, unit: str | None, value: float) -> str | None:
 MOCAP_RATE_HZ = (1e-3, 1e6)
 
 
+#: the largest position noise accepted (m, one standard deviation): far beyond any positioning system, and small
+#: enough that the tube check's stated tolerance (3 sigma) stays a finite number
+MOCAP_NOISE_STD_M = 1e3
+
+
 class MocapSpec(_Frozen):
     rate_hz: Annotated[float, Field(ge=MOCAP_RATE_HZ[0], le=MOCAP_RATE_HZ[1], allow_inf_nan=False)] = 100.0
-    noise_std: NonNegFloat = 0.0  # metres, optional simulated MoCap noise
+    noise_std: Annotated[float, Field(ge=0, le=MOCAP_NOISE_STD_M, allow_inf_nan=False)] = 0.0  # metres, optional
 
 
 AtomName = Annotated[str, Field(pattern=_ATOM_PATTERN)]
