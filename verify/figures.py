@@ -14,13 +14,11 @@ modules (this one and ``verify.workspace_map``).
 
 from __future__ import annotations
 
-import gc
 import math
 import multiprocessing
 import os
 import threading
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -29,6 +27,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from tubempc.runtime.gcpause import gc_paused
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, ObligationEntry, Verdict
 from verify.decimate import envelope
@@ -432,20 +431,6 @@ def _render_one(index: int) -> FigureSpec | None:
     return _PENDING[index]()
 
 
-@contextmanager
-def _gc_paused() -> Iterator[None]:
-    """No cyclic garbage collection while drawing: matplotlib allocates many small objects, and the collections
-    they trigger walk every object of the process (the log's frames included) again and again (about 15 % of the
-    drawing time); the cycles are collected once afterwards."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
-
-
 def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: pd.DataFrame | None,
                    nominal: pd.DataFrame | None, inputs: pd.DataFrame | None,
                    robustness: pd.DataFrame | None, judgement: FormulaJudgement | None = None,
@@ -461,7 +446,7 @@ def render_figures(certificate: Certificate, scenario: Scenario, *, trajectory: 
     builders = figure_builders(certificate, scenario, trajectory=trajectory, nominal=nominal, inputs=inputs,
                                judgement=judgement)
     count = min(figure_workers() if workers is None else workers, len(builders))
-    with _gc_paused():
+    with gc_paused():
         specs = _render_forked(builders, count) if count > 1 else None
         if specs is None:
             specs = [build() for build in builders]

@@ -19,13 +19,11 @@ dispatch (``detect_format``).
 
 from __future__ import annotations
 
-import gc
 import os
 import sqlite3
 import stat
 import struct
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter, itemgetter
@@ -45,6 +43,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 
+from tubempc.runtime.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
 from verify.ingest.mcapfile import read_bag_metadata, read_mcap_log
@@ -223,7 +222,7 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                       for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items()}
         return RawLog(str(p), fmt, True, topics_out, fast.available, False, tuple(notes))
     try:
-        with _gc_paused():
+        with gc_paused():
             return _read_indexed(p, fmt, wanted, notes)
     except TruncatedLogError as err:
         if not salvage:
@@ -233,21 +232,8 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
         if p.is_dir() and read_bag_metadata(p).compression_mode is not None:
             raise TruncatedLogError(f"{err.reason}; --salvage does not read compressed bag folders", path=str(p)
                                     ) from err
-        with _gc_paused():
+        with gc_paused():
             return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
-
-
-@contextmanager
-def _gc_paused() -> Iterator[None]:
-    """Pause the cyclic garbage collector while millions of (acyclic) message tuples and payloads are kept: each
-    collection would rescan all of them (a third of the reading time on 1e6 messages). Restored afterwards."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
 
 
 #: What rosbags' readers raise on a damaged file, caught only around their calls (open, messages): rosbags checks
