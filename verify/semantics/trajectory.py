@@ -113,6 +113,23 @@ def _sample_truth(margin: FloatArray) -> tuple[FloatArray, FloatArray]:
     return np.where(nan, -np.inf, margin), np.where(nan, np.inf, margin)
 
 
+def _atom_values(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, *, scenario: Scenario,
+                 max_speed_mps: float, sig: Mapping[str, SignalBounds], point_at: IntArray, gap_at: IntArray,
+                 size: int) -> dict[str, Truth]:
+    """Each atom's truth at the samples and over the gaps between them: region atoms from their margins (the motion
+    between samples bounded by ``max_speed_mps``), signal atoms from their bounds."""
+    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
+    values: dict[str, Truth] = {}
+    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula) - set(sig)).items():
+        plo, phi = _sample_truth(margin)
+        gb = gap_bounds(margin, step)
+        values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=size)
+    for name, b in sig.items():
+        values[name] = interleave(b.point_lo, b.point_hi, b.gap_lo, b.gap_hi, point_at=point_at, gap_at=gap_at,
+                                  size=size)
+    return values
+
+
 def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: FloatArray, scenario: Scenario, *,
                      max_speed_mps: float, signals: Mapping[str, SignalBounds] | None = None) -> TrajectoryVerdict:
     """Evaluate ``formula`` at the first sample under the trajectory semantics (times: ns, strictly increasing).
@@ -131,15 +148,8 @@ def check_trajectory(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Flo
         if fast is not None:
             return fast
     pos, point_at, gap_at = trajectory_positions(t_ns)
-    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
-    values: dict[str, Truth] = {}
-    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula) - set(sig)).items():
-        plo, phi = _sample_truth(margin)
-        gb = gap_bounds(margin, step)
-        values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
-    for name, b in sig.items():
-        values[name] = interleave(b.point_lo, b.point_hi, b.gap_lo, b.gap_hi, point_at=point_at, gap_at=gap_at,
-                                  size=pos.size)
+    values = _atom_values(formula, t_ns, x_m, y_m, scenario=scenario, max_speed_mps=max_speed_mps, sig=sig,
+                          point_at=point_at, gap_at=gap_at, size=pos.size)
     result = evaluate_at_points(formula, pos, values)
     root = result[formula]
     lo0, hi0 = float(root.lo[0]), float(root.hi[0])
@@ -178,15 +188,8 @@ def trajectory_values(formula: Formula, t_ns: IntArray, x_m: FloatArray, y_m: Fl
                 pass
             else:
                 return TrajectoryValues(pos, point_at, gap_at, _interleaved(res, point_at, gap_at, pos.size))
-    step = step_bound_m(t_ns, x_m, y_m, max_speed_mps)
-    values: dict[str, Truth] = {}
-    for name, margin in label_margins(x_m, y_m, scenario, atoms(formula) - set(sig)).items():
-        plo, phi = _sample_truth(margin)
-        gb = gap_bounds(margin, step)
-        values[name] = interleave(plo, phi, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
-    for name, b in sig.items():
-        values[name] = interleave(b.point_lo, b.point_hi, b.gap_lo, b.gap_hi, point_at=point_at, gap_at=gap_at,
-                                  size=pos.size)
+    values = _atom_values(formula, t_ns, x_m, y_m, scenario=scenario, max_speed_mps=max_speed_mps, sig=sig,
+                          point_at=point_at, gap_at=gap_at, size=pos.size)
     return TrajectoryValues(pos, point_at, gap_at, evaluate_at_points(formula, pos, values))
 
 
