@@ -4,15 +4,11 @@ certificate's one-sentence reasons."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
 
-from tubempc.cli import main
 from tubempc.scenario import builtin_scenario
 from verify import certify_log
 from verify.ingest import read_log
@@ -21,29 +17,11 @@ from verify.online import OnlineMonitor
 from verify.online.follow import open_follower
 from verify.online.watch import AUTO_PROBE, _Feeder, watch_log
 
+from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tests is not a package)
+
 ROOT = Path(__file__).resolve().parents[2]
 LOGS = ROOT / "logs"
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
-
-
-def _fuzz() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fuzz_certify", ROOT / "benchmarks" / "fuzz_certify.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("fuzz_certify", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-FUZZ = _fuzz()
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exc:
-        main(argv)
-    out, err = capsys.readouterr()
-    code = exc.value.code
-    return (code if isinstance(code, int) else 0), out, err
 
 
 def _late_zero_stamps(tmp_path: Path, fmt: str = "mcap", *, violating: bool = False) -> Path:
