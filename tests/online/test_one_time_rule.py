@@ -1,0 +1,120 @@
+"""watch times every stream (pose, nominal, commands, each signal topic) as certify does: the time rule applied to the
+whole stream in certify's reading order (by log time for a closed log). Read once, watch gives the same times by
+construction; following, each poll is timed with the samples before it and the whole streams are checked at the end
+(a difference: never a verdict)."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from tubempc.scenario import builtin_scenario, load_scenario
+from verify import certify_log
+from verify.ingest.rules import ReadingRules
+from verify.online import OnlineMonitor
+from verify.online.follow import open_follower
+from verify.online.watch import AUTO_PROBE, _Feeder, watch_log
+
+from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tests is not a package)
+
+SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
+LATE_S = 527.5  # the log time one nominal message is moved by (its header stamp and file position unchanged)
+
+
+def _late_nominal_log(tmp_path: Path) -> Path:
+    """The clean run as a bare MCAP whose nominal message at 7.8 s has a log time 527.5 s later in its record (a
+    flipped byte of the log time field): in file order its stamp fits its neighbours, in log-time order (certify's
+    reading order) it comes last, an outlier, re-timed from that log time."""
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.mcap", "mcap")
+    sc = builtin_scenario()
+    with log.open("rb") as fh:
+        channels = make_reader(fh).get_summary().channels  # type: ignore[union-attr]
+    (nominal,) = [cid for cid, ch in channels.items() if ch.topic == sc.topics.nominal]
+    data = bytearray(log.read_bytes())
+    t_ns = FUZZ.TIME0_NS + 7_800_000_000
+    # a message record: opcode 5, length u64, channel u16, sequence u32, log time u64, publish time u64, payload
+    at = data.find(b"\x05")
+    found = 0
+    while at >= 0:
+        if (data[at] == 5 and struct.unpack_from("<H", data, at + 9)[0] == nominal
+                and struct.unpack_from("<Q", data, at + 15)[0] == t_ns):
+            struct.pack_into("<Q", data, at + 15, t_ns + round(LATE_S * 1e9))
+            found += 1
+        at = data.find(b"\x05", at + 1)
+    assert found == 1
+    log.write_bytes(bytes(data))
+    return log
+
+
+def test_watch_reads_a_closed_log_in_certifys_order(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A nominal message whose log time is far later than its file position: certify re-times its stamp (an outlier
+    in log-time order) and leaves a pose sample without a nominal sample -- the tube is undecided; watch, reading the
+    file in its order, passed it."""
+    log = _late_nominal_log(tmp_path)
+    sc = builtin_scenario()
+    for base in ("header", "auto"):
+        cert = certify_log(log, sc, spec=SPEC, time_base=base).certificate
+        tube = next(c for c in cert["checks"] if c["name"] == "tube")
+        assert tube["verdict"] == "inconclusive" and cert["samples"]["nominal"]["retimed"] == 1
+        res = watch_log(log, OnlineMonitor(sc, spec=SPEC), time_base=base)
+        assert res.result.verdict == cert["verdict"] == "inconclusive", (base, res.result.verdict_reason)
+        assert [(c.name, c.verdict) for c in res.result.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
+    codes = [run([cmd, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", "header"],
+                 capsys)[0] for cmd in ("certify", "watch")]
+    assert codes == [2, 2]
+
+
+def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:
+    """Followed poll by poll in file order, the nominal message keeps its stamp; at the end the rule applied to the
+    whole nominal stream in certify's order gives it another time: a note names the topic, and the run's verdict is
+    not a pass. The clean log followed the same way: no note, a pass."""
+    sc = builtin_scenario()
+    clean = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "clean.mcap", "mcap")
+    for log, differs in ((_late_nominal_log(tmp_path), True), (clean, False)):
+        msgs = open_follower(log).poll()
+        monitor = OnlineMonitor(sc, spec=SPEC)
+        feeder = _Feeder(monitor, ReadingRules.of(sc, "header"), False, log, probe=AUTO_PROBE)
+        for k in range(0, len(msgs), 40):
+            feeder.feed(msgs[k : k + 40], final=k + 40 >= len(msgs), closed=k + 40 >= len(msgs))
+            monitor.update()
+        why = feeder.finish(closed=True)
+        assert bool(why) == differs, why
+        if differs:
+            assert len(why) == 1 and why[0].startswith(f"{sc.topics.nominal}: 1 of 301 sample(s)"), why
+        else:
+            assert monitor.close().verdict == "pass"
+
+
+def test_a_signal_message_alone_in_its_poll_is_timed_as_in_the_whole_stream(tmp_path: Path) -> None:
+    """A violating temperature message stamped near 1970 (a clock not set) among well-stamped ones: in the whole
+    stream an outlier, re-timed from its log time (10 s into the run), so certify fails the run. Read alone in its
+    poll the rule saw no neighbours and kept the 1970 stamp (never judged at 10 s); timed with the samples before it,
+    it is judged where certify judges it."""
+    run0 = FUZZ.base_run(violating=False)
+    run0.extra = FUZZ.temperature_stream(run0)
+    bad_log_ns = FUZZ.TIME0_NS + 10_000_000_000 - 2_000_000
+    run0.extra.append((bad_log_ns, FUZZ.TEMP_TOPIC, FUZZ.TEMPERATURE, FUZZ.temperature(5 * 10**9, 95.0)))
+    log = FUZZ.write_run(run0, tmp_path / "run.mcap", "mcap")
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text(FUZZ.signal_scenario_text())
+    sc = load_scenario(scenario)
+    spec = "G[0,inf) motor_ok"
+    cert = certify_log(log, sc, spec=spec, time_base="header").certificate
+    assert cert["verdict"] == "fail"
+    msgs = open_follower(log).poll()
+    (k,) = [i for i, m in enumerate(msgs) if m.topic == FUZZ.TEMP_TOPIC and m.log_ns == bad_log_ns]
+    monitor = OnlineMonitor(sc, spec=spec)
+    feeder = _Feeder(monitor, ReadingRules.of(sc, "header"), False, log, probe=AUTO_PROBE)
+    for poll in (msgs[:k], [msgs[k]], msgs[k + 1 :]):
+        feeder.feed(poll, final=poll[-1] is msgs[-1], closed=poll[-1] is msgs[-1])
+        monitor.update()
+    assert feeder.finish(closed=True) == []
+    res = monitor.close()
+    assert res.verdict == "fail", res.verdict_reason
+    spec_check = next(c for c in res.checks if c.name == "spec_trajectory")
+    want = next(c for c in cert["checks"] if c["name"] == "spec_trajectory")
+    assert spec_check.first_violation_ns is not None
+    assert abs((spec_check.first_violation_ns - cert["time0_ns"]) * 1e-9 - want["first_violation_time"]) < 1e-6
