@@ -21,7 +21,8 @@ format; message-content faults (header stamps: a repeated stamp hiding an obstac
 negative / 1970 / reordered stamps; NaN positions, zero quaternions, invalid UTF-8 frame ids, bad bytes in an
 optional topic, a wrong type on the pose topic, a missing topic); formula mutations (edits, deep nesting, long
 chains, huge bounds); scenario YAML mutations (edits, many regions, alias bombs, bad bytes); output paths and
-non-regular log paths; stamp faults on every stream, two types on one topic, option values at and past their limits,
+non-regular log paths (also inside a bag folder), huge windows; stamp faults on every stream (a signal topic, the
+nominal, ``TwistStamped`` commands), two types on one topic, option values at and past their limits,
 symlinks in output folders, signal data outside the pose's span; constant and degenerate formulas (``true``,
 ``false``, ``G !true``, windows past the log's end: the exact verdict is required), all-infinite and NaN-only
 streams (poses, a signal, commands), scenario values at and past the validator's limits. Every certify case is run
@@ -71,6 +72,7 @@ POSE = "geometry_msgs/msg/PoseStamped"
 TWIST = "geometry_msgs/msg/Twist"
 STRING = "std_msgs/msg/String"
 ODOMETRY = "nav_msgs/msg/Odometry"
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 
 
 class Hang(BaseException):
@@ -94,6 +96,10 @@ class Run:
     topics: tuple[str, ...] = ("pose", "nominal", "cmd_vel", "solver", "metadata")
     # more messages: (log time ns, topic, type, builder(typestore types, ros1) -> message)
     extra: list[tuple[int, str, str, Callable[[Any, bool], Any]]] = field(default_factory=list)
+    # the nominal's own header stamps and positions (None: the pose's); commands as TwistStamped with these stamps
+    nominal_stamp_ns: np.ndarray | None = None
+    nominal_xy: np.ndarray | None = None
+    cmd_stamp_ns: np.ndarray | None = None
 
 
 #: the signal topic of the campaign's signal families: a motor temperature (sensor_msgs/Temperature, in ROS1 and 2)
@@ -166,13 +172,18 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
     ty = store.types
     topics = SCENARIO.topics
     msgs: list[tuple[int, str, str, bytes]] = []
-    for i in range(run.t_ns.size):
-        sec, nsec = divmod(int(run.stamp_ns[i]), 10**9)
+    def header(i: int, stamp_ns: int) -> Any:
+        sec, nsec = divmod(int(stamp_ns), 10**9)
         stamp = ty["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
-        header = ty["std_msgs/msg/Header"](**({"seq": i} if ros1 else {}), stamp=stamp, frame_id="world")
-        pose = ty[POSE](header=header, pose=ty["geometry_msgs/msg/Pose"](
-            position=ty["geometry_msgs/msg/Point"](x=float(run.xy[i, 0]), y=float(run.xy[i, 1]), z=0.0),
+        return ty["std_msgs/msg/Header"](**({"seq": i} if ros1 else {}), stamp=stamp, frame_id="world")
+
+    def pose_msg(i: int, stamp_ns: int, xy: np.ndarray) -> Any:
+        return ty[POSE](header=header(i, stamp_ns), pose=ty["geometry_msgs/msg/Pose"](
+            position=ty["geometry_msgs/msg/Point"](x=float(xy[i, 0]), y=float(xy[i, 1]), z=0.0),
             orientation=ty["geometry_msgs/msg/Quaternion"](*(float(q) for q in run.quat[i]))))
+
+    for i in range(run.t_ns.size):
+        pose = pose_msg(i, int(run.stamp_ns[i]), run.xy)
         raw = bytes(ser(pose, POSE))
         if i in run.frame_ids:
             raw = _cdr_string_patch(raw, ros1, run.frame_ids[i])
@@ -183,12 +194,19 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
                 msgs.append((int(run.t_ns[i]), topics.pose, STRING,
                              bytes(ser(ty[STRING](data="not a pose"), STRING))))
         if "nominal" in run.topics:
-            msgs.append((int(run.t_ns[i]), topics.nominal, POSE, bytes(ser(pose, POSE))))
+            nominal = pose if run.nominal_stamp_ns is None and run.nominal_xy is None else pose_msg(
+                i, int((run.stamp_ns if run.nominal_stamp_ns is None else run.nominal_stamp_ns)[i]),
+                run.xy if run.nominal_xy is None else run.nominal_xy)
+            msgs.append((int(run.t_ns[i]), topics.nominal, POSE, bytes(ser(nominal, POSE))))
         if "cmd_vel" in run.topics:
             v3 = ty["geometry_msgs/msg/Vector3"]
             tw = ty[TWIST](linear=v3(x=float(run.cmd[i, 0]), y=float(run.cmd[i, 1]), z=0.0),
                            angular=v3(x=0.0, y=0.0, z=float(run.cmd[i, 2])))
-            msgs.append((int(run.t_ns[i]), topics.cmd_vel, TWIST, bytes(ser(tw, TWIST))))
+            if run.cmd_stamp_ns is None:
+                msgs.append((int(run.t_ns[i]), topics.cmd_vel, TWIST, bytes(ser(tw, TWIST))))
+            else:
+                stamped = ty[TWIST_STAMPED](header=header(i, int(run.cmd_stamp_ns[i])), twist=tw)
+                msgs.append((int(run.t_ns[i]), topics.cmd_vel, TWIST_STAMPED, bytes(ser(stamped, TWIST_STAMPED))))
         if camera:
             msgs.append((int(run.t_ns[i]) + 1, CAMERA, STRING, bytes(ser(ty[STRING](data="c" * 2000), STRING))))
         if "solver" in run.topics and i % 10 == 0:
@@ -469,6 +487,7 @@ VALID_FORMULAS = [SPEC, "F[0,10] mission_1", "G[0,20] (mission_1 -> F[0,5] missi
 
 
 def formula_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    truth = "any"
     kind = rng.choice(["edit", "edit", "nest_not", "nest_paren", "nest_temporal", "and_chain", "or_chain",
                        "big_bound", "garbage", "empty"])
     text = rng.choice(VALID_FORMULAS)
@@ -501,13 +520,17 @@ def formula_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: 
     elif kind == "big_bound":
         digits = rng.choice([20, 400, 5000])
         text = f"F[0,{'9' * digits}] mission_1" if rng.random() < 0.5 else f"G[{'1' * digits}.5,inf) !obs_1"
+        derived = random.Random(hash(rng.getstate()[1]))  # a variant that consumes no draw (see path_case)
+        if derived.random() < 0.5:  # a huge window the parser accepts: memory bounded by the log, never a pass
+            text = f"G[0,{derived.choice(['1e7', '10000000', '99999999999', '1e15'])}] !obs_1"
+            kind, truth = "huge_window", "undecidable"
     elif kind == "garbage":
         text = "".join(chr(rng.randrange(1, 0x3000)) for _ in range(rng.randrange(1, 80)))
     else:
         text = rng.choice(["", " ", "\n"])
     seed = seeds["mcap", False]
     argv = ["certify", str(seed), "--scenario", "nexus-sml", "--spec", text]
-    return Case("formula", kind, argv, "any", [seed])
+    return Case("formula", kind, argv, truth, [seed])
 
 
 def scenario_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
@@ -567,6 +590,10 @@ def scenario_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work:
 
 
 def path_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Output paths that cannot be written and log paths that are not logs (a FIFO, also as the storage file of a bag
+    folder, a device, a symlink loop there, empty files and folders): exit 3, nothing overwritten. Variants added
+    to a kind are drawn by a generator seeded from the case generator's state (``hash(rng.getstate()[1])``, which
+    consumes no draw): case numbers of earlier campaigns replay the same cases."""
     seed = seeds["bag", False]
     kind = rng.choice(["out_existing_file", "out_below_file", "out_dev_null", "out_readonly_fs", "out_existing_dir",
                        "log_fifo", "log_dev_zero", "log_empty_dir", "log_empty_file", "log_no_ext", "log_missing",
@@ -613,10 +640,26 @@ def path_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Pat
         else:
             inputs.append(d)
             require = exit3
-    elif kind == "log_fifo":
-        fifo = work / "pipe.bag"
-        os.mkfifo(fifo)
-        argv[1] = str(fifo)
+    elif kind == "log_fifo":  # the log path itself, or the storage file of a bag folder (derived draw: see below)
+        where = random.Random(hash(rng.getstate()[1])).choice(["path", "folder_fifo", "folder_dev_zero",
+                                                            "folder_loop"])
+        if where == "path":
+            fifo = work / "pipe.bag"
+            os.mkfifo(fifo)
+            argv[1] = str(fifo)
+        else:
+            bag = work / "bag"
+            shutil.copytree(seeds["dir", False], bag)
+            (storage,) = [f for f in bag.iterdir() if f.suffix == ".db3"]
+            storage.unlink()
+            if where == "folder_fifo":
+                os.mkfifo(storage)
+            elif where == "folder_dev_zero":
+                storage.symlink_to("/dev/zero")
+            else:
+                storage.symlink_to(storage)
+            argv[1] = str(bag)
+        kind = f"log_fifo:{where}"
         require = exit3
         inputs = []
     elif kind == "log_dev_zero":
@@ -671,26 +714,53 @@ def _stamp_fault(rng: random.Random, kind: str, log_ns: int) -> int:
 
 
 def stream_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
-    """Stamp faults on every stream (not only the pose): a second publisher on the signal topic (unset, 1970,
-    negative or late stamps, or duplicates of good stamps with other values) reports a violating value held at the
-    pose samples for 1 s; a faulty TwistStamped-free command stream is not needed (Twist has no stamp), so the nominal
-    gets the same stamp faults. The signal violation must never pass, on any time base."""
+    """Stamp faults on every stream (not only the pose), each hiding a violation that only a sample judged at its
+    log time shows (the run must never pass, on any time base):
+
+    - signal (half the cases): a second publisher on the signal topic (unset, 1970, negative or late stamps, or
+      duplicates of good stamps with other values) reports a violating value held at the pose samples;
+    - nominal: 1-20 nominal messages with such stamps (a duplicate: the stamp of the message before them) place the
+      nominal 0.5 m from the pose (a tube violation where the pose is matched to them);
+    - cmd_vel: the commands as ``TwistStamped``, 1-20 of them with such stamps and ``linear.x`` 5 m/s (bound 0.2).
+
+    The stream is chosen by a generator seeded from the case's draws, which are those of the signal-only family
+    before it: case numbers of earlier campaigns replay the same cases."""
     fmt = rng.choice(FORMATS[:4])
     kind = rng.choice(STAMP_FAULTS)
     run = base_run(violating=False)
-    run.extra = temperature_stream(run)
     start = rng.randrange(20, 250)
     count = rng.choice([1, 3, 10, 20])
-    for k in range(start, min(start + count, run.t_ns.size)):
+    faulty = range(start, min(start + count, run.t_ns.size))
+    stream = random.Random(f"{fmt}:{kind}:{start}:{count}").choice(["signal", "signal", "nominal", "cmd_vel"])
+    stamps = run.stamp_ns.copy()
+    run.extra = temperature_stream(run) if stream == "signal" else []
+    for k in faulty:
         log_ns = int(run.t_ns[k]) - 2_000_000  # after the good message, before the pose sample: held there
-        stamp = (int(run.t_ns[k]) - 5_000_000) if kind == "duplicate_conflict" else _stamp_fault(rng, kind, log_ns)
-        run.extra.append((log_ns, TEMP_TOPIC, TEMPERATURE, temperature(stamp, 95.0)))
-    path = write_run(run, work / f"signal_{kind}{SUFFIX[fmt]}", fmt)
-    scenario = work / "signal.yaml"
-    scenario.write_text(signal_scenario_text())
-    argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok",
-            "--time-base", rng.choice(["auto", "header", "log"])]
-    return Case("streams", f"{fmt}:{kind}", argv, "violating", [path, scenario])
+        if kind == "duplicate_conflict":
+            stamp = int(run.t_ns[k]) - 5_000_000 if stream == "signal" else int(run.stamp_ns[start - 1])
+        else:
+            stamp = _stamp_fault(rng, kind, log_ns)
+        if stream == "signal":
+            run.extra.append((log_ns, TEMP_TOPIC, TEMPERATURE, temperature(stamp, 95.0)))
+        else:
+            stamps[k] = stamp
+    if stream == "nominal":
+        run.nominal_stamp_ns, run.nominal_xy = stamps, run.xy.copy()
+        run.nominal_xy[list(faulty), 0] += 0.5
+    elif stream == "cmd_vel":
+        run.cmd_stamp_ns = stamps
+        run.cmd[list(faulty), 0] = 5.0
+    path = write_run(run, work / f"{stream}_{kind}{SUFFIX[fmt]}", fmt)
+    inputs = [path]
+    if stream == "signal":
+        scenario = work / "signal.yaml"
+        scenario.write_text(signal_scenario_text())
+        inputs.append(scenario)
+        argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok"]
+    else:
+        argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    return Case("streams", f"{fmt}:{stream}:{kind}", argv, "violating", inputs)
 
 
 def _pose_builder(msgtype: str, stamp_ns: int, x: float, y: float) -> Callable[[Any, bool], Any]:
