@@ -8,6 +8,7 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 
@@ -16,6 +17,7 @@ from verify import certify_log
 from verify.ingest.rules import ReadingRules
 from verify.online import OnlineMonitor
 from verify.online.follow import open_follower
+from verify.online.streamtimes import StreamTimes, reading_order
 from verify.online.watch import AUTO_PROBE, _Feeder, watch_log
 
 from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tests is not a package)
@@ -118,3 +120,31 @@ def test_a_signal_message_alone_in_its_poll_is_timed_as_in_the_whole_stream(tmp_
     want = next(c for c in cert["checks"] if c["name"] == "spec_trajectory")
     assert spec_check.first_violation_ns is not None
     assert abs((spec_check.first_violation_ns - cert["time0_ns"]) * 1e-9 - want["first_violation_time"]) < 1e-6
+
+
+def test_stream_times_by_single_samples_match_the_whole_stream() -> None:
+    """One sample per poll (a slow topic followed live), hundreds of polls: each is timed with the samples before
+    it, so the unset and the 1970 stamp are re-timed as on the whole stream and nothing differs at the end; in
+    log-time order (a closed log) a sample whose log time is far from its place is an outlier there."""
+    sc = builtin_scenario()
+    rules = ReadingRules.of(sc, "header")
+    n = 400
+    logs = FUZZ.TIME0_NS + np.arange(n, dtype=np.int64) * 100_000_000
+    stamps = logs.copy()
+    stamps[150], stamps[300] = 0, 10**9
+
+    def rule(s: np.ndarray | None, log: np.ndarray) -> tuple[object, np.ndarray]:
+        return rules.stream_times("/x", s, log, pose_base="header")
+
+    clock = StreamTimes("/x")
+    pushed = np.concatenate([clock.times(rule, stamps[k : k + 1], logs[k : k + 1]) for k in range(n)])
+    _, whole = rule(stamps, logs)
+    assert np.array_equal(pushed, whole) and whole[150] == logs[150] and whole[300] == logs[300]
+    tb, differ = clock.final(rule, closed=True)
+    assert differ == 0 and tb.retimed == 2
+    late = logs.copy()
+    late[78] += 527 * 10**9  # read at its place in the file, last by log time
+    assert reading_order(late, closed=True)[-1] == 78 and reading_order(late, closed=False)[-1] == n - 1
+    moved = StreamTimes("/x")
+    moved.times(rule, logs.copy(), late)
+    assert moved.final(rule, closed=False)[1] == 0 and moved.final(rule, closed=True)[1] == 1

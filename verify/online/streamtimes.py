@@ -32,6 +32,7 @@ IntArray = npt.NDArray[np.int64]
 TimeRule = Callable[[IntArray | None, IntArray], tuple[TimeBase, IntArray]]
 #: samples read before a poll that the rule sees with it (the outlier rule's neighbourhood is 31 samples)
 CONTEXT = 1024
+_PARTS = 64
 
 
 def reading_order(log_ns: IntArray, *, closed: bool) -> IntArray:
@@ -66,9 +67,10 @@ class StreamTimes:
         before_s, before_l = self._tail(self._stamps, ctx), self._tail(self._logs, ctx)
         _, t = rule(np.concatenate((before_s, stamps)) if self.header else None, np.concatenate((before_l, logs)))
         new = np.asarray(t[ctx:], dtype=np.int64)
-        self._stamps.append(stamps)
-        self._logs.append(logs)
-        self._pushed.append(new)
+        for parts, part in ((self._stamps, stamps), (self._logs, logs), (self._pushed, new)):
+            parts.append(part)
+            if len(parts) > _PARTS:  # many small polls: one array again (the tail is then one slice)
+                parts[:] = [_cat(parts)]
         self.count += int(logs.shape[0])
         return new
 
