@@ -80,9 +80,9 @@ def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) ->
         monitor = OnlineMonitor(sc, spec=SPEC)
         feeder = _Feeder(monitor, ReadingRules.of(sc, "header"), False, log, probe=AUTO_PROBE)
         for k in range(0, len(msgs), 40):
-            feeder.feed(msgs[k : k + 40], final=k + 40 >= len(msgs), closed=k + 40 >= len(msgs))
+            feeder.feed(msgs[k : k + 40], final=k + 40 >= len(msgs), by_log_time=k + 40 >= len(msgs))
             monitor.update()
-        why = feeder.finish(closed=True)
+        why = feeder.finish(by_log_time=True)
         assert bool(why) == differs, why
         if differs:
             assert len(why) == 1 and why[0].startswith(f"{sc.topics.nominal}: 1 of 301 sample(s)"), why
@@ -111,9 +111,9 @@ def test_a_signal_message_alone_in_its_poll_is_timed_as_in_the_whole_stream(tmp_
     monitor = OnlineMonitor(sc, spec=spec)
     feeder = _Feeder(monitor, ReadingRules.of(sc, "header"), False, log, probe=AUTO_PROBE)
     for poll in (msgs[:k], [msgs[k]], msgs[k + 1 :]):
-        feeder.feed(poll, final=poll[-1] is msgs[-1], closed=poll[-1] is msgs[-1])
+        feeder.feed(poll, final=poll[-1] is msgs[-1], by_log_time=poll[-1] is msgs[-1])
         monitor.update()
-    assert feeder.finish(closed=True) == []
+    assert feeder.finish(by_log_time=True) == []
     res = monitor.close()
     assert res.verdict == "fail", res.verdict_reason
     spec_check = next(c for c in res.checks if c.name == "spec_trajectory")
@@ -140,11 +140,11 @@ def test_stream_times_by_single_samples_match_the_whole_stream() -> None:
     pushed = np.concatenate([clock.times(rule, stamps[k : k + 1], logs[k : k + 1]) for k in range(n)])
     _, whole = rule(stamps, logs)
     assert np.array_equal(pushed, whole) and whole[150] == logs[150] and whole[300] == logs[300]
-    tb, differ = clock.final(rule, closed=True)
+    tb, differ = clock.final(rule, by_log_time=True)
     assert differ == 0 and tb.retimed == 2
     late = logs.copy()
     late[78] += 527 * 10**9  # read at its place in the file, last by log time
-    assert reading_order(late, closed=True)[-1] == 78 and reading_order(late, closed=False)[-1] == n - 1
+    assert reading_order(late, by_log_time=True)[-1] == 78 and reading_order(late, by_log_time=False)[-1] == n - 1
     moved = StreamTimes("/x")
     moved.times(rule, logs.copy(), late)
-    assert moved.final(rule, closed=False)[1] == 0 and moved.final(rule, closed=True)[1] == 1
+    assert moved.final(rule, by_log_time=False)[1] == 0 and moved.final(rule, by_log_time=True)[1] == 1

@@ -8,11 +8,12 @@ with the pose's base) -> output: the times of the poll's samples, and at the end
 certify-side ``TimeBase`` of the whole stream and the number of samples whose pushed time differs from it.
 
 certify applies the rule (stamp outliers re-timed, the header judged able or not to order the samples) to the whole
-stream in its reading order: by log time (stable, the file order breaking ties) for a log its recorder closed (the
-indexed readers' order), the file order for a salvaged one. The rule looks at each stamp's neighbours in that order,
-so a poll read alone may get other times: each poll is timed with the samples read before it as context (the last
-``CONTEXT``), and ``final`` re-applies the rule to every sample in certify's order. A log read once (``watch``
-without ``--follow``) is pushed in one poll, in certify's order: the same times by construction.
+stream in its reading order: by log time (stable, the file order breaking ties) for an MCAP log its recorder closed
+(its indexed reader's order), else the file order (``verify.online.watch`` says which). The rule looks at each
+stamp's neighbours in that order, so a poll read alone may get other times: each poll is timed with the samples read
+before it as context (the last ``CONTEXT``), and ``final`` re-applies the rule to every sample in certify's order. A
+log read once (``watch`` without ``--follow``) is pushed in one poll, in certify's order: the same times by
+construction.
 """
 
 from __future__ import annotations
@@ -35,10 +36,10 @@ CONTEXT = 1024
 _PARTS = 64
 
 
-def reading_order(log_ns: IntArray, *, closed: bool) -> IntArray:
+def reading_order(log_ns: IntArray, *, by_log_time: bool) -> IntArray:
     """The order in which certify reads a stream whose samples were read (by the follower) in file order: by log
-    time, stable (the indexed readers of a closed log), or the file order itself (a salvaged log)."""
-    if not closed:
+    time, stable (``by_log_time``: the indexed reader of a closed MCAP log), or the file order itself."""
+    if not by_log_time:
         return np.arange(log_ns.shape[0], dtype=np.int64)
     return np.argsort(log_ns, kind="stable").astype(np.int64)
 
@@ -85,11 +86,11 @@ class StreamTimes:
             need -= int(out[-1].shape[0])
         return _cat(out[::-1])
 
-    def final(self, rule: TimeRule, *, closed: bool) -> tuple[TimeBase, int]:
-        """certify's time base for the whole stream (its reading order: ``closed``, by log time) and how many
-        samples were pushed at another time than the one certify gives them."""
+    def final(self, rule: TimeRule, *, by_log_time: bool) -> tuple[TimeBase, int]:
+        """certify's time base for the whole stream (in its reading order: ``by_log_time`` or the file order) and
+        how many samples were pushed at another time than the one certify gives them."""
         stamps, logs, pushed = _cat(self._stamps), _cat(self._logs), _cat(self._pushed)
-        order = reading_order(logs, closed=closed)
+        order = reading_order(logs, by_log_time=by_log_time)
         base, t = rule(stamps[order] if self.header else None, logs[order])
         certify = np.empty_like(pushed)
         certify[order] = t

@@ -12,8 +12,8 @@ stream's time base, ``TwistStamped`` commands, clock corrections: the scenario's
 ``clock_offsets``, as ``--clock-offset`` gives them).
 
 Time rule: one for every stream (pose, nominal, commands, every signal topic), applied as certify applies it: to
-the whole stream, in certify's reading order (by log time for a log its recorder closed, the file order for a
-salvaged one; ``verify.online.streamtimes``):
+the whole stream, in certify's reading order (by log time for an MCAP log its recorder closed, else the file order;
+``verify.online.streamtimes``, ``_Reading.by_log_time``):
 - without ``follow`` (a log read once, complete or not) the messages are held until the end of the reading and
   pushed at once, each stream in certify's order: the rule sees each whole stream as certify does (the same time
   base for the pose -- ``auto``: ``verify.ingest.timebase.choose_time_base`` on the whole pose stream -- and the
@@ -80,7 +80,7 @@ class WatchResult:
 
 
 def _in_log_order(messages: list[SalvagedMessage]) -> list[SalvagedMessage]:
-    """certify's reading order of a closed log: by log time, the file order breaking ties (a stable sort)."""
+    """certify's reading order of a closed MCAP log: by log time, the file order breaking ties (a stable sort)."""
     return sorted(messages, key=lambda m: m.log_ns)
 
 
@@ -116,9 +116,9 @@ class _Feeder:
             self.signals.setdefault(spec.topic, []).append((name, spec.field))
 
     # ---- reading ---------------------------------------------------------------------------------------------------
-    def feed(self, messages: list[SalvagedMessage], *, final: bool = False, closed: bool = False) -> None:
+    def feed(self, messages: list[SalvagedMessage], *, final: bool = False, by_log_time: bool = False) -> None:
         """Push the messages of one poll (``final``: the log ends -- an auto time base is chosen now at the latest;
-        ``closed``: its recorder closed it, so certify reads it by log time)."""
+        ``by_log_time``: certify reads this log by log time -- ``_Reading.by_log_time``)."""
         if self._holding:
             self._held += messages
             for m in messages:
@@ -127,7 +127,7 @@ class _Feeder:
             if not final and not self._probe_done():
                 return
             messages, self._held, self._holding = self._held, [], False
-            if final and closed:
+            if final and by_log_time:
                 messages = _in_log_order(messages)
             if self.time_base is None:
                 self.time_base = self._choose([m for m in messages if m.topic == self.pose_topic])
@@ -191,13 +191,14 @@ class _Feeder:
         clock = self.times.setdefault(stream, StreamTimes(topic))
         return clock.times(self._rule(stream, topic, self._pose_base), stamps_ns, np.asarray(log_ns, dtype=np.int64))
 
-    def base_mismatch(self, *, closed: bool = False) -> str | None:
+    def base_mismatch(self, *, by_log_time: bool = False) -> str | None:
         """auto, chosen before the whole pose stream was read: why certify, which decides on the whole stream (in its
-        reading order: ``closed``, by log time), would judge this log on another time base (None: the same)."""
+        reading order: ``by_log_time`` or the file order), would judge this log on another time base (None: the
+        same)."""
         pose = self.times.get("pose")
         if self.requested != "auto" or self.time_base is None or pose is None or not pose.count:
             return None
-        whole, _ = pose.final(self._rule("pose", pose.topic, None), closed=closed)
+        whole, _ = pose.final(self._rule("pose", pose.topic, None), by_log_time=by_log_time)
         if whole.name == self.time_base:
             return None
         return (f"--time-base auto: the decisions were made on {self.time_base} time, chosen on the first "
@@ -205,22 +206,22 @@ class _Feeder:
                 f"{whole.name} time ({whole.note or 'the header stamps order the samples'}): the verdict is "
                 f"undecided here; run certify, or watch without --follow on the complete log")
 
-    def finish(self, *, closed: bool) -> list[str]:
-        """The end of the reading: the time rule applied to every whole stream in certify's order (``closed``: by
-        log time). Sets each stream's problem (an explicit header base whose stamps cannot order it: no pass, as
-        read_log) and returns why the decisions were made on times certify would not use (empty: none)."""
+    def finish(self, *, by_log_time: bool) -> list[str]:
+        """The end of the reading: the time rule applied to every whole stream in certify's order (``by_log_time``,
+        else the file order). Sets each stream's problem (an explicit header base whose stamps cannot order it: no
+        pass, as read_log) and returns why the decisions were made on times certify would not use (empty: none)."""
         why: list[str] = []
-        if (mismatch := self.base_mismatch(closed=closed)) is not None:
+        if (mismatch := self.base_mismatch(by_log_time=by_log_time)) is not None:
             why.append(mismatch)
         pose = self.times.get("pose")
         pose_base = self._pose_base
         if pose is not None and pose.count:
-            pose_base = pose.final(self._rule("pose", pose.topic, None), closed=closed)[0].name
+            pose_base = pose.final(self._rule("pose", pose.topic, None), by_log_time=by_log_time)[0].name
         for stream, clock in self.times.items():
             if stream in self.unused:
                 continue
             tb, differ = clock.final(self._rule(stream, clock.topic, pose_base if stream != "pose" else None),
-                                     closed=closed)
+                                     by_log_time=by_log_time)
             if not tb.usable and self.requested != "auto" and tb.note:
                 for label in self._labels(stream):
                     self.problems.setdefault(label, tb.note)
@@ -365,6 +366,14 @@ class _Reading:
     count: int = 0
     reason: str = ""
 
+    @property
+    def by_log_time(self) -> bool:
+        """Whether certify reads this log's streams by log time: a closed MCAP log (its indexed reader sorts each
+        chunk's message records by the log time they hold, the one the follower reads). A ROS1 bag is read in the
+        order of its index's times and a sqlite3 storage in that of its timestamp index, which are the file order
+        of a recorded log, and hold their own copies of the times: there, as for a salvaged log, the file order."""
+        return self.follower.finished and self.follower.format == "mcap"
+
     def report(self, new: list[Decision]) -> None:
         for d in new:
             self.decisions.append(d)
@@ -380,7 +389,7 @@ class _Reading:
             if msgs:
                 self.count += len(msgs)
                 for feeder in self.feeders:
-                    feeder.feed(msgs, final=follower.finished, closed=follower.finished)
+                    feeder.feed(msgs, final=follower.finished, by_log_time=self.by_log_time)
                 self.report(self.monitor.update())
             if (now_bytes := log_bytes(p)) != last_bytes or msgs:  # the idle timer measures the log's bytes, mtime
                 last_bytes, last_growth = now_bytes, time.monotonic()
@@ -402,7 +411,7 @@ class _Reading:
         """The last reading: what --salvage reads beyond the complete records of a log not closed."""
         if self.follower.finished:
             for feeder in self.feeders:
-                feeder.feed([], final=True, closed=True)
+                feeder.feed([], final=True, by_log_time=self.by_log_time)
             return []
         extra = _read(self.p, self.follower.rest)  # a cut uncompressed chunk's complete records
         self.count += len(extra)
@@ -433,7 +442,7 @@ def _close(reading: _Reading, notes: list[str]) -> WatchResult:
     mismatches: list[str] = []
     for feeder in feeders:
         _check_streams(feeder, reading.p, reading.reason)
-        why = feeder.finish(closed=finished)
+        why = feeder.finish(by_log_time=reading.by_log_time)
         mismatches += why
         notes += [n for n in (feeder.base_note, *why, *feeder.unused.values()) if n and n not in notes]
     result: OnlineResult | FleetResult
