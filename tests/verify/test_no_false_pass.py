@@ -148,6 +148,29 @@ def test_fast_decoders_refuse_what_rosbags_refuses(msgtype: str, damage: str) ->
             decode_field(raw, False, field, fast=fast)
 
 
+@pytest.mark.parametrize("ros1", [True, False])
+@pytest.mark.parametrize("msgtype", ["geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry",
+                                     "geometry_msgs/msg/TwistStamped"])
+def test_fast_and_plain_decoders_read_a_negative_stamp_alike(ros1: bool, msgtype: str) -> None:
+    """A stamp second of -1 (written as int32 0xffffffff, as rosbags writes ROS1's time too): rosbags reads it back
+    as -1 s; the fast decoders read ROS1's as 2106 (uint32), so a nominal stream with negative stamps was
+    inconclusive on one path and failed on the other (the fault campaign's nominal stamp faults)."""
+    import numpy as np
+
+    from verify.ingest.decode import decode_pose, decode_twist
+    from verify.ingest.raw import RawTopic
+
+    good = _serialized(ros1, msgtype)
+    at = 4  # the stamp second: after seq (ROS1) or after the encapsulation header (CDR)
+    assert good[at : at + 4] == (5).to_bytes(4, "little")
+    neg = good[:at] + (2**32 - 1).to_bytes(4, "little") + good[at + 4 :]
+    raw = RawTopic("/t", msgtype, True, [1, 2, 3], [good, neg, good])
+    decode = decode_twist if msgtype.endswith("TwistStamped") else decode_pose
+    got = [decode(raw, ros1, fast=fast).stamp_ns for fast in (True, False)]  # type: ignore[operator]
+    assert got[0] is not None and got[1] is not None
+    assert np.array_equal(got[0], got[1]) and int(got[0][1]) == -10**9, got
+
+
 # ---- finding 1: unset stamps on a signal topic ----------------------------------------------------------------------
 SIGNAL_SPEC = "G[0,inf) motor_ok"
 

@@ -220,9 +220,9 @@ def _pose_fast(raw: RawTopic, ros1: bool) -> PoseColumns | None:
     else:
         block = _f64_block(u8, pos, 7)
         stamps = np.stack([_u32(u8, sec_at), _u32(u8, sec_at + 4)], axis=1)
+    # builtin_interfaces/Time.sec is int32, also as rosbags reads ROS1's time (the plain path: the same stamps)
     sec = stamps[:, 0]
-    if not ros1:
-        sec = np.where(sec >= 2**31, sec - 2**32, sec)  # builtin_interfaces/Time.sec is int32
+    sec = np.where(sec >= 2**31, sec - 2**32, sec)
     stamp_ns = sec * 10**9 + stamps[:, 1]
     return PoseColumns(stamp_ns, np.asarray(raw.log_ns, dtype=np.int64), block[:, 0].copy(), block[:, 1].copy(),
                        block[:, 3:7].copy(), True)
@@ -295,8 +295,7 @@ def _twist_stamped_fast(raw: RawTopic, ros1: bool) -> TwistColumns | None:
         return None
     stamps = np.ascontiguousarray(mat[:, 4:12]).view("<u4").reshape(n, 2).astype(np.int64)
     sec = stamps[:, 0]
-    if not ros1:
-        sec = np.where(sec >= 2**31, sec - 2**32, sec)
+    sec = np.where(sec >= 2**31, sec - 2**32, sec)  # int32, as in _pose_fast
     block = _f64_block_uniform(u8, size, start, 6)
     return TwistColumns(np.asarray(raw.log_ns, dtype=np.int64), block[:, [0, 1, 5]].copy(), True,
                         sec * 10**9 + stamps[:, 1])
