@@ -81,7 +81,10 @@ class WatchResult:
 
 def _in_log_order(messages: list[SalvagedMessage]) -> list[SalvagedMessage]:
     """certify's reading order of a closed MCAP log: by log time, the file order breaking ties (a stable sort)."""
-    return sorted(messages, key=lambda m: m.log_ns)
+    log_ns = np.fromiter((m.log_ns for m in messages), dtype=np.int64, count=len(messages))
+    if bool(np.all(log_ns[1:] >= log_ns[:-1])):  # a recorded log: already in that order
+        return messages
+    return [messages[k] for k in np.argsort(log_ns, kind="stable").tolist()]
 
 
 class _Feeder:
