@@ -178,3 +178,36 @@ def test_watch_keeps_the_row_order_where_certify_reads_the_timestamp_index(tmp_p
         got = [run([cmd, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", base], capsys)[0]
                for cmd in ("certify", "watch")]
         assert got == [0, 0], (base, got)
+
+
+class _Polls:
+    """A follower that delivers a complete MCAP log's messages 40 at a time, closed with the last poll."""
+
+    def __init__(self, path: Path) -> None:
+        self.path, self.format, self.finished, self.delivered = path, "mcap", False, 0
+        self._msgs = open_follower(path).poll()
+
+    def poll(self) -> list[object]:
+        out = self._msgs[self.delivered : self.delivered + 40]
+        self.delivered += len(out)
+        self.finished = self.delivered >= len(self._msgs)
+        return list(out)
+
+    def rest(self) -> list[object]:
+        return []
+
+
+def test_watch_follow_is_never_a_pass_on_times_certify_would_not_use(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """watch --follow on the log whose nominal message certify re-times: the decisions were made on the message's
+    stamp, so the run's verdict is inconclusive (certify's) with a note naming the topic; on the clean log, a pass."""
+    from verify.online import watch
+
+    monkeypatch.setattr(watch, "open_follower", _Polls)
+    sc = builtin_scenario()
+    clean = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "clean.mcap", "mcap")
+    for log, want in ((_late_nominal_log(tmp_path), "inconclusive"), (clean, "pass")):
+        res = watch_log(log, OnlineMonitor(sc, spec=SPEC), follow=True, poll_s=0.01, time_base="header")
+        assert res.finished and res.result.verdict == want, (log, res.result.verdict_reason, res.notes)
+        named = [n for n in res.notes if n.startswith(f"{sc.topics.nominal}: 1 of 301 sample(s)")]
+        assert len(named) == (want == "inconclusive"), res.notes
