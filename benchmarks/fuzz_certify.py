@@ -593,7 +593,7 @@ def path_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Pat
     """Output paths that cannot be written and log paths that are not logs (a FIFO, also as the storage file of a bag
     folder, a device, a symlink loop there, empty files and folders): exit 3, nothing overwritten. Variants added
     to a kind are drawn by a generator seeded from the case generator's state (``hash(rng.getstate()[1])``, which
-    consumes no draw): case numbers of earlier campaigns replay the same cases."""
+    consumes no draw: the case's other draws keep their values)."""
     seed = seeds["bag", False]
     kind = rng.choice(["out_existing_file", "out_below_file", "out_dev_null", "out_readonly_fs", "out_existing_dir",
                        "log_fifo", "log_dev_zero", "log_empty_dir", "log_empty_file", "log_no_ext", "log_missing",
@@ -724,7 +724,7 @@ def stream_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: P
     - cmd_vel: the commands as ``TwistStamped``, 1-20 of them with such stamps and ``linear.x`` 5 m/s (bound 0.2).
 
     The stream is chosen by a generator seeded from the case's draws, which are those of the signal-only family
-    before it: case numbers of earlier campaigns replay the same cases."""
+    before it (a signal case keeps its values; the nominal and command cases replace some of them)."""
     fmt = rng.choice(FORMATS[:4])
     kind = rng.choice(STAMP_FAULTS)
     run = base_run(violating=False)
