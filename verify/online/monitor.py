@@ -386,12 +386,30 @@ class OnlineMonitor:
     def update(self) -> list[Decision]:
         """Judge the buffered samples; the checks and obligations decided since the last call (including those
         decided when ``max_pending`` samples made a push judge the buffer). Samples that cannot decide anything
-        (``verify.online.quiet``) may stay buffered until one can or ``max_pending`` wait: the same decisions, at
-        the same call, with the same times, as judging at every call."""
+        (``verify.online.quiet``) may stay buffered until one can: the same decisions, at the same call, with the
+        same times, as judging at every call. Those are judged one stream at a time, one stream per update, once
+        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once."""
         if not self._quiet.quiet():
             self._process()
+        else:
+            self._judge_quiet_stream()
         out, self._unreturned = self._unreturned, []
         return out
+
+    def _judge_quiet_stream(self) -> None:
+        """Judge the buffered samples of the stream ``Quiet.due`` names (all tested quiet: nothing is decided, so
+        neither decisions nor the quiet test's state change)."""
+        stream = self._quiet.due()
+        if stream == "pose":
+            self._judge_poses(closing=False)
+        elif stream == "cmd":
+            self._judge_cmd()
+        elif stream == "nominal":
+            self._judge_nominal()
+            self._resolve_tube(closing=False)
+        else:
+            return
+        self._quiet.judged(stream)
 
     @staticmethod
     def _with_extras(t: IntArray, x: FloatArray, y: FloatArray, extra: list[tuple[int, float, float]]
@@ -403,11 +421,31 @@ class OnlineMonitor:
         return (np.insert(t, at, et), np.insert(x, at, [e[1] for e in extra]), np.insert(y, at, [e[2] for e in extra]))
 
     def _process(self, closing: bool = False) -> None:
+        """Judge every buffered sample, then collect the new decisions."""
+        self._judge_nominal()
+        self._judge_poses(closing)
+        self._judge_cmd()
+        self._resolve_tube(closing=False)
+        self._unreturned.extend(self._new_decisions())
+        self._quiet.refresh()
+
+    def _judge_nominal(self) -> None:
         if self._nom_t:
             self._judged["nominal"] += len(self._nom_t)
             self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
                                np.array(self._nom_y, dtype=np.float64))
             self._nom_t, self._nom_x, self._nom_y = [], [], []
+
+    def _judge_cmd(self) -> None:
+        if self._cmd_t:
+            self._judged["cmd"] += len(self._cmd_t)
+            t = np.array(self._cmd_t, dtype=np.int64)
+            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
+            self._cmd_t, self._cmd_u = [], []
+            self._feed_cmd(t, u)
+
+    def _judge_poses(self, closing: bool) -> None:
+        """The pose samples every used signal is known for, with their duplicates that disagree and the late ones."""
         late, self._late = self._late, []
         k = self._judgeable(closing)
         self._pose_trigger = len(self._pose_t) - k + self.max_pending
@@ -432,15 +470,6 @@ class OnlineMonitor:
         elif late:
             self._feed_every(np.array([e[0] for e in late], dtype=np.int64), np.array([e[1] for e in late]),
                              np.array([e[2] for e in late]))
-        if self._cmd_t:
-            self._judged["cmd"] += len(self._cmd_t)
-            t = np.array(self._cmd_t, dtype=np.int64)
-            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
-            self._cmd_t, self._cmd_u = [], []
-            self._feed_cmd(t, u)
-        self._resolve_tube(closing=False)
-        self._unreturned.extend(self._new_decisions())
-        self._quiet.refresh()
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
                    every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:

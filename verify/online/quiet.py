@@ -42,16 +42,18 @@ from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, Window
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
 
-__all__ = ["EPS", "MAX_WAITING", "Quiet"]
+__all__ = ["EPS", "MAX_WAITING", "QUIET_BATCH", "Quiet"]
 
 #: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
 #: rounding differences between this scalar arithmetic and the vectorised judging
 EPS = 1e-6
 #: slack (ns) on a window's end: the timed run rounds its times through seconds
 _END_SLACK_NS = 1_000
-#: at most this many pose samples wait for an update that judges (with ``max_pending``, if lower): a judging costs
-#: a fixed few hundred microseconds plus a few per sample, so this bounds the slowest update near 1 ms
-MAX_WAITING = 64
+#: quiet samples of one stream judged together (fewer if ``max_pending`` is lower): one stream per update, so that
+#: an update pays at most one stream's fixed judging cost, and that cost is shared by this many samples
+QUIET_BATCH = 256
+#: at most this many pose samples wait for an update that judges (a bound on memory should a stream stall the others)
+MAX_WAITING = 2 * QUIET_BATCH
 
 Value = Callable[[list[float]], float]
 
@@ -116,6 +118,7 @@ class Quiet:
             elif not isinstance(leaf, StreamHead | OfflineHead):
                 covered = False
         self.enabled = covered
+        self.batch = max(1, min(QUIET_BATCH, mon.max_pending - 3))  # below the pushes' own trigger
         self.block = False  # a nominal sample made unknown: judge at the next update
         regions = [r for r in sc.regions if getattr(r, "polygon", None) is None]
         eta = sc.robot.radius
@@ -202,6 +205,23 @@ class Quiet:
         if self.pose_seen < len(pt) and not self._poses_quiet():
             return False
         return not (self.tube and self.unmatched) or self._tube_quiet()
+
+    def due(self) -> str | None:
+        """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
+        fullest of those holding ``batch`` samples), or None."""
+        mon = self.mon
+        waiting = [(len(mon._pose_t), "pose"), (len(mon._cmd_t), "cmd"), (len(mon._nom_t), "nominal")]
+        n, stream = max(waiting)
+        return stream if n >= self.batch else None
+
+    def judged(self, stream: str) -> None:
+        """The tested samples of ``stream`` were judged (deciding nothing): the test goes on from the rest."""
+        if stream == "pose":
+            self.pose_seen = len(self.mon._pose_t)
+        elif stream == "cmd":
+            self.cmd_seen = len(self.mon._cmd_t)
+        else:
+            self.nom_seen = len(self.mon._nom_t)
 
     def _commands_quiet(self) -> bool:
         mon = self.mon
