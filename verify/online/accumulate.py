@@ -51,13 +51,18 @@ class MarginRun:
         first violation found in this batch."""
         new = margin[new_from:]
         self.samples += new.shape[0]
-        self.sample_min = _min(self.sample_min, _finite_min(new))
-        with np.errstate(all="ignore"):
-            if new.size and not np.isnan(new).all():
-                self.least = min(self.least, float(np.nanmin(new)))
-        self.nan += int(np.isnan(new).sum())
+        least = float(new.min()) if new.size else math.inf  # NaN if any sample is NaN
+        if math.isfinite(least):  # no NaN and no -inf: the least margin is also the least finite one
+            self.sample_min = _min(self.sample_min, least)
+            self.least = min(self.least, least)
+        elif new.size:
+            self.sample_min = _min(self.sample_min, _finite_min(new))
+            with np.errstate(all="ignore"):
+                if not np.isnan(new).all():
+                    self.least = min(self.least, float(np.nanmin(new)))
+            self.nan += int(np.isnan(new).sum())
         hit = None
-        if self.fail_ns is None:
+        if self.fail_ns is None and not least >= 0:
             bad = np.flatnonzero(new < 0)
             if bad.size:
                 hit = int(bad[0]) + new_from

@@ -144,6 +144,55 @@ def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
     return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
 
 
+def _prepend(prev: tuple[int, float, float], t: IntArray, x: FloatArray, y: FloatArray
+             ) -> tuple[IntArray, FloatArray, FloatArray]:
+    """A batch with the sample before it in front."""
+    return np.concatenate(([prev[0]], t)), np.concatenate(([prev[1]], x)), np.concatenate(([prev[2]], y))
+
+
+def _point_and_gap_bounds(atom_m: FloatArray, step: FloatArray
+                          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Every atom's bounds at each sample (a NaN margin: unknown) and over each gap between consecutive samples
+    (``verify.geometry.gap_bounds`` on every atom at once)."""
+    nan = np.isnan(atom_m)
+    p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m, atom_m)
+    with np.errstate(invalid="ignore"):  # inf - inf (an unknown atom over an unbounded gap): NaN, then unknown
+        mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])
+        half = 0.5 * step
+        g_lo, g_hi = mid - half, mid + half
+    g_lo[np.isnan(g_lo)] = -np.inf
+    g_hi[np.isnan(g_hi)] = np.inf
+    return p_lo, p_hi, g_lo, g_hi
+
+
+def _positions_after(t_rel: IntArray, p_lo: FloatArray, p_hi: FloatArray, g_lo: FloatArray, g_hi: FloatArray,
+                         *, first: bool) -> tuple[IntArray, IntArray, npt.NDArray[np.bool_], FloatArray, FloatArray]:
+    """The positions of ``verify.semantics.trajectory.trajectory_positions`` after the first sample of ``t_rel``:
+    each later sample's preceding gap ``[t_(i-1) + 1, t_i - 1]`` (when it holds an instant) then the sample itself
+    (``first``: the first sample too, a point with no gap before it). Returns their spans, whether each is a point,
+    and every atom's bounds there (rows as ``p_lo``)."""
+    m = t_rel.shape[0] - 1
+    o = 1 if first else 0
+    start = np.empty(2 * m + o, dtype=np.int64)
+    stop = np.empty_like(start)
+    is_point = np.zeros(start.shape[0], dtype=bool)
+    lo = np.empty((p_lo.shape[0], start.shape[0]))
+    hi = np.empty_like(lo)
+    if first:
+        start[0] = stop[0] = t_rel[0]
+        is_point[0] = True
+        lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
+    start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
+    start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
+    is_point[o + 1 :: 2] = True
+    lo[:, o::2], hi[:, o::2] = g_lo, g_hi
+    lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
+    keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
+    if not keep.all():
+        start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
+    return start, stop, is_point, lo, hi
+
+
 class _Semantics:
     """One semantics of the formula: its track, atom nodes, heads and evaluation."""
 
@@ -206,6 +255,7 @@ class OnlineMonitor:
         self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
         self._tol_m = tube_tolerance_m(sc)
+        self._max_speed_mps = sc.max_speed_mps
         self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # pending input
         # pending input: one list per column (cheap appends; one numpy conversion per batch)
@@ -236,8 +286,8 @@ class OnlineMonitor:
         self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
         self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
         self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
-        self._run_changes: list[float] = []  # s from time 0 of every change of the containing set (exits included)
-        self._entry_change: list[int] = []  # per timed-run entry: its index in _run_changes
+        self._run_changes_s: list[float] = []  # s from time 0 of every change of the containing set (exits included)
+        self._entry_change: list[int] = []  # per timed-run entry: its index in _run_changes_s
         self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
         self._ws = MarginRun("workspace")
         self._clear = MarginRun("obstacle_clearance")
@@ -474,87 +524,82 @@ class OnlineMonitor:
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
                    every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:
         """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
-        samples for the per-sample checks (None: the same samples)."""
-        sc = self.scenario
+        samples for the per-sample checks (None: the same samples). The batch is judged with the sample before it
+        (``k0`` = 1), whose gap to the first new sample it closes."""
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
         t0 = self.t0_ns
         prev = self._prev
         k0 = 0 if prev is None else 1
         if prev is not None:
-            t_abs = np.concatenate(([prev[0]], t_abs))
-            x = np.concatenate(([prev[1]], x))
-            y = np.concatenate(([prev[2]], y))
+            t_abs, x, y = _prepend(prev, t_abs, x, y)
         self._prev = (int(t_abs[-1]), float(x[-1]), float(y[-1]))
         t_rel = t_abs - t0
-        step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
-        # trajectory semantics: sample points and the gaps between them
-        tr = self._traj
-        region_m, atom_m = self._margins(x, y)
-        nan = np.isnan(atom_m)
-        p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
-                                                                                                      atom_m)
-        with np.errstate(invalid="ignore"):  # inf - inf (an unknown atom over an unbounded gap): NaN, then unknown
-            mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
-            half = 0.5 * step
-            g_lo, g_hi = mid - half, mid + half
-        g_lo[np.isnan(g_lo)] = -np.inf
-        g_hi[np.isnan(g_hi)] = np.inf
-        # the timed run's entries (paper, Definition 3): where the containing region changes
-        # (verify.semantics.timed_run.timed_run_of_sets): a new entry where the set of containing regions changes
-        unknown = ~(np.isfinite(x[k0:]) & np.isfinite(y[k0:]))  # an entry of its own, every label unknown
-        inside = np.vstack((self._containment(x[k0:], y[k0:]) & ~unknown, unknown[None, :]))
-        before = np.concatenate((inside[:, :1] if self._prev_set is None else self._prev_set, inside[:, :-1]), axis=1)
-        changed = np.any(inside != before, axis=0)
-        if self._prev_set is None:
-            changed[0] = True
-        self._prev_set = inside[:, -1:].copy()
-        entry = np.flatnonzero(changed & inside.any(axis=0))
-        ch = np.flatnonzero(changed)
-        self._entry_change += (len(self._run_changes) + np.searchsorted(ch, entry)).tolist()
-        self._run_changes += (t_rel[k0:][ch].astype(np.float64) * 1e-9).tolist()
-        members = [self._entry_name(inside[:, int(e)]) for e in entry]
-        conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
+        step = step_bound_m(t_rel, x, y, self._max_speed_mps)
+        dist, region_m, atom_m = self._margins(x, y)
+        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], None if dist is None else dist[:, k0:])
+        bounds = _point_and_gap_bounds(atom_m, step)
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
         if self._feeds:  # signal atoms: verify.signals on the messages held around this batch
-            p_lo, p_hi = p_lo.copy(), p_hi.copy()
+            bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
             for row in self._signal_rows:
                 name = self._names[row]
                 b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
-                p_lo[row], p_hi[row], g_lo[row], g_hi[row] = b.point_lo, b.point_hi, b.gap_lo, b.gap_hi
-        # the positions of verify.semantics.trajectory.trajectory_positions after the previous sample: each new sample's
-        # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
-        m = t_rel.shape[0] - 1
-        start = np.empty(2 * m + 1 - k0, dtype=np.int64)
-        stop = np.empty_like(start)
-        is_point = np.zeros(start.shape[0], dtype=bool)
-        lo = np.empty((len(self._names), start.shape[0]))
-        hi = np.empty_like(lo)
-        o = 1 - k0  # the first sample of the run is a point with no gap before it
-        if o:
-            start[0] = stop[0] = t_rel[0]
-            is_point[0] = True
-            lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
-        start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
-        start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
-        is_point[o + 1 :: 2] = True
-        lo[:, o::2], hi[:, o::2] = g_lo, g_hi
-        lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
-        keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
-        if not keep.all():
-            start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
+                for rows, values in zip(bounds, (b.point_lo, b.point_hi, b.gap_lo, b.gap_hi), strict=True):
+                    rows[row] = values
+        self._push_trajectory(t_rel, bounds, k0)
+        self._push_run(conv, entry, members, entry_values)
+        # per-sample checks on every sample: workspace, obstacle clearance, tube
+        if every is None and self._prev_every == prev:
+            self._feed_every(t_abs, x, y, (step, region_m, k0))
+        else:
+            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
+
+    def _push_trajectory(self, t_rel: IntArray, bounds: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+                         k0: int) -> None:
+        """Trajectory semantics: the positions after the previous sample (its gap to each new sample, then the
+        sample) with every atom's bounds there, then one evaluation step."""
+        tr = self._traj
+        start, stop, is_point, lo, hi = _positions_after(t_rel, *bounds, first=k0 == 0)
         known = np.where(is_point, start, stop + 1)
         for k, name in enumerate(self._names):
             tr.atoms[name].push(lo[k], hi[k], known)
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
-        # timed-run semantics: the entries
+
+    def _run_changes(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None
+                     ) -> tuple[IntArray, list[str], IntArray]:
+        """The timed run's entries (paper, Definition 3) among the new samples: where the set of regions containing
+        the robot changes (``verify.semantics.timed_run.timed_run_of_sets``), a sample of unknown position being an
+        entry of its own. Returns the entries' indexes, their names and every new sample's time as the timed run
+        rounds it (through seconds, ns)."""
+        conv = np.round(t_rel.astype(np.float64) * 1e-9 * 1e9).astype(np.int64)
+        unknown = ~(np.isfinite(x) & np.isfinite(y))  # an entry of its own, every label unknown
+        inside = np.vstack((self._containment(x, y, dist) & ~unknown, unknown[None, :]))
+        prev_set = self._prev_set
+        self._prev_set = inside[:, -1:].copy()
+        if prev_set is not None and (inside == prev_set).all():  # no change in this batch (the common case)
+            return np.zeros(0, dtype=np.int64), [], conv
+        before = np.concatenate((inside[:, :1] if prev_set is None else prev_set, inside[:, :-1]), axis=1)
+        changed = np.any(inside != before, axis=0)
+        if prev_set is None:
+            changed[0] = True
+        entry = np.flatnonzero(changed & inside.any(axis=0))
+        ch = np.flatnonzero(changed)
+        self._entry_change += (len(self._run_changes_s) + np.searchsorted(ch, entry)).tolist()
+        self._run_changes_s += (t_rel[ch].astype(np.float64) * 1e-9).tolist()
+        return entry, [self._entry_name(inside[:, int(e)]) for e in entry], conv
+
+    def _push_run(self, conv: IntArray, entry: IntArray, members: list[str],
+                  entry_values: dict[str, tuple[FloatArray, FloatArray]]) -> None:
+        """Timed-run semantics: the new entries with every atom's value there, the new ticks, one evaluation step."""
         run = self._run
         if entry.size:
             t_e = conv[entry]
             self._run_entries += [(m, float(t) * 1e-9) for m, t in zip(members, t_e, strict=True)]
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
+            unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
             for name in self._names:
                 if name in entry_values:
                     e_lo, e_hi = entry_values[name]
@@ -562,17 +607,10 @@ class OnlineMonitor:
                     self._run_signal[name][0].extend(e_lo.tolist())
                     self._run_signal[name][1].extend(e_hi.tolist())
                     continue
-                holds = np.array([name in self._entry_labels[m] for m in members], dtype=bool)
-                v1 = np.where(holds, 1.0, -1.0)
-                unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
+                v1 = np.where(np.array([name in self._entry_labels[m] for m in members], dtype=bool), 1.0, -1.0)
                 run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
         run.track.tick(conv)
         run.evaluation.step()
-        # per-sample checks on every sample: workspace, obstacle clearance, tube
-        if every is None and self._prev_every == prev:
-            self._feed_every(t_abs, x, y, (step, region_m, k0))
-        else:
-            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
 
     def _feed_every(self, et: IntArray, ex: FloatArray, ey: FloatArray,
                     reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
@@ -584,10 +622,9 @@ class OnlineMonitor:
         else:
             k1 = 0 if self._prev_every is None else 1
             if self._prev_every is not None:
-                pt, px, py = self._prev_every
-                et, ex, ey = np.concatenate(([pt], et)), np.concatenate(([px], ex)), np.concatenate(([py], ey))
-            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, sc.max_speed_mps)
-            e_margin = self._margins(ex, ey)[0]
+                et, ex, ey = _prepend(self._prev_every, et, ex, ey)
+            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, self._max_speed_mps)
+            e_margin = self._margins(ex, ey)[1]
         self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
         self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
         if self._unsafe:
@@ -599,25 +636,30 @@ class OnlineMonitor:
             self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
         self._tube_last_t = int(et[-1])
 
-    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Every region's margin (rows in scenario order) and every atom's (rows in name order), as
-        ``verify.geometry.region_margins`` / ``label_margins`` give them (bit for bit)."""
+    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray | None, FloatArray, FloatArray]:
+        """The distance of every disc region's centre (None: a polygon region; rows in scenario order), every
+        region's margin and every atom's (rows in name order), as ``verify.geometry.region_margins`` /
+        ``label_margins`` give them (bit for bit)."""
         if not self._discs:
             atom = label_margins(x, y, self.scenario, frozenset(self._region_names))
             atom_m = np.array([atom[n] if n in atom else np.full(x.shape[0], -np.inf) for n in self._names]
                               ).reshape(-1, x.shape[0])
-            return region_margins(x, y, self.scenario), atom_m
-        region_m = self._offset[:, None] - np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+            return None, region_margins(x, y, self.scenario), atom_m
+        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
+        region_m = self._offset[:, None] - dist
         atom_m = np.empty((len(self._names), x.shape[0]))
         for k, rows in enumerate(self._atom_rows):
-            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
-        return region_m, atom_m
+            if len(rows) == 1:
+                atom_m[k] = region_m[rows[0]]
+            else:
+                atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
+        return dist, region_m, atom_m
 
-    def _containment(self, x: FloatArray, y: FloatArray) -> npt.NDArray[np.bool_]:
-        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc."""
-        if not self._discs:
+    def _containment(self, x: FloatArray, y: FloatArray, dist: FloatArray | None) -> npt.NDArray[np.bool_]:
+        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc
+        (``dist``: the discs' centre distances, from ``_margins``)."""
+        if dist is None:
             return containment(x, y, self.scenario)
-        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
         return dist + self.scenario.robot.radius <= self._radius[:, None]
 
     def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
@@ -783,7 +825,7 @@ class OnlineMonitor:
         values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
         # as verify.semantics.timed_run.entry_exits: the next change of the containing set, or the last sample
         last_s = float(np.float64(last_ns) * 1e-9)
-        exits = [self._run_changes[j + 1] if j + 1 < len(self._run_changes) else last_s for j in self._entry_change]
+        exits = [self._run_changes_s[j + 1] if j + 1 < len(self._run_changes_s) else last_s for j in self._entry_change]
         tr = check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values,
                              exits=exits)
         return tr.margin_s, tr.margin_reason

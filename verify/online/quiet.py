@@ -32,6 +32,7 @@ covered: the monitor then judges at every ``update`` as before.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -128,7 +129,9 @@ class Quiet:
         self.eta = eta
         self.unsafe = list(mon._unsafe)
         ws = sc.workspace
-        self.box = (float(ws.x[0]), float(ws.x[1]), float(ws.y[0]), float(ws.y[1]))
+        # the workspace box shrunk by the robot's radius and EPS: a sample inside it has a margin above EPS
+        self.inner_box = (float(ws.x[0]) + eta + EPS, float(ws.x[1]) - eta - EPS, float(ws.y[0]) + eta + EPS,
+                          float(ws.y[1]) - eta - EPS)
         limits = sc.inputs
         if limits.model == "holonomic":
             bounds = [float(b) for b in limits.max_abs]
@@ -178,31 +181,33 @@ class Quiet:
         ps = mon._prev_set
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
-        self.unmatched: list[tuple[int, float, float]] = []
+        self.unmatched: deque[tuple[int, float, float]] = deque()
         for t, x, y in mon._tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
         nt, nx, ny = mon._nominal
-        cut = min([mon._last_pose, *(u[0] for u in self.unmatched[:1])]) - self.match_ns
+        cut = min(mon._last_pose, self.unmatched[0][0] if self.unmatched else mon._last_pose) - self.match_ns
         k = int(nt.searchsorted(cut)) if nt.size else 0
-        self.noms: list[tuple[int, float, float]] = list(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
-                                                             strict=True))
+        self.noms: deque[tuple[int, float, float]] = deque(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
+                                                               strict=True))
 
     def quiet(self) -> bool:
-        """True when judging the buffered samples now decides nothing (see the module docstring)."""
+        """True when judging the buffered samples now decides nothing (see the module docstring). Each call tests
+        the samples pushed since the last one (one per stream, typically)."""
         mon = self.mon
         if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
                 or len(mon._pose_t) >= MAX_WAITING):
             return False
-        if mon._nom_t and self.nom_seen < len(mon._nom_t):
-            self.noms.extend(zip(mon._nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
-                                 strict=True))
-            self.nom_seen = len(mon._nom_t)
-        if self.tube_wait and mon._nom_t:
+        nom_t = mon._nom_t
+        if nom_t:
+            if self.tube_wait:
+                return False
+            if self.nom_seen < len(nom_t):
+                self.noms.extend(zip(nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
+                                     strict=True))
+                self.nom_seen = len(nom_t)
+        if self.cmd and self.cmd_seen < len(mon._cmd_u) and not self._commands_quiet():
             return False
-        if self.cmd and not self._commands_quiet():
-            return False
-        pt = mon._pose_t
-        if self.pose_seen < len(pt) and not self._poses_quiet():
+        if self.pose_seen < len(mon._pose_t) and not self._poses_quiet():
             return False
         return not (self.tube and self.unmatched) or self._tube_quiet()
 
@@ -210,8 +215,7 @@ class Quiet:
         """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
         fullest of those holding ``batch`` samples), or None."""
         mon = self.mon
-        waiting = [(len(mon._pose_t), "pose"), (len(mon._cmd_t), "cmd"), (len(mon._nom_t), "nominal")]
-        n, stream = max(waiting)
+        n, stream = max((len(mon._pose_t), "pose"), (len(mon._cmd_t), "cmd"), (len(mon._nom_t), "nominal"))
         return stream if n >= self.batch else None
 
     def judged(self, stream: str) -> None:
@@ -224,90 +228,105 @@ class Quiet:
             self.nom_seen = len(self.mon._nom_t)
 
     def _commands_quiet(self) -> bool:
-        mon = self.mon
-        cols, limit = self.cols, self.cmd_limit
-        for u in mon._cmd_u[self.cmd_seen:]:
-            for c, lim in zip(cols, limit, strict=True):
-                if not abs(u[c]) <= lim:  # also NaN
-                    return False
-        self.cmd_seen = len(mon._cmd_u)
+        cmds = self.mon._cmd_u
+        (c0, c1, c2), (l0, l1, l2) = self.cols, self.cmd_limit
+        for k in range(self.cmd_seen, len(cmds)):
+            u = cmds[k]
+            if not (abs(u[c0]) <= l0 and abs(u[c1]) <= l1 and abs(u[c2]) <= l2):  # also NaN
+                return False
+        self.cmd_seen = len(cmds)
         return True
 
     def _poses_quiet(self) -> bool:
+        """The pose samples pushed since the last test, each near the last sample tested in full (every margin
+        tested is 1-Lipschitz in the position, so none has come within EPS of its limit, no region was entered or
+        left, no window argument changed sides) or tested in full (``_tested``)."""
         mon = self.mon
-        eta, discs = self.eta, self.discs
-        ws, clear, run_open, windows = self.ws, self.clear, self.run_open, self.windows
-        x0, x1, y0, y1 = self.box
-        x0, x1, y0, y1 = x0 + eta + EPS, x1 - eta - EPS, y0 + eta + EPS, y1 - eta - EPS
-        hypot, isfinite, inf = math.hypot, math.isfinite, math.inf
-        prev_t, prev_key = self.prev_t, self.prev_key
-        deadline = self.deadline
+        pt, px, py = mon._pose_t, mon._pose_x, mon._pose_y
+        hypot, isfinite = math.hypot, math.isfinite
+        prev_t, ref, deadline = self.prev_t, self.ref, self.deadline
         unmatched = self.unmatched if self.tube and not self.tube_wait else None
-        ref = self.ref
-        start = self.pose_seen
-        for t, x, y in zip(mon._pose_t[start:], mon._pose_x[start:], mon._pose_y[start:], strict=True):
+        for i in range(self.pose_seen, len(pt)):
+            t, x, y = pt[i], px[i], py[i]
             if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
                 return False
-            # still near the last fully tested sample: every margin tested is 1-Lipschitz in the position, so none
-            # has come within EPS of its limit, no region was entered or left, no window argument changed sides
             if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
-                if ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
+                ok, ref = self._tested(t, x, y, prev_t)
+                if not ok:
                     return False
-                slack = min(x - x0, x1 - x, y - y0, y1 - y) if ws else inf
-                until = deadline
-                mg = []
-                key = []
-                for cx, cy, off, r, unsafe in discs:
-                    d = hypot(x - cx, y - cy)
-                    if unsafe and clear:
-                        if off - d > -EPS:  # obstacle clearance below EPS
-                            return False
-                        slack = min(slack, d - off - EPS)
-                    if run_open:
-                        c = d + eta - r
-                        if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
-                            return False
-                        key.append(c < 0)
-                        slack = min(slack, abs(c) - EPS)
-                    mg.append(off - d)
-                if run_open:
-                    key.append(False)  # the "position unknown" row: a finite sample
-                    if key != prev_key:  # a new timed-run entry
-                        return False
-                for always, lo, hi, value in windows:
-                    v = value(mg)
-                    room = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
-                    if room > 0:
-                        slack = min(slack, room)
-                    elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
-                        return False
-                    else:  # the window has not started: test again when it does
-                        until = min(until, lo)
-                ref = (x, y, slack, until) if slack > 0 else None
             if unmatched is not None:
                 unmatched.append((t, x, y))
             prev_t = t
-        self.prev_t, self.prev_key, self.ref = prev_t, prev_key, ref
-        self.pose_seen = len(mon._pose_t)
+        self.prev_t, self.ref = prev_t, ref
+        self.pose_seen = len(pt)
         return True
+
+    def _tested(self, t: int, x: float, y: float, prev_t: int) -> tuple[bool, tuple[float, float, float, float] | None]:
+        """The full test of one sample: whether it is quiet, and (if some room is left) the reference the next
+        samples are compared with: (x, y, how far the robot may move before any tested value can reach its limit,
+        the time from which it must be tested again)."""
+        x0, x1, y0, y1 = self.inner_box
+        if self.ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
+            return False, None
+        slack = min(x - x0, x1 - x, y - y0, y1 - y) if self.ws else math.inf
+        room = self._discs_room(x, y)
+        if room is None:
+            return False, None
+        slack = min(slack, room[0])
+        mg = room[1]
+        until = self.deadline
+        for always, lo, hi, value in self.windows:
+            v = value(mg)
+            margin = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
+            if margin > 0:
+                slack = min(slack, margin)
+            elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
+                return False, None
+            else:  # the window has not started: test again when it does
+                until = min(until, lo)
+        return True, ((x, y, slack, until) if slack > 0 else None)
+
+    def _discs_room(self, x: float, y: float) -> tuple[float, list[float]] | None:
+        """Obstacle clearance and the timed run's containing set at one sample: None when a clearance is below
+        EPS, the sample is on a region's boundary or the set changes; else how far the robot may move before one
+        of those can happen, and every disc's margin."""
+        eta, clear, run_open, hypot = self.eta, self.clear, self.run_open, math.hypot
+        slack = math.inf
+        mg: list[float] = []
+        key: list[bool] = []
+        for cx, cy, off, r, unsafe in self.discs:
+            d = hypot(x - cx, y - cy)
+            if unsafe and clear:
+                if off - d > -EPS:  # obstacle clearance below EPS
+                    return None
+                slack = min(slack, d - off - EPS)
+            if run_open:
+                c = d + eta - r
+                if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
+                    return None
+                key.append(c < 0)
+                slack = min(slack, abs(c) - EPS)
+            mg.append(off - d)
+        if run_open:
+            key.append(False)  # the "position unknown" row: a finite sample
+            if key != self.prev_key:  # a new timed-run entry
+                return None
+        return slack, mg
 
     def _tube_quiet(self) -> bool:
         """The pose samples the next judging can match are inside the tube against every candidate nominal."""
-        noms = self.noms
+        noms, unmatched = self.noms, self.unmatched
         if not noms:
             return True
         last_nom = noms[-1][0]
         match, limit, hypot = self.match_ns, self.tube_limit, math.hypot
-        keep: list[tuple[int, float, float]] = []
-        for t, x, y in self.unmatched:
-            if t > last_nom:  # not matched by the next judging
-                keep.append((t, x, y))
-                continue
+        while unmatched and unmatched[0][0] <= last_nom:  # in time order: the ones the next judging matches
+            t, x, y = unmatched[0]
             for nt, nx, ny in noms:
                 if abs(nt - t) <= match and not hypot(x - nx, y - ny) <= limit:  # also NaN
                     return False
-        self.unmatched = keep
-        cut = min([self.mon._last_pose, *(u[0] for u in keep[:1])]) - match
-        if noms[0][0] < cut:
-            self.noms = [n for n in noms if n[0] >= cut]
+            unmatched.popleft()
+        cut = min(self.mon._last_pose, unmatched[0][0] if unmatched else self.mon._last_pose) - match
+        while noms and noms[0][0] < cut:  # no later pose sample can match these
+            noms.popleft()
         return True

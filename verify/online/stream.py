@@ -63,16 +63,28 @@ class Buffer:
         self.base = 0  # global index of the first retained element
         self.stop = 0  # global index past the last element
 
-    def extend(self, values: npt.ArrayLike) -> None:
-        v = np.asarray(values)
-        k = v.shape[0]
+    def _room(self, k: int) -> int:
+        """Room for ``k`` more elements (moving the retained ones to the front, or to a larger array, when the end
+        is reached); returns where they go."""
         n = self.stop - self.base
         if self._off + n + k > self._a.shape[0]:
             cap = max(256, 2 * (n + k))
             new = np.empty(cap, dtype=self._a.dtype) if cap > self._a.shape[0] else self._a
             new[:n] = self._a[self._off : self._off + n]
             self._a, self._off = new, 0
-        self._a[self._off + n : self._off + n + k] = v
+        return self._off + n
+
+    def extend(self, values: npt.ArrayLike) -> None:
+        v = np.asarray(values)
+        k = v.shape[0]
+        at = self._room(k)
+        self._a[at : at + k] = v
+        self.stop += k
+
+    def fill(self, value: float | int, k: int) -> None:
+        """``k`` copies of ``value``."""
+        at = self._room(k)
+        self._a[at : at + k] = value
         self.stop += k
 
     def view(self, g0: int, g1: int) -> npt.NDArray[np.generic]:
@@ -192,7 +204,10 @@ class Node:
         self.lo.extend(lo)
         self.hi.extend(hi)
         self.known.extend(known)
-        self.wit.extend(np.full(lo.shape[0], _AT, dtype=np.int64) if wit is None else wit)
+        if wit is None:
+            self.wit.fill(_AT, lo.shape[0])
+        else:
+            self.wit.extend(wit)
         self.final += lo.shape[0]
 
     def witness(self, track: Track, g0: int, g1: int) -> IntArray:
