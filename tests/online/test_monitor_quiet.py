@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from tubempc.scenario import builtin_scenario
 from verify.online import OnlineMonitor
 
@@ -14,9 +16,9 @@ def _counted(mon: OnlineMonitor) -> list[int]:
     calls = [0]
     judge = mon._process
 
-    def counting(closing: bool = False) -> None:
+    def counting(*args: Any, **kwargs: Any) -> None:
         calls[0] += 1
-        judge(closing)
+        judge(*args, **kwargs)
 
     mon._process = counting  # type: ignore[method-assign]
     return calls

@@ -46,7 +46,7 @@ from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
-from verify.online.quiet import Quiet
+from verify.online.quiet import EVERY_STREAM, Quiet
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
 from verify.selection import select_checks
@@ -439,8 +439,9 @@ class OnlineMonitor:
         (``verify.online.quiet``) may stay buffered until one can: the same decisions, at the same call, with the
         same times, as judging at every call. Those are judged one stream at a time, one stream per update, once
         ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once."""
-        if not self._quiet.quiet():
-            self._process()
+        loud = self._quiet.loud()
+        if loud:
+            self._process(loud)
         else:
             self._judge_quiet_stream()
         out, self._unreturned = self._unreturned, []
@@ -470,12 +471,17 @@ class OnlineMonitor:
         at = np.searchsorted(t, et, side="right")
         return (np.insert(t, at, et), np.insert(x, at, [e[1] for e in extra]), np.insert(y, at, [e[2] for e in extra]))
 
-    def _process(self, closing: bool = False) -> None:
-        """Judge every buffered sample, then collect the new decisions."""
-        self._judge_nominal()
-        self._judge_poses(closing)
-        self._judge_cmd()
-        self._resolve_tube(closing=False)
+    def _process(self, streams: frozenset[str] = EVERY_STREAM, closing: bool = False) -> None:
+        """Judge the buffered samples of ``streams`` (those of the others cannot decide anything now), then collect
+        the new decisions."""
+        if "nominal" in streams:
+            self._judge_nominal()
+        if "pose" in streams:
+            self._judge_poses(closing)
+        if "cmd" in streams:
+            self._judge_cmd()
+        if "nominal" in streams:
+            self._resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
         self._quiet.refresh()
 

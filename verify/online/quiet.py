@@ -43,7 +43,7 @@ from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, Window
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
 
-__all__ = ["EPS", "MAX_WAITING", "QUIET_BATCH", "Quiet"]
+__all__ = ["EPS", "EVERY_STREAM", "MAX_WAITING", "QUIET_BATCH", "Quiet"]
 
 #: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
 #: rounding differences between this scalar arithmetic and the vectorised judging
@@ -55,6 +55,12 @@ _END_SLACK_NS = 1_000
 QUIET_BATCH = 256
 #: at most this many pose samples wait for an update that judges (a bound on memory should a stream stall the others)
 MAX_WAITING = 2 * QUIET_BATCH
+
+#: the buffered streams an update may judge
+EVERY_STREAM = frozenset({"pose", "nominal", "cmd"})
+_POSE_AND_NOMINAL = frozenset({"pose", "nominal"})
+_CMD = frozenset({"cmd"})
+_NONE: frozenset[str] = frozenset()
 
 Value = Callable[[list[float]], float]
 
@@ -190,26 +196,27 @@ class Quiet:
         self.noms: deque[tuple[int, float, float]] = deque(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
                                                                strict=True))
 
-    def quiet(self) -> bool:
-        """True when judging the buffered samples now decides nothing (see the module docstring). Each call tests
-        the samples pushed since the last one (one per stream, typically)."""
+    def loud(self) -> frozenset[str]:
+        """The streams whose buffered samples must be judged now for the decisions to come at this update (empty:
+        judging now decides nothing; see the module docstring). Each call tests the samples pushed since the last
+        one (one per stream, typically). The pose samples are judged with the nominal ones (for the tube)."""
         mon = self.mon
         if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
                 or len(mon._pose_t) >= MAX_WAITING):
-            return False
+            return EVERY_STREAM
         nom_t = mon._nom_t
         if nom_t:
             if self.tube_wait:
-                return False
+                return EVERY_STREAM
             if self.nom_seen < len(nom_t):
                 self.noms.extend(zip(nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
                                      strict=True))
                 self.nom_seen = len(nom_t)
-        if self.cmd and self.cmd_seen < len(mon._cmd_u) and not self._commands_quiet():
-            return False
-        if self.pose_seen < len(mon._pose_t) and not self._poses_quiet():
-            return False
-        return not (self.tube and self.unmatched) or self._tube_quiet()
+        cmd = self.cmd and self.cmd_seen < len(mon._cmd_u) and not self._commands_quiet()
+        pose = self.pose_seen < len(mon._pose_t) and not self._poses_quiet()
+        if pose or (self.tube and self.unmatched and not self._tube_quiet()):
+            return EVERY_STREAM if cmd else _POSE_AND_NOMINAL
+        return _CMD if cmd else _NONE
 
     def due(self) -> str | None:
         """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
@@ -249,17 +256,25 @@ class Quiet:
         for i in range(self.pose_seen, len(pt)):
             t, x, y = pt[i], px[i], py[i]
             if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
-                return False
+                return self._loud_from(i)
             if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
                 ok, ref = self._tested(t, x, y, prev_t)
                 if not ok:
-                    return False
+                    return self._loud_from(i)
             if unmatched is not None:
                 unmatched.append((t, x, y))
             prev_t = t
         self.prev_t, self.ref = prev_t, ref
         self.pose_seen = len(pt)
         return True
+
+    def _loud_from(self, i: int) -> bool:
+        """The pose sample ``i`` is not quiet: the pose samples are judged now, so the tube test takes it and those
+        after it too (False)."""
+        if self.tube and not self.tube_wait:
+            mon = self.mon
+            self.unmatched.extend(zip(mon._pose_t[i:], mon._pose_x[i:], mon._pose_y[i:], strict=True))
+        return False
 
     def _tested(self, t: int, x: float, y: float, prev_t: int) -> tuple[bool, tuple[float, float, float, float] | None]:
         """The full test of one sample: whether it is quiet, and (if some room is left) the reference the next
