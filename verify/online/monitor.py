@@ -302,6 +302,8 @@ class OnlineMonitor:
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
         self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+        # the second half of a judged pose batch (timed run, per-sample checks) left for the next update
+        self._second_half: Callable[[], None] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
     def _unit_of(self, formula: Formula) -> str | None:
@@ -450,9 +452,12 @@ class OnlineMonitor:
     def _judge_quiet_stream(self) -> None:
         """Judge the buffered samples of the stream ``Quiet.due`` names (all tested quiet: nothing is decided, so
         neither decisions nor the quiet test's state change)."""
+        if self._second_half is not None:  # the second half of the last pose batch
+            self._finish_pose()
+            return
         stream = self._quiet.due()
         if stream == "pose":
-            self._judge_poses(closing=False)
+            self._judge_poses(closing=False, defer=True)
         elif stream == "cmd":
             self._judge_cmd()
         elif stream == "nominal":
@@ -474,6 +479,7 @@ class OnlineMonitor:
     def _process(self, streams: frozenset[str] = EVERY_STREAM, closing: bool = False) -> None:
         """Judge the buffered samples of ``streams`` (those of the others cannot decide anything now), then collect
         the new decisions."""
+        self._finish_pose()
         if "nominal" in streams:
             self._judge_nominal()
         if "pose" in streams:
@@ -500,8 +506,10 @@ class OnlineMonitor:
             self._cmd_t, self._cmd_u = [], []
             self._feed_cmd(t, u)
 
-    def _judge_poses(self, closing: bool) -> None:
-        """The pose samples every used signal is known for, with their duplicates that disagree and the late ones."""
+    def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
+        """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
+        (``defer``: quiet samples, half of whose judging may wait for the next update)."""
+        self._finish_pose()
         late, self._late = self._late, []
         k = self._judgeable(closing)
         self._pose_trigger = len(self._pose_t) - k + self.max_pending
@@ -522,16 +530,19 @@ class OnlineMonitor:
                 x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
             if late:
                 every = self._with_extras(*(every if every is not None else (t, x, y)), late)
-            self._feed_pose(t, x, y, every)
+            self._feed_pose(t, x, y, every, defer=defer)
         elif late:
             self._feed_every(np.array([e[0] for e in late], dtype=np.int64), np.array([e[1] for e in late]),
                              np.array([e[2] for e in late]))
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
-                   every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:
+                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: bool = False) -> None:
         """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
         samples for the per-sample checks (None: the same samples). The batch is judged with the sample before it
-        (``k0`` = 1), whose gap to the first new sample it closes."""
+        (``k0`` = 1), whose gap to the first new sample it closes: the trajectory semantics, then the timed run and
+        the per-sample checks (``defer``: left to ``_finish_pose``, at the next update or any judging before it;
+        with signal atoms the timed run's entries come first, the signals' bounds there being computed with the
+        trajectory's)."""
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
         t0 = self.t0_ns
@@ -543,23 +554,44 @@ class OnlineMonitor:
         t_rel = t_abs - t0
         step = step_bound_m(t_rel, x, y, self._max_speed_mps)
         dist, region_m, atom_m = self._margins(x, y)
-        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], None if dist is None else dist[:, k0:])
         bounds = _point_and_gap_bounds(atom_m, step)
+        if every is None and self._prev_every == prev:  # the per-sample checks reuse the steps and margins
+            checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None] = (
+                t_abs, x, y, (step, region_m, k0))
+        else:
+            checks = (*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])), None)
+        entry_dist = None if dist is None else dist[:, k0:]
+        if not self._feeds:
+            self._push_trajectory(t_rel, bounds, k0)
+            self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
+            if not defer:
+                self._finish_pose()
+            return
+        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
-        if self._feeds:  # signal atoms: verify.signals on the messages held around this batch
-            bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
-            for row in self._signal_rows:
-                name = self._names[row]
-                b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
-                for rows, values in zip(bounds, (b.point_lo, b.point_hi, b.gap_lo, b.gap_hi), strict=True):
-                    rows[row] = values
+        bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
+        for row in self._signal_rows:  # signal atoms: verify.signals on the messages held around this batch
+            name = self._names[row]
+            b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
+            for rows, values in zip(bounds, (b.point_lo, b.point_hi, b.gap_lo, b.gap_hi), strict=True):
+                rows[row] = values
         self._push_trajectory(t_rel, bounds, k0)
         self._push_run(conv, entry, members, entry_values)
-        # per-sample checks on every sample: workspace, obstacle clearance, tube
-        if every is None and self._prev_every == prev:
-            self._feed_every(t_abs, x, y, (step, region_m, k0))
-        else:
-            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
+        self._feed_every(*checks)
+
+    def _run_and_checks(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None,
+                        checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None]
+                        ) -> None:
+        """The second half of a pose batch without signal atoms: the timed run, then the per-sample checks."""
+        entry, members, conv = self._run_changes(t_rel, x, y, dist)
+        self._push_run(conv, entry, members, {})
+        self._feed_every(*checks)
+
+    def _finish_pose(self) -> None:
+        """The second half of the last pose batch, if it was left for later."""
+        if self._second_half is not None:
+            second, self._second_half = self._second_half, None
+            second()
 
     def _push_trajectory(self, t_rel: IntArray, bounds: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
                          k0: int) -> None:

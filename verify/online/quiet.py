@@ -125,7 +125,7 @@ class Quiet:
             elif not isinstance(leaf, StreamHead | OfflineHead):
                 covered = False
         self.enabled = covered
-        self.batch = max(1, min(QUIET_BATCH, mon.max_pending - 3))  # below the pushes' own trigger
+        self.batch = max(1, min(QUIET_BATCH, mon.max_pending - 8))  # below the pushes' own trigger
         self.block = False  # a nominal sample made unknown: judge at the next update
         regions = [r for r in sc.regions if getattr(r, "polygon", None) is None]
         eta = sc.robot.radius

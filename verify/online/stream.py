@@ -74,11 +74,12 @@ class Buffer:
             self._a, self._off = new, 0
         return self._off + n
 
-    def extend(self, values: npt.ArrayLike) -> None:
-        v = np.asarray(values)
-        k = v.shape[0]
-        at = self._room(k)
-        self._a[at : at + k] = v
+    def extend(self, values: npt.NDArray[np.generic]) -> None:
+        k = values.shape[0]
+        at = self._off + self.stop - self.base
+        if at + k > self._a.shape[0]:
+            at = self._room(k)
+        self._a[at : at + k] = values
         self.stop += k
 
     def fill(self, value: float | int, k: int) -> None:
@@ -254,7 +255,7 @@ class NotNode(Node):
         c = self.arg.final
         if c > self.final:
             p = self.final
-            self.emit(-_f(self.arg.hi, p, c), -_f(self.arg.lo, p, c), _i(self.arg.known, p, c).copy())
+            self.emit(-_f(self.arg.hi, p, c), -_f(self.arg.lo, p, c), _i(self.arg.known, p, c))
 
     def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
         lo, hi, known = self.arg.values_from(track, self.final)
@@ -293,7 +294,7 @@ class BoolNode(Node):
             for a in self.args:
                 wit = np.where(_f(a.hi, p, c) < 0, np.minimum(wit, a.witness(track, p, c)), wit)
             wit = np.where(wit == _NEVER, _AT, wit)
-        self.emit(np.array(lo, copy=True), np.array(hi, copy=True), np.array(known, copy=True), wit)
+        self.emit(lo, hi, known, wit)  # copied into the buffers
 
     def provisional(self, track: Track) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Kleene's and/or; decided false (and) as soon as one argument is, true once all are (or: the dual)."""
