@@ -46,9 +46,11 @@ from verify.ingest import LogData
 from verify.ingest.timebase import AGREE_TOL
 from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
+from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.quiet import EVERY_STREAM, Quiet
 from verify.online.signalfeed import SignalFeed
-from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
+from verify.online.stream import AtomNode
+from verify.online.track import Track
 from verify.selection import select_checks
 from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run
 from verify.semantics.trajectory import reported_margin

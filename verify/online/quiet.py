@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Not, Or
 from verify.checks import INPUT_COMPONENTS, INPUT_TOLERANCE
-from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, WindowHead
+from verify.online.heads import BoolHead, Head, OfflineHead, StreamHead, WindowHead
 
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
