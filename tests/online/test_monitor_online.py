@@ -187,7 +187,7 @@ def test_the_general_geometry_path_gives_the_same_verdicts() -> None:
     results = []
     for discs in (True, False):
         mon = OnlineMonitor(sc)
-        mon._discs = discs
+        mon._geometry.discs = discs
         decisions = feed_log_data(mon, log, update_every=25)
         results.append((mon.close(), [(d.name, d.verdict, d.time_s) for d in decisions]))
     (fast, fast_d), (general, general_d) = results

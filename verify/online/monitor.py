@@ -36,23 +36,21 @@ from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
 from verify.errors import VerifyError
 from verify.geometry import (
-    containment,
-    label_margins,
-    region_margins,
     step_bound_m,
     workspace_margin,
 )
 from verify.ingest import LogData
-from verify.ingest.timebase import AGREE_TOL
 from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
+from verify.online.inputs import StreamInput
 from verify.online.quiet import EVERY_STREAM, Quiet
+from verify.online.regions import RegionGeometry, RunLog, point_and_gap_bounds, positions_after, prepend
 from verify.online.signalfeed import SignalFeed
 from verify.online.stream import AtomNode
 from verify.online.track import Track
 from verify.selection import select_checks
-from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run
+from verify.semantics.timed_run import UNKNOWN_ENTRY
 from verify.semantics.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
@@ -146,55 +144,6 @@ def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
     return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
 
 
-def _prepend(prev: tuple[int, float, float], t: IntArray, x: FloatArray, y: FloatArray
-             ) -> tuple[IntArray, FloatArray, FloatArray]:
-    """A batch with the sample before it in front."""
-    return np.concatenate(([prev[0]], t)), np.concatenate(([prev[1]], x)), np.concatenate(([prev[2]], y))
-
-
-def _point_and_gap_bounds(atom_m: FloatArray, step: FloatArray
-                          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Every atom's bounds at each sample (a NaN margin: unknown) and over each gap between consecutive samples
-    (``verify.geometry.gap_bounds`` on every atom at once)."""
-    nan = np.isnan(atom_m)
-    p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m, atom_m)
-    with np.errstate(invalid="ignore"):  # inf - inf (an unknown atom over an unbounded gap): NaN, then unknown
-        mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])
-        half = 0.5 * step
-        g_lo, g_hi = mid - half, mid + half
-    g_lo[np.isnan(g_lo)] = -np.inf
-    g_hi[np.isnan(g_hi)] = np.inf
-    return p_lo, p_hi, g_lo, g_hi
-
-
-def _positions_after(t_rel: IntArray, p_lo: FloatArray, p_hi: FloatArray, g_lo: FloatArray, g_hi: FloatArray,
-                         *, first: bool) -> tuple[IntArray, IntArray, npt.NDArray[np.bool_], FloatArray, FloatArray]:
-    """The positions of ``verify.semantics.trajectory.trajectory_positions`` after the first sample of ``t_rel``:
-    each later sample's preceding gap ``[t_(i-1) + 1, t_i - 1]`` (when it holds an instant) then the sample itself
-    (``first``: the first sample too, a point with no gap before it). Returns their spans, whether each is a point,
-    and every atom's bounds there (rows as ``p_lo``)."""
-    m = t_rel.shape[0] - 1
-    o = 1 if first else 0
-    start = np.empty(2 * m + o, dtype=np.int64)
-    stop = np.empty_like(start)
-    is_point = np.zeros(start.shape[0], dtype=bool)
-    lo = np.empty((p_lo.shape[0], start.shape[0]))
-    hi = np.empty_like(lo)
-    if first:
-        start[0] = stop[0] = t_rel[0]
-        is_point[0] = True
-        lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
-    start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
-    start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
-    is_point[o + 1 :: 2] = True
-    lo[:, o::2], hi[:, o::2] = g_lo, g_hi
-    lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
-    keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
-    if not keep.all():
-        start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
-    return start, stop, is_point, lo, hi
-
-
 class _Semantics:
     """One semantics of the formula: its track, atom nodes, heads and evaluation."""
 
@@ -230,7 +179,6 @@ class OnlineMonitor:
         # a name that is both a label and a signal is the signal (as verify.certify)
         self._feeds = {n: SignalFeed(n, sc.signals[n], pose_topic=sc.topics.pose) for n in self._names
                        if n in sc.signals}
-        self._region_names = [n for n in self._names if n not in self._feeds]
         self._signal_rows = [k for k, n in enumerate(self._names) if n in self._feeds]
         self.max_signal_lag_ns = round(max_signal_lag_s * 1e9)
         self._newest_ns = -(2**63)  # the newest time pushed on the pose or a signal stream (the monitor's clock)
@@ -243,54 +191,25 @@ class OnlineMonitor:
         self._units: dict[str, str | None] = {"spec_trajectory": self._unit_of(self.formula), "spec_timed_run": "s",
                                               "tube": "m", "workspace": "m", "obstacle_clearance": "m"}
         self._units.update({str(h.formula): self._unit_of(h.formula) for h in self._traj.obligations})
-        eta = sc.robot.radius
-        discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
-        self._cx = np.array([r.center[0] for r in discs], dtype=np.float64)
-        self._cy = np.array([r.center[1] for r in discs], dtype=np.float64)
-        self._radius = np.array([r.radius for r in discs], dtype=np.float64)
-        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in discs])
-        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels and name not in self._feeds]
-                           for name in self._names]
-        # discs only: every region's margin in one broadcast pass; otherwise verify.geometry's functions per batch
-        self._discs = all(getattr(r, "polygon", None) is None for r in sc.regions)
-        self._labels = [frozenset(r.labels) for r in sc.regions]
-        self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
+        self._geometry = RegionGeometry(sc, self._names, self._feeds)
+        self._unsafe = self._geometry.unsafe
         self._period_ns = round(1e9 / sc.mocap.rate_hz)
         self._tol_m = tube_tolerance_m(sc)
         self._max_speed_mps = sc.max_speed_mps
         self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
-        # pending input
-        # pending input: one list per column (cheap appends; one numpy conversion per batch)
-        self._pose_t: list[int] = []
-        self._pose_x: list[float] = []
-        self._pose_y: list[float] = []
-        self._pose_yaw: list[float] = []
+        # input: the samples buffered until judged, per stream
+        self._pose = StreamInput.of("pose", 2)  # x, y
+        self._nom = StreamInput.of("nominal", 2)  # x, y
+        self._cmd = StreamInput.of("cmd", 3)  # u1, u2, u3
         self._conflict: set[int] = set()  # pending pose times whose duplicates disagree (unknown to the formula)
         self._extra: list[tuple[int, float, float]] = []  # the disagreeing duplicates (judged by per-sample checks)
         self._late: list[tuple[int, float, float]] = []  # ... of a sample the formula had judged already
         self._formula_late_conflicts = 0
-        self._nom_t: list[int] = []
-        self._nom_x: list[float] = []
-        self._nom_y: list[float] = []
-        self._cmd_t: list[int] = []
-        self._cmd_u: list[tuple[float, float, float]] = []
-        self._last_values: dict[str, tuple[float, ...]] = {}  # the first sample at each stream's last time
-        self.merged = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.conflicting = {"pose": 0, "nominal": 0, "cmd": 0}
-        self._last_pose = self._last_nom = self._last_cmd = -(2**63)
-        self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
         # judged state
         self.t0_ns: int | None = None
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
         self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
-        self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
-        self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
-        self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
-        self._run_changes_s: list[float] = []  # s from time 0 of every change of the containing set (exits included)
-        self._entry_change: list[int] = []  # per timed-run entry: its index in _run_changes_s
-        self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
+        self._run_log = RunLog(sc, list(self._feeds))
         self._ws = MarginRun("workspace")
         self._clear = MarginRun("obstacle_clearance")
         self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
@@ -314,43 +233,56 @@ class OnlineMonitor:
 
     # ---- input ----------------------------------------------------------------------------------------------------
     @property
+    def _streams(self) -> tuple[StreamInput, StreamInput, StreamInput]:
+        return self._pose, self._nom, self._cmd
+
+    @property
     def counts(self) -> dict[str, int]:
         """Samples accepted per stream."""
-        return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
-                len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
+        return {s.name: s.count for s in self._streams}
 
-    def _reject(self, stream: str, t_ns: int, last: int, values: tuple[float, ...]) -> bool:
-        """A sample at or before the stream's last time. Before: counted out of order, never judged. At the same
-        time (as ``verify.ingest.timebase.judged_samples``): merged when its values agree with the first sample
-        there, else a conflict (True: the caller keeps it for the per-sample checks)."""
+    @property
+    def merged(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them with the same values (merged with it)."""
+        return {s.name: s.merged for s in self._streams}
+
+    @property
+    def conflicting(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them with other values."""
+        return {s.name: s.conflicting for s in self._streams}
+
+    @property
+    def duplicates(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them (merged or conflicting)."""
+        return {s.name: s.duplicates for s in self._streams}
+
+    @property
+    def out_of_order(self) -> dict[str, int]:
+        """Per stream: samples before the time of the one before them (never judged)."""
+        return {s.name: s.out_of_order for s in self._streams}
+
+    def _reject(self, stream: StreamInput, t_ns: int, values: tuple[float, ...]) -> bool:
+        """A sample at or before the stream's last time (``StreamInput.repeat``; True: a conflict)."""
         if self._closed:
-            raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
-        if t_ns != last:
-            self.out_of_order[stream] += 1
-            return False
-        self.duplicates[stream] += 1
-        first = self._last_values[stream]
-        if all(abs(a - b) <= AGREE_TOL or (math.isnan(a) and math.isnan(b))
-               for a, b in zip(first, values, strict=True)):
-            self.merged[stream] += 1
-            return False
-        self.conflicting[stream] += 1
-        return True
+            raise MonitorClosedError(f"a {stream.name} sample at t_ns={t_ns} was pushed after close()")
+        return stream.repeat(t_ns, values)
 
     def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A pose sample (absolute ns). A sample is judged once the next one (or ``close``) arrives, so that a
         sample repeating its time can still be merged with it or make it unknown."""
-        if t_ns > self._last_pose and not self._closed:
-            self._last_pose = t_ns
-            self._last_values["pose"] = (x_m, y_m, yaw_rad)
-            self._pose_t.append(t_ns)
-            self._pose_x.append(x_m)
-            self._pose_y.append(y_m)
+        pose = self._pose
+        if t_ns > pose.last_ns and not self._closed:
+            pose.last_ns = t_ns
+            pose.last_values = (x_m, y_m, yaw_rad)
+            pose.t.append(t_ns)
+            xs, ys = pose.cols
+            xs.append(x_m)
+            ys.append(y_m)
             self._newest_ns = max(self._newest_ns, t_ns)
-            if len(self._pose_t) > self._pose_trigger:
+            if len(pose.t) > self._pose_trigger:
                 self._process()
-        elif self._reject("pose", t_ns, self._last_pose, (x_m, y_m, yaw_rad)):
-            if self._pose_t and self._pose_t[-1] == t_ns:  # not judged yet: unknown to the formula
+        elif self._reject(pose, t_ns, (x_m, y_m, yaw_rad)):
+            if pose.t and pose.t[-1] == t_ns:  # not judged yet: unknown to the formula
                 self._conflict.add(t_ns)
                 self._extra.append((t_ns, x_m, y_m))
             else:  # the formula has judged the first sample at this time already: it cannot pass any more
@@ -359,22 +291,25 @@ class OnlineMonitor:
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A sample of the MPC's nominal state (absolute ns)."""
-        if t_ns > self._last_nom and not self._closed:
-            self._last_nom = t_ns
-            self._last_values["nominal"] = (x_m, y_m, yaw_rad)
-            self._nom_t.append(t_ns)
-            self._nom_x.append(x_m)
-            self._nom_y.append(y_m)
-            if len(self._nom_t) >= self.max_pending:
+        nom = self._nom
+        if t_ns > nom.last_ns and not self._closed:
+            nom.last_ns = t_ns
+            nom.last_values = (x_m, y_m, yaw_rad)
+            nom.t.append(t_ns)
+            xs, ys = nom.cols
+            xs.append(x_m)
+            ys.append(y_m)
+            if len(nom.t) >= self.max_pending:
                 self._process()
-        elif self._reject("nominal", t_ns, self._last_nom, (x_m, y_m, yaw_rad)):
+        elif self._reject(nom, t_ns, (x_m, y_m, yaw_rad)):
             self._unknown_nominal(t_ns)
 
     def _unknown_nominal(self, t_ns: int) -> None:
         """Nominal samples that disagree at one time: the nominal state there is unknown."""
         self._quiet.block = True
-        if self._nom_t and self._nom_t[-1] == t_ns:
-            self._nom_x[-1] = self._nom_y[-1] = math.nan
+        if self._nom.t and self._nom.t[-1] == t_ns:
+            for c in self._nom.cols:
+                c[-1] = math.nan
             return
         nt, nx, ny = self._nominal
         if nt.size and int(nt[-1]) == t_ns:
@@ -415,25 +350,30 @@ class OnlineMonitor:
     def _judgeable(self, closing: bool) -> int:
         """How many pending pose samples every used signal is known for (a message after them), or that are older
         than the lag bound."""
-        n = len(self._pose_t)
+        pt = self._pose.t
+        n = len(pt)
         if closing or not self._feeds or not n:
             return n
         cover = min(f.newest_ns for f in self._feeds.values())
-        k = bisect_left(self._pose_t, cover)  # samples strictly before the newest message of every signal
-        if k < n and self._pose_t[k] <= self._newest_ns - self.max_signal_lag_ns:
-            k = bisect_right(self._pose_t, self._newest_ns - self.max_signal_lag_ns)
+        k = bisect_left(pt, cover)  # samples strictly before the newest message of every signal
+        if k < n and pt[k] <= self._newest_ns - self.max_signal_lag_ns:
+            k = bisect_right(pt, self._newest_ns - self.max_signal_lag_ns)
         return k
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
         """An applied input (absolute ns; body frame as logged: vx, vy, wz). Every command is judged, also one
         that repeats a time with other values."""
-        if (t_ns > self._last_cmd and not self._closed) or self._reject("cmd", t_ns, self._last_cmd, (u1, u2, u3)):
-            if t_ns > self._last_cmd:
-                self._last_cmd = t_ns
-                self._last_values["cmd"] = (u1, u2, u3)
-            self._cmd_t.append(t_ns)
-            self._cmd_u.append((u1, u2, u3))
-            if len(self._cmd_t) >= self.max_pending:
+        cmd = self._cmd
+        if (t_ns > cmd.last_ns and not self._closed) or self._reject(cmd, t_ns, (u1, u2, u3)):
+            if t_ns > cmd.last_ns:
+                cmd.last_ns = t_ns
+                cmd.last_values = (u1, u2, u3)
+            cmd.t.append(t_ns)
+            c1, c2, c3 = cmd.cols
+            c1.append(u1)
+            c2.append(u2)
+            c3.append(u3)
+            if len(cmd.t) >= self.max_pending:
                 self._process()
 
     # ---- judging --------------------------------------------------------------------------------------------------
@@ -494,19 +434,14 @@ class OnlineMonitor:
         self._quiet.refresh()
 
     def _judge_nominal(self) -> None:
-        if self._nom_t:
-            self._judged["nominal"] += len(self._nom_t)
-            self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
-                               np.array(self._nom_y, dtype=np.float64))
-            self._nom_t, self._nom_x, self._nom_y = [], [], []
+        if self._nom.t:
+            t, (x, y) = self._nom.take()
+            self._feed_nominal(t, x, y)
 
     def _judge_cmd(self) -> None:
-        if self._cmd_t:
-            self._judged["cmd"] += len(self._cmd_t)
-            t = np.array(self._cmd_t, dtype=np.int64)
-            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
-            self._cmd_t, self._cmd_u = [], []
-            self._feed_cmd(t, u)
+        if self._cmd.t:
+            t, cols = self._cmd.take()
+            self._feed_cmd(t, np.column_stack(cols))
 
     def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
         """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
@@ -514,13 +449,9 @@ class OnlineMonitor:
         self._finish_pose()
         late, self._late = self._late, []
         k = self._judgeable(closing)
-        self._pose_trigger = len(self._pose_t) - k + self.max_pending
+        self._pose_trigger = len(self._pose.t) - k + self.max_pending
         if k:
-            self._judged["pose"] += k
-            t = np.array(self._pose_t[:k], dtype=np.int64)
-            x = np.array(self._pose_x[:k], dtype=np.float64)
-            y = np.array(self._pose_y[:k], dtype=np.float64)
-            del self._pose_t[:k], self._pose_x[:k], self._pose_y[:k]
+            t, (x, y) = self._pose.take(k)
             every = None
             if self._conflict:
                 done = int(t[-1])
@@ -551,12 +482,12 @@ class OnlineMonitor:
         prev = self._prev
         k0 = 0 if prev is None else 1
         if prev is not None:
-            t_abs, x, y = _prepend(prev, t_abs, x, y)
+            t_abs, x, y = prepend(prev, t_abs, x, y)
         self._prev = (int(t_abs[-1]), float(x[-1]), float(y[-1]))
         t_rel = t_abs - t0
         step = step_bound_m(t_rel, x, y, self._max_speed_mps)
-        dist, region_m, atom_m = self._margins(x, y)
-        bounds = _point_and_gap_bounds(atom_m, step)
+        dist, region_m, atom_m = self._geometry.margins(x, y)
+        bounds = point_and_gap_bounds(atom_m, step)
         if every is None and self._prev_every == prev:  # the per-sample checks reuse the steps and margins
             checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None] = (
                 t_abs, x, y, (step, region_m, k0))
@@ -600,7 +531,7 @@ class OnlineMonitor:
         """Trajectory semantics: the positions after the previous sample (its gap to each new sample, then the
         sample) with every atom's bounds there, then one evaluation step."""
         tr = self._traj
-        start, stop, is_point, lo, hi = _positions_after(t_rel, *bounds, first=k0 == 0)
+        start, stop, is_point, lo, hi = positions_after(t_rel, *bounds, first=k0 == 0)
         known = np.where(is_point, start, stop + 1)
         for k, name in enumerate(self._names):
             tr.atoms[name].push(lo[k], hi[k], known)
@@ -610,26 +541,8 @@ class OnlineMonitor:
 
     def _run_changes(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None
                      ) -> tuple[IntArray, list[str], IntArray]:
-        """The timed run's entries (paper, Definition 3) among the new samples: where the set of regions containing
-        the robot changes (``verify.semantics.timed_run.timed_run_of_sets``), a sample of unknown position being an
-        entry of its own. Returns the entries' indexes, their names and every new sample's time as the timed run
-        rounds it (through seconds, ns)."""
-        conv = np.round(t_rel.astype(np.float64) * 1e-9 * 1e9).astype(np.int64)
-        unknown = ~(np.isfinite(x) & np.isfinite(y))  # an entry of its own, every label unknown
-        inside = np.vstack((self._containment(x, y, dist) & ~unknown, unknown[None, :]))
-        prev_set = self._prev_set
-        self._prev_set = inside[:, -1:].copy()
-        if prev_set is not None and (inside == prev_set).all():  # no change in this batch (the common case)
-            return np.zeros(0, dtype=np.int64), [], conv
-        before = np.concatenate((inside[:, :1] if prev_set is None else prev_set, inside[:, :-1]), axis=1)
-        changed = np.any(inside != before, axis=0)
-        if prev_set is None:
-            changed[0] = True
-        entry = np.flatnonzero(changed & inside.any(axis=0))
-        ch = np.flatnonzero(changed)
-        self._entry_change += (len(self._run_changes_s) + np.searchsorted(ch, entry)).tolist()
-        self._run_changes_s += (t_rel[ch].astype(np.float64) * 1e-9).tolist()
-        return entry, [self._entry_name(inside[:, int(e)]) for e in entry], conv
+        """The timed run's new entries (``RunLog.changes``)."""
+        return self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
 
     def _push_run(self, conv: IntArray, entry: IntArray, members: list[str],
                   entry_values: dict[str, tuple[FloatArray, FloatArray]]) -> None:
@@ -637,17 +550,16 @@ class OnlineMonitor:
         run = self._run
         if entry.size:
             t_e = conv[entry]
-            self._run_entries += [(m, float(t) * 1e-9) for m, t in zip(members, t_e, strict=True)]
+            self._run_log.record(members, t_e, entry_values)
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
             for name in self._names:
                 if name in entry_values:
                     e_lo, e_hi = entry_values[name]
                     run.atoms[name].push(e_lo, e_hi, t_e)
-                    self._run_signal[name][0].extend(e_lo.tolist())
-                    self._run_signal[name][1].extend(e_hi.tolist())
                     continue
-                v1 = np.where(np.array([name in self._entry_labels[m] for m in members], dtype=bool), 1.0, -1.0)
+                labels = self._run_log.entry_labels
+                v1 = np.where(np.array([name in labels[m] for m in members], dtype=bool), 1.0, -1.0)
                 run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
         run.track.tick(conv)
         run.evaluation.step()
@@ -662,9 +574,9 @@ class OnlineMonitor:
         else:
             k1 = 0 if self._prev_every is None else 1
             if self._prev_every is not None:
-                et, ex, ey = _prepend(self._prev_every, et, ex, ey)
+                et, ex, ey = prepend(self._prev_every, et, ex, ey)
             e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, self._max_speed_mps)
-            e_margin = self._margins(ex, ey)[1]
+            e_margin = self._geometry.margins(ex, ey)[1]
         self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
         self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
         if self._unsafe:
@@ -675,43 +587,6 @@ class OnlineMonitor:
         if "tube" in self._selected:
             self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
         self._tube_last_t = int(et[-1])
-
-    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray | None, FloatArray, FloatArray]:
-        """The distance of every disc region's centre (None: a polygon region; rows in scenario order), every
-        region's margin and every atom's (rows in name order), as ``verify.geometry.region_margins`` /
-        ``label_margins`` give them (bit for bit)."""
-        if not self._discs:
-            atom = label_margins(x, y, self.scenario, frozenset(self._region_names))
-            atom_m = np.array([atom[n] if n in atom else np.full(x.shape[0], -np.inf) for n in self._names]
-                              ).reshape(-1, x.shape[0])
-            return None, region_margins(x, y, self.scenario), atom_m
-        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        region_m = self._offset[:, None] - dist
-        atom_m = np.empty((len(self._names), x.shape[0]))
-        for k, rows in enumerate(self._atom_rows):
-            if len(rows) == 1:
-                atom_m[k] = region_m[rows[0]]
-            else:
-                atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
-        return dist, region_m, atom_m
-
-    def _containment(self, x: FloatArray, y: FloatArray, dist: FloatArray | None) -> npt.NDArray[np.bool_]:
-        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc
-        (``dist``: the discs' centre distances, from ``_margins``)."""
-        if dist is None:
-            return containment(x, y, self.scenario)
-        return dist + self.scenario.robot.radius <= self._radius[:, None]
-
-    def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
-        """A timed-run entry's name (its regions joined with ``+``); its labels (their union) are kept by name."""
-        if column[-1]:  # the last row: the sample's position is unknown
-            self._entry_labels.setdefault(UNKNOWN_ENTRY, frozenset())
-            return UNKNOWN_ENTRY
-        rows = np.flatnonzero(column[:-1])
-        name = "+".join(self.scenario.regions[int(k)].name for k in rows)
-        if name not in self._entry_labels:
-            self._entry_labels[name] = frozenset(lab for k in rows for lab in self._labels[int(k)])
-        return name
 
     def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
         nt, nx, ny = self._nominal
@@ -842,7 +717,7 @@ class OnlineMonitor:
             problems["pose"] = (f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
                                 f"judged")
         for name, feed in sorted(self._feeds.items()):  # as certify: the run is the pose's span, and cannot pass
-            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
+            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._pose.last_ns):
                 problems[f"signal {name}"] = ("messages outside the pose's span violate its predicate: the run is "
                                               "the pose's span, so they are not judged and the run cannot pass")
         verdict, why = overall_verdict([(c.name, c.verdict) for c in checks], partial=partial, problems=problems)
@@ -853,22 +728,6 @@ class OnlineMonitor:
     def final_decisions(self) -> list[Decision]:
         """The decisions made by ``close`` (every check still open at the end)."""
         return list(getattr(self, "_final_decisions", []))
-
-    def _timed_run_margin_s(self, t0: int) -> tuple[float | None, str | None]:
-        """A failed timed run's temporal margin (or why it has none), as the certificate states it
-        (``verify.semantics.timed_run``): computed once at the end on the entries kept (one per region change)."""
-        if not self._run_entries:
-            return None, None
-        last_ns = self._last_pose - t0
-        end_s = max(last_ns * 1e-9, self._run_entries[-1][1])
-        labels = {name: sorted(lab) for name, lab in self._entry_labels.items()}
-        values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
-        # as verify.semantics.timed_run.entry_exits: the next change of the containing set, or the last sample
-        last_s = float(np.float64(last_ns) * 1e-9)
-        exits = [self._run_changes_s[j + 1] if j + 1 < len(self._run_changes_s) else last_s for j in self._entry_change]
-        tr = check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values,
-                             exits=exits)
-        return tr.margin_s, tr.margin_reason
 
     def _formula_doubt(self) -> str | None:
         """Why the formula, as judged online, cannot pass: pose or signal samples that arrived for an instant
@@ -899,7 +758,8 @@ class OnlineMonitor:
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
-            run_margin, run_reason = self._timed_run_margin_s(t0) if rv == "fail" else (None, None)
+            run_margin, run_reason = (self._run_log.margin_s(str(self.formula), self._pose.last_ns - t0)
+                                      if rv == "fail" else (None, None))
             spec_run = CheckResult("spec_timed_run", rv, run_margin,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    ({} if self._run.track.count else {"reason": "the timed run is empty"})

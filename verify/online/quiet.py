@@ -111,9 +111,10 @@ class Quiet:
     def __init__(self, mon: OnlineMonitor) -> None:
         self.mon = mon
         sc = mon.scenario
-        rows = {n: list(r) for n, r in zip(mon._names, mon._atom_rows, strict=True)}
+        geometry = mon._geometry
+        rows = {n: list(r) for n, r in zip(mon._names, geometry.atom_rows, strict=True)}
         self.values: dict[int, Value] = {}
-        covered = not mon._feeds and mon._discs and sc.workspace.polygon is None
+        covered = not mon._feeds and geometry.discs and sc.workspace.polygon is None
         for leaf in _leaves(mon._traj.head):
             if isinstance(leaf, WindowHead):
                 assert isinstance(leaf.formula, Eventually | Always)
@@ -131,7 +132,7 @@ class Quiet:
         eta = sc.robot.radius
         # per disc: centre, offset of its margin (verify.geometry: r + eta for unsafe, r - eta otherwise), radius
         self.discs = [(float(r.center[0]), float(r.center[1]), float(off), float(r.radius), bool(r.unsafe))
-                      for r, off in zip(regions, mon._offset.tolist(), strict=True)]
+                      for r, off in zip(regions, geometry.offset.tolist(), strict=True)]
         self.eta = eta
         self.unsafe = list(mon._unsafe)
         ws = sc.workspace
@@ -184,14 +185,15 @@ class Quiet:
         self.run_open = "spec_timed_run" in sel and not mon._run.head.decided
         # the last judged sample (the formula's) and the regions containing it, as the judging saw them
         self.prev_t = mon._prev[0] if mon._prev is not None else None
-        ps = mon._prev_set
+        ps = mon._run_log.prev_set
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
         self.unmatched: deque[tuple[int, float, float]] = deque()
         for t, x, y in mon._tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
         nt, nx, ny = mon._nominal
-        cut = min(mon._last_pose, self.unmatched[0][0] if self.unmatched else mon._last_pose) - self.match_ns
+        last = mon._pose.last_ns
+        cut = min(last, self.unmatched[0][0] if self.unmatched else last) - self.match_ns
         k = int(nt.searchsorted(cut)) if nt.size else 0
         self.noms: deque[tuple[int, float, float]] = deque(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
                                                                strict=True))
@@ -202,18 +204,19 @@ class Quiet:
         one (one per stream, typically). The pose samples are judged with the nominal ones (for the tube)."""
         mon = self.mon
         if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
-                or len(mon._pose_t) >= MAX_WAITING):
+                or len(mon._pose.t) >= MAX_WAITING):
             return EVERY_STREAM
-        nom_t = mon._nom_t
+        nom_t = mon._nom.t
         if nom_t:
             if self.tube_wait:
                 return EVERY_STREAM
             if self.nom_seen < len(nom_t):
-                self.noms.extend(zip(nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
-                                     strict=True))
+                k = self.nom_seen
+                nx, ny = mon._nom.cols
+                self.noms.extend(zip(nom_t[k:], nx[k:], ny[k:], strict=True))
                 self.nom_seen = len(nom_t)
-        cmd = self.cmd and self.cmd_seen < len(mon._cmd_u) and not self._commands_quiet()
-        pose = self.pose_seen < len(mon._pose_t) and not self._poses_quiet()
+        cmd = self.cmd and self.cmd_seen < len(mon._cmd.t) and not self._commands_quiet()
+        pose = self.pose_seen < len(mon._pose.t) and not self._poses_quiet()
         if pose or (self.tube and self.unmatched and not self._tube_quiet()):
             return EVERY_STREAM if cmd else _POSE_AND_NOMINAL
         return _CMD if cmd else _NONE
@@ -222,26 +225,26 @@ class Quiet:
         """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
         fullest of those holding ``batch`` samples), or None."""
         mon = self.mon
-        n, stream = max((len(mon._pose_t), "pose"), (len(mon._cmd_t), "cmd"), (len(mon._nom_t), "nominal"))
+        n, stream = max((len(mon._pose.t), "pose"), (len(mon._cmd.t), "cmd"), (len(mon._nom.t), "nominal"))
         return stream if n >= self.batch else None
 
     def judged(self, stream: str) -> None:
         """The tested samples of ``stream`` were judged (deciding nothing): the test goes on from the rest."""
         if stream == "pose":
-            self.pose_seen = len(self.mon._pose_t)
+            self.pose_seen = len(self.mon._pose.t)
         elif stream == "cmd":
-            self.cmd_seen = len(self.mon._cmd_t)
+            self.cmd_seen = len(self.mon._cmd.t)
         else:
-            self.nom_seen = len(self.mon._nom_t)
+            self.nom_seen = len(self.mon._nom.t)
 
     def _commands_quiet(self) -> bool:
-        cmds = self.mon._cmd_u
-        (c0, c1, c2), (l0, l1, l2) = self.cols, self.cmd_limit
-        for k in range(self.cmd_seen, len(cmds)):
-            u = cmds[k]
-            if not (abs(u[c0]) <= l0 and abs(u[c1]) <= l1 and abs(u[c2]) <= l2):  # also NaN
+        cmd = self.mon._cmd
+        u0, u1, u2 = (cmd.cols[c] for c in self.cols)
+        l0, l1, l2 = self.cmd_limit
+        for k in range(self.cmd_seen, len(cmd.t)):
+            if not (abs(u0[k]) <= l0 and abs(u1[k]) <= l1 and abs(u2[k]) <= l2):  # also NaN
                 return False
-        self.cmd_seen = len(cmds)
+        self.cmd_seen = len(cmd.t)
         return True
 
     def _poses_quiet(self) -> bool:
@@ -249,7 +252,7 @@ class Quiet:
         tested is 1-Lipschitz in the position, so none has come within EPS of its limit, no region was entered or
         left, no window argument changed sides) or tested in full (``_tested``)."""
         mon = self.mon
-        pt, px, py = mon._pose_t, mon._pose_x, mon._pose_y
+        pt, (px, py) = mon._pose.t, mon._pose.cols
         hypot, isfinite = math.hypot, math.isfinite
         prev_t, ref, deadline = self.prev_t, self.ref, self.deadline
         unmatched = self.unmatched if self.tube and not self.tube_wait else None
@@ -273,7 +276,8 @@ class Quiet:
         after it too (False)."""
         if self.tube and not self.tube_wait:
             mon = self.mon
-            self.unmatched.extend(zip(mon._pose_t[i:], mon._pose_x[i:], mon._pose_y[i:], strict=True))
+            pt, (px, py) = mon._pose.t, mon._pose.cols
+            self.unmatched.extend(zip(pt[i:], px[i:], py[i:], strict=True))
         return False
 
     def _tested(self, t: int, x: float, y: float, prev_t: int) -> tuple[bool, tuple[float, float, float, float] | None]:
@@ -341,7 +345,8 @@ class Quiet:
                 if abs(nt - t) <= match and not hypot(x - nx, y - ny) <= limit:  # also NaN
                     return False
             unmatched.popleft()
-        cut = min(self.mon._last_pose, unmatched[0][0] if unmatched else self.mon._last_pose) - match
+        last = self.mon._pose.last_ns
+        cut = min(last, unmatched[0][0] if unmatched else last) - match
         while noms and noms[0][0] < cut:  # no later pose sample can match these
             noms.popleft()
         return True
