@@ -225,4 +225,5 @@ def test_nested_regions_make_one_timed_run_entry_with_both_labels() -> None:
         res = mon.close()
         cert = certify_data(log, sc, spec=spec).certificate
         assert [(c.name, c.verdict) for c in res.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
-        assert [e[0] for e in mon._run_log.entries] == [e["region"] for e in cert["timed_run"]] == ["room", "room+table"]
+        entries = [e[0] for e in mon._run_log.entries]
+        assert entries == [e["region"] for e in cert["timed_run"]] == ["room", "room+table"]

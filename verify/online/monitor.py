@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
@@ -34,19 +33,17 @@ from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
 from verify.checks import CheckResult, check_input_box, check_tube
-from verify.errors import VerifyError
-from verify.geometry import (
-    step_bound_m,
-    workspace_margin,
-)
+from verify.errors import MonitorClosedError
+from verify.geometry import step_bound_m, workspace_margin
 from verify.ingest import LogData
-from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
+from verify.judging import formula_of, overall_verdict, tube_tolerance_m
 from verify.online.accumulate import MarginRun, MergedRun
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.inputs import StreamInput
 from verify.online.quiet import EVERY_STREAM, Quiet
 from verify.online.regions import RegionGeometry, RunLog, point_and_gap_bounds, positions_after, prepend
 from verify.online.signalfeed import SignalFeed
+from verify.online.states import CheckState, Decision, MonitorState, OnlineResult, rel_s
 from verify.online.stream import AtomNode
 from verify.online.track import Track
 from verify.selection import select_checks
@@ -60,88 +57,6 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 #: how long (s) a pose sample waits for a message of every signal the formula uses before the silence is judged
 DEFAULT_SIGNAL_LAG_S = 3.0
-
-
-class MonitorClosedError(VerifyError, RuntimeError):
-    """A sample was pushed after ``close``."""
-
-
-@dataclass(frozen=True, slots=True)
-class CheckState:
-    """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
-    margin so far (the certificate's rule, ``verify.semantics.trajectory.reported_margin``, on the bounds so far),
-    whether that margin is final (no later sample can change it) and the first violation (s)."""
-
-    name: str
-    verdict: str
-    decided: bool
-    decided_at_s: float | None
-    margin: float | None
-    first_violation_s: float | None
-    margin_final: bool = False
-    unit: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """A check or obligation became final: its verdict, when (``time_s``), its first violation, and its margin when
-    that is final too (None while a later sample can still change it: an ``F`` already true may become more so,
-    a violated ``G`` more violated; the margin is then in ``final_lines`` at the end). So nothing a decision states
-    depends on how the samples were batched."""
-
-    name: str
-    verdict: str
-    time_s: float
-    margin: float | None
-    first_violation_s: float | None
-    unit: str | None = "m"  # the margin's unit (None: not stated, e.g. a formula mixing metres and a signal's unit)
-
-    def line(self) -> str:
-        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.4g}"
-        unit = "" if not margin or not self.unit else f" {self.unit}"
-        at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
-        return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
-
-
-@dataclass(frozen=True, slots=True)
-class MonitorState:
-    verdict: str  # "fail" as soon as one check fails; "pass" only after close
-    checks: tuple[CheckState, ...]
-    obligations: tuple[CheckState, ...]
-    samples: dict[str, int]
-    closed: bool
-
-    @property
-    def all_decided(self) -> bool:
-        return all(c.decided for c in (*self.checks, *self.obligations))
-
-    def final_lines(self) -> list[str]:
-        """At the end (``close``): one line per obligation and check with its final verdict, margin and first
-        violation, the values the certificate states for the same samples."""
-        out = []
-        for c in (*self.obligations, *self.checks):
-            margin = "" if c.margin is None else f" margin {c.margin:+.4g}" + (f" {c.unit}" if c.unit else "")
-            at = "" if c.first_violation_s is None else f" (violated at {c.first_violation_s:.2f} s)"
-            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{at}")
-        return out
-
-
-@dataclass(frozen=True, slots=True)
-class OnlineResult:
-    """What ``close`` returns: the checks (as ``verify.checks.CheckResult``), the overall verdict and exit code."""
-
-    verdict: str
-    verdict_reason: str | None
-    checks: tuple[CheckResult, ...]
-    state: MonitorState
-
-    @property
-    def exit_code(self) -> int:
-        return EXIT_CODES[self.verdict]
-
-
-def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
-    return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
 
 
 class _Semantics:
@@ -630,8 +545,8 @@ class OnlineMonitor:
         if margin:
             m = reported_margin(verdict, h.lo, h.hi)
             m = m if m is not None and math.isfinite(m) else None
-        decided_at = _rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
-        first = _rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        decided_at = rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
+        first = rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
         return CheckState(name, verdict, h.decided, decided_at, m, first, h.margin_final,
                           self._units.get(name) if margin else None)
 
@@ -641,7 +556,7 @@ class OnlineMonitor:
             end = self._traj.track.end_ns
             return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
-                               _rel_s(c.first_violation_ns, t0), True,
+                               rel_s(c.first_violation_ns, t0), True,
                                c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
@@ -661,7 +576,7 @@ class OnlineMonitor:
                 out.append(CheckState(run.name, "pass", True, 0.0, None, None))
                 continue
             out.append(CheckState(run.name, "fail" if failed else "inconclusive", failed,
-                                  _rel_s(when, t0), m, _rel_s(when, t0)))
+                                  rel_s(when, t0), m, rel_s(when, t0)))
         return out
 
     def state(self) -> MonitorState:
