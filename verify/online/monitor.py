@@ -1,4 +1,3 @@
-# Over 500 lines: one incremental monitor; the formula and the five checks share its batch loop and buffers.
 """Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
 
 input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer
@@ -32,12 +31,12 @@ import numpy.typing as npt
 from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
-from verify.checks import CheckResult, check_input_box, check_tube
+from verify.checks import CheckResult
 from verify.errors import MonitorClosedError
-from verify.geometry import step_bound_m, workspace_margin
+from verify.geometry import step_bound_m
 from verify.ingest import LogData
-from verify.judging import formula_of, overall_verdict, tube_tolerance_m
-from verify.online.accumulate import MarginRun, MergedRun
+from verify.judging import formula_of, overall_verdict
+from verify.online.accumulate import SampleChecks
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.inputs import StreamInput
 from verify.online.quiet import EVERY_STREAM, Quiet
@@ -107,11 +106,7 @@ class OnlineMonitor:
                                               "tube": "m", "workspace": "m", "obstacle_clearance": "m"}
         self._units.update({str(h.formula): self._unit_of(h.formula) for h in self._traj.obligations})
         self._geometry = RegionGeometry(sc, self._names, self._feeds)
-        self._unsafe = self._geometry.unsafe
-        self._period_ns = round(1e9 / sc.mocap.rate_hz)
-        self._tol_m = tube_tolerance_m(sc)
         self._max_speed_mps = sc.max_speed_mps
-        self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
         # input: the samples buffered until judged, per stream
         self._pose = StreamInput.of("pose", 2)  # x, y
         self._nom = StreamInput.of("nominal", 2)  # x, y
@@ -123,21 +118,13 @@ class OnlineMonitor:
         # judged state
         self.t0_ns: int | None = None
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
-        self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
         self._run_log = RunLog(sc, list(self._feeds))
-        self._ws = MarginRun("workspace")
-        self._clear = MarginRun("obstacle_clearance")
-        self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
-        self._input = MergedRun("input_box", missing_reason="no cmd_vel logged")
-        self._tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []
-        self._nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
-        self._nominal_seen = 0
+        self._checks = SampleChecks(sc, self._geometry, tube="tube" in self._selected)
         self._reported: set[str] = set()
         self._closed = False
         self._result: OnlineResult | None = None
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
-        self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
         # the second half of a judged pose batch (timed run, per-sample checks) left for the next update
         self._second_half: Callable[[], None] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
@@ -226,11 +213,7 @@ class OnlineMonitor:
             for c in self._nom.cols:
                 c[-1] = math.nan
             return
-        nt, nx, ny = self._nominal
-        if nt.size and int(nt[-1]) == t_ns:
-            nx, ny = nx.copy(), ny.copy()
-            nx[-1] = ny[-1] = math.nan
-            self._nominal = (nt, nx, ny)
+        self._checks.nominal_unknown(t_ns)
 
     def push_signal(self, name: str, t_ns: int, value: float) -> None:
         """A message of the scenario's signal ``name`` (absolute ns on the pose's time base; the field's value).
@@ -319,7 +302,7 @@ class OnlineMonitor:
             self._judge_cmd()
         elif stream == "nominal":
             self._judge_nominal()
-            self._resolve_tube(closing=False)
+            self._checks.resolve_tube(closing=False)
         else:
             return
         self._quiet.judged(stream)
@@ -344,19 +327,19 @@ class OnlineMonitor:
         if "cmd" in streams:
             self._judge_cmd()
         if "nominal" in streams:
-            self._resolve_tube(closing=False)
+            self._checks.resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
         self._quiet.refresh()
 
     def _judge_nominal(self) -> None:
         if self._nom.t:
             t, (x, y) = self._nom.take()
-            self._feed_nominal(t, x, y)
+            self._checks.feed_nominal(t, x, y)
 
     def _judge_cmd(self) -> None:
         if self._cmd.t:
             t, cols = self._cmd.take()
-            self._feed_cmd(t, np.column_stack(cols))
+            self._checks.feed_cmd(t, np.column_stack(cols))
 
     def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
         """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
@@ -403,7 +386,7 @@ class OnlineMonitor:
         step = step_bound_m(t_rel, x, y, self._max_speed_mps)
         dist, region_m, atom_m = self._geometry.margins(x, y)
         bounds = point_and_gap_bounds(atom_m, step)
-        if every is None and self._prev_every == prev:  # the per-sample checks reuse the steps and margins
+        if every is None and self._checks.prev == prev:  # the per-sample checks reuse the steps and margins
             checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None] = (
                 t_abs, x, y, (step, region_m, k0))
         else:
@@ -481,59 +464,8 @@ class OnlineMonitor:
 
     def _feed_every(self, et: IntArray, ex: FloatArray, ey: FloatArray,
                     reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
-        """Workspace, obstacle clearance and (pending until a nominal sample at or after them) tube on every
-        sample; ``reuse``: step bounds, region margins and offset already computed with the previous sample."""
-        sc = self.scenario
-        if reuse is not None:
-            e_step, e_margin, k1 = reuse
-        else:
-            k1 = 0 if self._prev_every is None else 1
-            if self._prev_every is not None:
-                et, ex, ey = prepend(self._prev_every, et, ex, ey)
-            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, self._max_speed_mps)
-            e_margin = self._geometry.margins(ex, ey)[1]
-        self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
-        self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
-        if self._unsafe:
-            margins = e_margin[self._unsafe]
-            hit = self._clear.feed(et, -np.max(margins, axis=0), e_step, k1)
-            if hit is not None:
-                self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
-        if "tube" in self._selected:
-            self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
-        self._tube_last_t = int(et[-1])
-
-    def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
-        nt, nx, ny = self._nominal
-        self._nominal = (np.concatenate((nt, t)), np.concatenate((nx, x)), np.concatenate((ny, y)))
-        self._nominal_seen += t.shape[0]
-
-    def _feed_cmd(self, t: IntArray, u: FloatArray) -> None:
-        res = check_input_box(t, u, self.scenario.inputs)
-        self._input.feed(res, t.shape[0])
-
-    def _resolve_tube(self, closing: bool) -> None:
-        """Judge the pose samples whose nearest nominal sample is known (a nominal sample at or after them)."""
-        if not self._tube_pending:
-            return
-        t = np.concatenate([p[0] for p in self._tube_pending])
-        x = np.concatenate([p[1] for p in self._tube_pending])
-        y = np.concatenate([p[2] for p in self._tube_pending])
-        nt, nx, ny = self._nominal
-        if nt.size == 0:
-            self._tube_pending = [(t, x, y)] if not closing else []
-            return
-        nt, nx, ny = self._nominal
-        k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
-        if k:
-            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self._tube_radius_m,
-                             tolerance_m=self._tol_m, match_ns=self._period_ns // 2)
-            self._tube.feed(res, k)
-        self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
-        # keep the nominal samples a later pose sample can still match: from the last one before it
-        keep_from = int(t[k]) if k < t.shape[0] else self._tube_last_t + 1
-        j = max(int(np.searchsorted(nt, keep_from, side="left")) - 1, 0)
-        self._nominal = (nt[j:], nx[j:], ny[j:])
+        """The per-sample checks on pose samples (``SampleChecks.feed_poses``)."""
+        self._checks.feed_poses(et, ex, ey, self.t0_ns or 0, reuse)
 
     # ---- state -------------------------------------------------------------------------------------------------------
     def _head_state(self, name: str, h: Head, *, margin: bool) -> CheckState:
@@ -564,19 +496,12 @@ class OnlineMonitor:
         t0 = self.t0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
-        runs: list[MergedRun | MarginRun] = [self._tube, self._input, self._ws, self._clear]
-        for run in runs:
-            if isinstance(run, MarginRun):
-                failed, when, m = run.fail_ns is not None, run.fail_ns, run.sample_min
-            else:
-                failed = run.fail is not None
-                when = run.fail.first_violation_ns if run.fail is not None else None
-                m = run.margin
-            if run.name == "obstacle_clearance" and not self._unsafe:
-                out.append(CheckState(run.name, "pass", True, 0.0, None, None))
+        for name, failed, when, m in self._checks.running():
+            if name == "obstacle_clearance" and not self._checks.unsafe:
+                out.append(CheckState(name, "pass", True, 0.0, None, None))
                 continue
-            out.append(CheckState(run.name, "fail" if failed else "inconclusive", failed,
-                                  rel_s(when, t0), m, rel_s(when, t0)))
+            out.append(CheckState(name, "fail" if failed else "inconclusive", failed, rel_s(when, t0), m,
+                                  rel_s(when, t0)))
         return out
 
     def state(self) -> MonitorState:
@@ -622,7 +547,7 @@ class OnlineMonitor:
         self._closed = True
         for sem in (self._traj, self._run):
             sem.evaluation.step(closing=True)
-        self._resolve_tube(closing=True)
+        self._checks.resolve_tube(closing=True)
         checks = self._final_checks()
         self._final = checks
         self._final_decisions = self._unreturned + self._new_decisions()
@@ -683,14 +608,7 @@ class OnlineMonitor:
         if why:  # a judged sample turned out unknown (or may have been judged otherwise): the formula cannot pass
             spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
                                    if c.verdict == "pass" else c for c in (spec_traj, spec_run))
-        tube = self._tube.result({"radius_m": self._tube_radius_m, "noise_tolerance_m": self._tol_m})
-        if self._nominal_seen == 0:
-            tube = CheckResult("tube", "inconclusive", None, None,
-                               {"reason": "no nominal state logged: tube containment cannot be checked"})
-        clear = self._clear.result() if self._unsafe else CheckResult(
-            "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
-        every = [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
-                 self._ws.result(), clear]
+        every = [spec_traj, spec_run, *self._checks.results()]
         return [c for c in every if c.name in self._selected]
 
 

@@ -134,7 +134,7 @@ class Quiet:
         self.discs = [(float(r.center[0]), float(r.center[1]), float(off), float(r.radius), bool(r.unsafe))
                       for r, off in zip(regions, geometry.offset.tolist(), strict=True)]
         self.eta = eta
-        self.unsafe = list(mon._unsafe)
+        self.unsafe = list(geometry.unsafe)
         ws = sc.workspace
         # the workspace box shrunk by the robot's radius and EPS: a sample inside it has a margin above EPS
         self.inner_box = (float(ws.x[0]) + eta + EPS, float(ws.x[1]) - eta - EPS, float(ws.y[0]) + eta + EPS,
@@ -148,8 +148,8 @@ class Quiet:
             self.cols = [0, 2, 1]
         assert len(INPUT_COMPONENTS[limits.model]) == 3
         self.cmd_limit = [b + INPUT_TOLERANCE - EPS for b in bounds]
-        self.tube_limit = mon._tube_radius_m + mon._tol_m - EPS
-        self.match_ns = mon._period_ns // 2
+        self.tube_limit = mon._checks.tube_radius_m + mon._checks.tol_m - EPS
+        self.match_ns = mon._checks.period_ns // 2
         self.refresh()
 
     def refresh(self) -> None:
@@ -161,12 +161,13 @@ class Quiet:
         # limit, the time from which it must be tested again)
         self.ref: tuple[float, float, float, float] | None = None
         sel = mon._selected
-        self.ws = "workspace" in sel and mon._ws.fail_ns is None
-        self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and mon._clear.fail_ns is None
-        self.cmd = "input_box" in sel and mon._input.fail is None
-        self.tube = "tube" in sel and mon._tube.fail is None
+        checks = mon._checks
+        self.ws = "workspace" in sel and checks.ws.fail_ns is None
+        self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and checks.clear.fail_ns is None
+        self.cmd = "input_box" in sel and checks.input.fail is None
+        self.tube = "tube" in sel and checks.tube.fail is None
         # no nominal sample yet: none can be matched before the first one arrives, which is then judged at once
-        self.tube_wait = self.tube and mon._nominal_seen == 0
+        self.tube_wait = self.tube and checks.nominal_seen == 0
         t0 = mon.t0_ns
         self.windows: list[tuple[bool, int, float, Value]] = []  # (G?, window start, end (abs ns), phi)
         ends: list[float] = []
@@ -189,9 +190,9 @@ class Quiet:
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
         self.unmatched: deque[tuple[int, float, float]] = deque()
-        for t, x, y in mon._tube_pending:
+        for t, x, y in checks.tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
-        nt, nx, ny = mon._nominal
+        nt, nx, ny = checks.nominal
         last = mon._pose.last_ns
         cut = min(last, self.unmatched[0][0] if self.unmatched else last) - self.match_ns
         k = int(nt.searchsorted(cut)) if nt.size else 0
