@@ -286,6 +286,8 @@ class OnlineMonitor:
             self._process(loud)
         else:
             self._judge_quiet_stream()
+        if not self._unreturned:
+            return []
         out, self._unreturned = self._unreturned, []
         return out
 

@@ -226,8 +226,10 @@ class Quiet:
         """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
         fullest of those holding ``batch`` samples), or None."""
         mon = self.mon
-        n, stream = max((len(mon._pose.t), "pose"), (len(mon._cmd.t), "cmd"), (len(mon._nom.t), "nominal"))
-        return stream if n >= self.batch else None
+        pose, cmd, nom, batch = len(mon._pose.t), len(mon._cmd.t), len(mon._nom.t), self.batch
+        if pose < batch and cmd < batch and nom < batch:
+            return None
+        return max((pose, "pose"), (cmd, "cmd"), (nom, "nominal"))[1]
 
     def judged(self, stream: str) -> None:
         """The tested samples of ``stream`` were judged (deciding nothing): the test goes on from the rest."""
