@@ -372,8 +372,10 @@ def build_head(formula: Formula, atom: Callable[[str], AtomNode]) -> Head:
     return head(formula)
 
 
-#: steps between two drops of the positions no consumer needs (dropping is cheap but not free)
+#: steps between two drops of the positions no consumer needs (dropping is cheap but not free) ...
 _TRIM_EVERY = 8
+#: ... or sooner, once this many positions and ticks were appended since the last drop (large batches)
+_TRIM_AFTER = 1024
 
 
 class Evaluation:
@@ -385,6 +387,7 @@ class Evaluation:
         self.heads = heads
         self.nodes: list[Node] = []
         self._steps = 0
+        self._trimmed_at = 0  # positions and ticks appended when the last drop ran
         self.consumers: dict[int, list[Node | Head]] = {}
         seen: set[int] = set()
 
@@ -412,8 +415,10 @@ class Evaluation:
         for h in self.heads:
             h.update(self.track, closing)
         self._steps += 1
-        if closing or self._steps % _TRIM_EVERY:
+        appended = self.track.count + self.track.ticks.stop
+        if closing or (self._steps % _TRIM_EVERY and appended - self._trimmed_at < _TRIM_AFTER):
             return
+        self._trimmed_at = appended
         keep = self.track.count
         for node in self.nodes:
             node.keep_from = min(c.need_from() for c in self.consumers[id(node)])
