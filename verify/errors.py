@@ -10,6 +10,7 @@ __all__ = [
     "FastPathError",
     "LogReadError",
     "MissingTopicError",
+    "MonitorClosedError",
     "ScenarioInputError",
     "SpecError",
     "TruncatedLogError",
@@ -49,6 +50,11 @@ class SpecError(UnusableInputError):
 
 class ScenarioInputError(UnusableInputError):
     """The scenario given to the certifier cannot be loaded."""
+
+
+class MonitorClosedError(VerifyError, RuntimeError):
+    """A sample was pushed to ``verify.online.OnlineMonitor`` after its ``close`` (a programming error of the
+    caller, not bad input)."""
 
 
 class FastPathError(Exception):

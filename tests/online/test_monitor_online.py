@@ -187,7 +187,7 @@ def test_the_general_geometry_path_gives_the_same_verdicts() -> None:
     results = []
     for discs in (True, False):
         mon = OnlineMonitor(sc)
-        mon._discs = discs
+        mon._geometry.discs = discs
         decisions = feed_log_data(mon, log, update_every=25)
         results.append((mon.close(), [(d.name, d.verdict, d.time_s) for d in decisions]))
     (fast, fast_d), (general, general_d) = results
@@ -216,3 +216,19 @@ def test_motion_between_two_updates_is_judged(update_every: int) -> None:
     spec = next(c for c in res.checks if c.name == "spec_trajectory")
     assert spec.verdict == "inconclusive"
     assert res.verdict != "pass"
+
+
+def test_memory_does_not_grow_with_the_batch() -> None:
+    """Large batches (``max_pending``) drop what no window needs at every batch once 1024 positions and ticks were
+    appended, not only every 8 batches: the values held stay within a few batches' worth (8 batches of 1000 samples,
+    two positions and a tick each, in every node, were held before)."""
+    sc = builtin_scenario()
+    n = 3 * 60 * 100
+    t = 10**18 + np.arange(n, dtype=np.int64) * 10_000_000
+    mon = OnlineMonitor(sc, max_pending=1000)
+    peak = 0
+    for i in range(n):
+        mon.push_pose(int(t[i]), -1.99, -1.78)
+        if i % 100 == 99:
+            peak = max(peak, mon.retained_positions)
+    assert peak <= 4 * (3 * 1000 + 1024)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from tubempc.scenario import builtin_scenario
 from verify.online import OnlineMonitor
 
@@ -14,9 +16,9 @@ def _counted(mon: OnlineMonitor) -> list[int]:
     calls = [0]
     judge = mon._process
 
-    def counting(closing: bool = False) -> None:
+    def counting(*args: Any, **kwargs: Any) -> None:
         calls[0] += 1
-        judge(closing)
+        judge(*args, **kwargs)
 
     mon._process = counting  # type: ignore[method-assign]
     return calls
@@ -56,3 +58,63 @@ def test_a_command_outside_the_box_is_reported_at_its_update() -> None:
     mon.push_cmd(T0 + 50 * DT, 5.0, 0.0, 0.0)
     got = mon.update()
     assert [(d.name, d.verdict, d.time_s) for d in got] == [("input_box", "fail", 0.5)]
+
+
+def _judging_log(mon: OnlineMonitor) -> list[str]:
+    """Records which part of the judging runs: the trajectory semantics, the per-sample checks on poses, the
+    commands, the nominal states."""
+    log: list[str] = []
+
+    def logging(name: str, fn: Any) -> Any:
+        def logged(*args: Any, **kwargs: Any) -> Any:
+            log.append(name)
+            return fn(*args, **kwargs)
+
+        return logged
+
+    for name, obj, attr in (("trajectory", mon._traj.evaluation, "step"), ("poses", mon._checks, "feed_poses"),
+                            ("cmd", mon._checks, "feed_cmd"), ("nominal", mon._checks, "feed_nominal")):
+        setattr(obj, attr, logging(name, getattr(obj, attr)))
+    return log
+
+
+def test_a_quiet_stretch_is_judged_one_stream_per_update() -> None:
+    """Standing still in R2 for 10 s with an update per sample: every stream's samples are judged (the buffers stay
+    below ``max_pending``), and no update judges more than one stream (a pose batch takes two updates: the
+    trajectory semantics, then the per-sample checks), so that no single update pays for all of them."""
+    mon = OnlineMonitor(SC, spec="G[0,inf) !obs_1 & F[0,inf) mission_1")
+    x, y = SC.regions[1].center
+    log = _judging_log(mon)
+    per_update = []
+    for i in range(1000):
+        t = T0 + i * DT
+        mon.push_nominal(t, x, y)
+        mon.push_pose(t, x, y)
+        mon.push_cmd(t, 0.0, 0.0, 0.0)
+        before = len(log)
+        assert mon.update() == []
+        per_update.append(log[before:])
+        assert max(len(mon._pose.t), len(mon._nom.t), len(mon._cmd.t)) < mon.max_pending
+    assert per_update[0] == ["nominal", "trajectory", "poses", "cmd"]  # the first samples are judged at once
+    assert max(len(parts) for parts in per_update[1:]) == 1
+    assert {"trajectory", "poses", "cmd", "nominal"} <= {p for parts in per_update[1:] for p in parts}
+    assert mon.counts == {"pose": 1000, "nominal": 1000, "cmd": 1000}
+
+
+def test_a_command_outside_the_box_judges_the_commands_alone() -> None:
+    """A command outside the box while the poses stay quiet: the update that follows judges the commands only and
+    returns the input box's failure with its time; the pose samples stay buffered."""
+    mon = OnlineMonitor(SC, spec="G[0,inf) !obs_1")
+    x, y = SC.regions[1].center
+    for i in range(50):
+        t = T0 + i * DT
+        mon.push_pose(t, x, y)
+        mon.push_cmd(t, 0.0, 0.0, 0.0)
+        mon.update()
+    log = _judging_log(mon)
+    mon.push_pose(T0 + 50 * DT, x, y)
+    mon.push_cmd(T0 + 50 * DT, 5.0, 0.0, 0.0)
+    got = mon.update()
+    assert [(d.name, d.verdict, d.time_s) for d in got] == [("input_box", "fail", 0.5)]
+    assert log == ["cmd"] and mon._pose.t
+    assert mon.close().verdict == "fail"

@@ -153,11 +153,11 @@ def _run(n: int, silent_after: int, *, lag_s: float = 1.0) -> OnlineMonitor:
 
 def test_pose_samples_wait_for_the_signal_at_most_the_lag() -> None:
     mon = _run(600, 600)
-    assert mon.counts["pose"] == 600 and len(mon._pose_t) <= 10 + 1  # judged as the signal covers them
+    assert mon.counts["pose"] == 600 and len(mon._pose.t) <= 10 + 1  # judged as the signal covers them
     assert len(mon._feeds["slow"].t) <= 10 + 2  # messages kept: from the one held at the last judged sample on
     mon = _run(600, 50, lag_s=1.0)
     mon.update()
-    assert len(mon._pose_t) <= 10 + 11  # a silent signal: no more than the lag (10 samples) and one batch wait
+    assert len(mon._pose.t) <= 10 + 11  # a silent signal: no more than the lag (10 samples) and one batch wait
     res = mon.close()
     assert res.checks[0].verdict == "inconclusive"  # the silence is unknown: G slow cannot pass
     assert mon.retained_positions < 200
@@ -225,4 +225,5 @@ def test_nested_regions_make_one_timed_run_entry_with_both_labels() -> None:
         res = mon.close()
         cert = certify_data(log, sc, spec=spec).certificate
         assert [(c.name, c.verdict) for c in res.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
-        assert [e[0] for e in mon._run_entries] == [e["region"] for e in cert["timed_run"]] == ["room", "room+table"]
+        entries = [e[0] for e in mon._run_log.entries]
+        assert entries == [e["region"] for e in cert["timed_run"]] == ["room", "room+table"]

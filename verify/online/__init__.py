@@ -5,15 +5,9 @@ check and each top-level obligation of the formula as soon as it is decided; ``c
 ``certify_log`` gives offline.
 """
 
-from verify.online.monitor import (
-    CheckState,
-    Decision,
-    MonitorClosedError,
-    MonitorState,
-    OnlineMonitor,
-    OnlineResult,
-    feed_log_data,
-)
+from verify.errors import MonitorClosedError
+from verify.online.monitor import OnlineMonitor, feed_log_data
+from verify.online.states import CheckState, Decision, MonitorState, OnlineResult
 
 __all__ = [
     "CheckState",

@@ -1,8 +1,9 @@
 """Per-sample checks accumulated over batches: margins / batch results -> the ``CheckResult`` of the whole run.
 
-input: per batch, the margins of new samples with the previous one (workspace, obstacle clearance), or the offline
-check's result on the batch (tube, input box) -> output: the first violation as soon as it is seen, and at the end
-the ``CheckResult`` ``verify.checks`` gives for all the samples at once (same verdict, margin, first violation).
+input: per batch, the new pose samples with the previous one (workspace, obstacle clearance: their margins), the
+pose samples whose nearest nominal sample is known (tube) and the commands (input box), judged by the offline
+checks (``verify.checks``) -> output: the first violation as soon as it is seen, and at the end the
+``CheckResult`` ``verify.checks`` gives for all the samples at once (same verdict, margin, first violation).
 """
 
 from __future__ import annotations
@@ -14,10 +15,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from verify.checks import CheckResult
-from verify.geometry import gap_bounds
+from tubempc.scenario import Scenario
+from verify.checks import CheckResult, check_input_box, check_tube
+from verify.geometry import gap_bounds, step_bound_m, workspace_margin
+from verify.judging import tube_tolerance_m
+from verify.online.regions import RegionGeometry, prepend
 
-__all__ = ["MarginRun", "MergedRun"]
+__all__ = ["MarginRun", "MergedRun", "SampleChecks"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -51,13 +55,18 @@ class MarginRun:
         first violation found in this batch."""
         new = margin[new_from:]
         self.samples += new.shape[0]
-        self.sample_min = _min(self.sample_min, _finite_min(new))
-        with np.errstate(all="ignore"):
-            if new.size and not np.isnan(new).all():
-                self.least = min(self.least, float(np.nanmin(new)))
-        self.nan += int(np.isnan(new).sum())
+        least = float(new.min()) if new.size else math.inf  # NaN if any sample is NaN
+        if math.isfinite(least):  # no NaN and no -inf: the least margin is also the least finite one
+            self.sample_min = _min(self.sample_min, least)
+            self.least = min(self.least, least)
+        elif new.size:
+            self.sample_min = _min(self.sample_min, _finite_min(new))
+            with np.errstate(all="ignore"):
+                if not np.isnan(new).all():
+                    self.least = min(self.least, float(np.nanmin(new)))
+            self.nan += int(np.isnan(new).sum())
         hit = None
-        if self.fail_ns is None:
+        if self.fail_ns is None and not least >= 0:
             bad = np.flatnonzero(new < 0)
             if bad.size:
                 hit = int(bad[0]) + new_from
@@ -132,3 +141,110 @@ class MergedRun:
         if self.undecided:
             return CheckResult(self.name, "inconclusive", self.margin, None, {**d, "reason": "; ".join(self.undecided)})
         return CheckResult(self.name, "pass", self.margin, None, d)
+
+
+class SampleChecks:
+    """The per-sample checks of one run, accumulated over batches: workspace and obstacle clearance on every pose
+    sample, the tube on every pose sample once a nominal sample at or after it is known (the nearest nominal sample
+    is then known), the input box on every command."""
+
+    def __init__(self, sc: Scenario, geometry: RegionGeometry, *, tube: bool) -> None:
+        self.scenario = sc
+        self.geometry = geometry
+        self.unsafe = geometry.unsafe
+        self.max_speed_mps = sc.max_speed_mps
+        self.period_ns = round(1e9 / sc.mocap.rate_hz)
+        self.tol_m = tube_tolerance_m(sc)
+        self.tube_radius_m = sc.tube_radius_m if tube else math.nan
+        self.tube_on = tube
+        self.ws = MarginRun("workspace")
+        self.clear = MarginRun("obstacle_clearance")
+        self.tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
+        self.input = MergedRun("input_box", missing_reason="no cmd_vel logged")
+        self.prev: tuple[int, float, float] | None = None  # the last pose sample judged
+        self.tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []  # judged, not matched yet
+        self.tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+        self.nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+        self.nominal_seen = 0
+
+    def feed_poses(self, t_ns: IntArray, x: FloatArray, y: FloatArray, t0: int,
+                   reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
+        """New pose samples (``reuse``: with the previous one in front, its step bounds, region margins and 1)."""
+        if reuse is not None:
+            step, margin, k1 = reuse
+        else:
+            k1 = 0 if self.prev is None else 1
+            if self.prev is not None:
+                t_ns, x, y = prepend(self.prev, t_ns, x, y)
+            step = step_bound_m(t_ns - t0, x, y, self.max_speed_mps)
+            margin = self.geometry.margins(x, y)[1]
+        self.prev = (int(t_ns[-1]), float(x[-1]), float(y[-1]))
+        self.ws.feed(t_ns, workspace_margin(x, y, self.scenario), step, k1)
+        if self.unsafe:
+            margins = margin[self.unsafe]
+            hit = self.clear.feed(t_ns, -np.max(margins, axis=0), step, k1)
+            if hit is not None:
+                region = self.unsafe[int(np.argmax(margins[:, hit]))]
+                self.clear.fail_detail["region"] = self.scenario.regions[region].name
+        if self.tube_on:
+            self.tube_pending.append((t_ns[k1:], x[k1:], y[k1:]))
+        self.tube_last_t = int(t_ns[-1])
+
+    def feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
+        nt, nx, ny = self.nominal
+        self.nominal = (np.concatenate((nt, t)), np.concatenate((nx, x)), np.concatenate((ny, y)))
+        self.nominal_seen += t.shape[0]
+
+    def nominal_unknown(self, t_ns: int) -> None:
+        """The nominal sample judged at ``t_ns`` (the last one) had a duplicate with other values: unknown."""
+        nt, nx, ny = self.nominal
+        if nt.size and int(nt[-1]) == t_ns:
+            nx, ny = nx.copy(), ny.copy()
+            nx[-1] = ny[-1] = math.nan
+            self.nominal = (nt, nx, ny)
+
+    def feed_cmd(self, t: IntArray, u: FloatArray) -> None:
+        self.input.feed(check_input_box(t, u, self.scenario.inputs), t.shape[0])
+
+    def resolve_tube(self, closing: bool) -> None:
+        """Judge the pose samples whose nearest nominal sample is known (a nominal sample at or after them)."""
+        if not self.tube_pending:
+            return
+        t = np.concatenate([p[0] for p in self.tube_pending])
+        x = np.concatenate([p[1] for p in self.tube_pending])
+        y = np.concatenate([p[2] for p in self.tube_pending])
+        nt, nx, ny = self.nominal
+        if nt.size == 0:
+            self.tube_pending = [(t, x, y)] if not closing else []
+            return
+        k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
+        if k:
+            res = check_tube(t[:k], x[:k], y[:k], self.nominal, radius_m=self.tube_radius_m,
+                             tolerance_m=self.tol_m, match_ns=self.period_ns // 2)
+            self.tube.feed(res, k)
+        self.tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
+        # keep the nominal samples a later pose sample can still match: from the last one before it
+        keep_from = int(t[k]) if k < t.shape[0] else self.tube_last_t + 1
+        j = max(int(np.searchsorted(nt, keep_from, side="left")) - 1, 0)
+        self.nominal = (nt[j:], nx[j:], ny[j:])
+
+    def running(self) -> list[tuple[str, bool, int | None, float | None]]:
+        """Per check (tube, input box, workspace, obstacle clearance): whether it failed, its first violation and
+        its margin so far."""
+        out: list[tuple[str, bool, int | None, float | None]] = []
+        for run in (self.tube, self.input):
+            when = run.fail.first_violation_ns if run.fail is not None else None
+            out.append((run.name, run.fail is not None, when, run.margin))
+        for margin_run in (self.ws, self.clear):
+            out.append((margin_run.name, margin_run.fail_ns is not None, margin_run.fail_ns, margin_run.sample_min))
+        return out
+
+    def results(self) -> list[CheckResult]:
+        """The ``CheckResult`` of each check at the end (tube, input box, workspace, obstacle clearance)."""
+        tube = self.tube.result({"radius_m": self.tube_radius_m, "noise_tolerance_m": self.tol_m})
+        if self.nominal_seen == 0:
+            tube = CheckResult("tube", "inconclusive", None, None,
+                               {"reason": "no nominal state logged: tube containment cannot be checked"})
+        clear = self.clear.result() if self.unsafe else CheckResult(
+            "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
+        return [tube, self.input.result({"max_abs": list(self.scenario.inputs.max_abs)}), self.ws.result(), clear]

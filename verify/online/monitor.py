@@ -1,4 +1,3 @@
-# Over 500 lines: one incremental monitor; the formula and the five checks share its batch loop and buffers.
 """Online certification: samples pushed in time order -> the state of every check and obligation as soon as decided.
 
 input: a scenario (and formula), then pose / nominal / command samples in time order per stream (absolute integer
@@ -23,7 +22,6 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
@@ -33,24 +31,22 @@ import numpy.typing as npt
 from tubempc.mitl import And, Formula, atoms
 from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
-from verify.checks import CheckResult, check_input_box, check_tube
-from verify.errors import VerifyError
-from verify.geometry import (
-    containment,
-    label_margins,
-    region_margins,
-    step_bound_m,
-    workspace_margin,
-)
+from verify.checks import CheckResult
+from verify.errors import MonitorClosedError
+from verify.geometry import step_bound_m
 from verify.ingest import LogData
-from verify.ingest.timebase import AGREE_TOL
-from verify.judging import EXIT_CODES, formula_of, overall_verdict, tube_tolerance_m
-from verify.online.accumulate import MarginRun, MergedRun
-from verify.online.quiet import Quiet
+from verify.judging import formula_of, overall_verdict
+from verify.online.accumulate import SampleChecks
+from verify.online.heads import BoolHead, Evaluation, Head, build_head
+from verify.online.inputs import StreamInput
+from verify.online.quiet import EVERY_STREAM, Quiet
+from verify.online.regions import RegionGeometry, RunLog, point_and_gap_bounds, positions_after, prepend
 from verify.online.signalfeed import SignalFeed
-from verify.online.stream import AtomNode, BoolHead, Evaluation, Head, Track, build_head
+from verify.online.states import CheckState, Decision, MonitorState, OnlineResult, rel_s
+from verify.online.stream import AtomNode
+from verify.online.track import Track
 from verify.selection import select_checks
-from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run
+from verify.semantics.timed_run import UNKNOWN_ENTRY
 from verify.semantics.trajectory import reported_margin
 
 __all__ = ["CheckState", "Decision", "MonitorClosedError", "MonitorState", "OnlineMonitor", "OnlineResult",
@@ -60,88 +56,6 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 #: how long (s) a pose sample waits for a message of every signal the formula uses before the silence is judged
 DEFAULT_SIGNAL_LAG_S = 3.0
-
-
-class MonitorClosedError(VerifyError, RuntimeError):
-    """A sample was pushed after ``close``."""
-
-
-@dataclass(frozen=True, slots=True)
-class CheckState:
-    """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
-    margin so far (the certificate's rule, ``verify.semantics.trajectory.reported_margin``, on the bounds so far),
-    whether that margin is final (no later sample can change it) and the first violation (s)."""
-
-    name: str
-    verdict: str
-    decided: bool
-    decided_at_s: float | None
-    margin: float | None
-    first_violation_s: float | None
-    margin_final: bool = False
-    unit: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """A check or obligation became final: its verdict, when (``time_s``), its first violation, and its margin when
-    that is final too (None while a later sample can still change it: an ``F`` already true may become more so,
-    a violated ``G`` more violated; the margin is then in ``final_lines`` at the end). So nothing a decision states
-    depends on how the samples were batched."""
-
-    name: str
-    verdict: str
-    time_s: float
-    margin: float | None
-    first_violation_s: float | None
-    unit: str | None = "m"  # the margin's unit (None: not stated, e.g. a formula mixing metres and a signal's unit)
-
-    def line(self) -> str:
-        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.4g}"
-        unit = "" if not margin or not self.unit else f" {self.unit}"
-        at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
-        return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
-
-
-@dataclass(frozen=True, slots=True)
-class MonitorState:
-    verdict: str  # "fail" as soon as one check fails; "pass" only after close
-    checks: tuple[CheckState, ...]
-    obligations: tuple[CheckState, ...]
-    samples: dict[str, int]
-    closed: bool
-
-    @property
-    def all_decided(self) -> bool:
-        return all(c.decided for c in (*self.checks, *self.obligations))
-
-    def final_lines(self) -> list[str]:
-        """At the end (``close``): one line per obligation and check with its final verdict, margin and first
-        violation, the values the certificate states for the same samples."""
-        out = []
-        for c in (*self.obligations, *self.checks):
-            margin = "" if c.margin is None else f" margin {c.margin:+.4g}" + (f" {c.unit}" if c.unit else "")
-            at = "" if c.first_violation_s is None else f" (violated at {c.first_violation_s:.2f} s)"
-            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{at}")
-        return out
-
-
-@dataclass(frozen=True, slots=True)
-class OnlineResult:
-    """What ``close`` returns: the checks (as ``verify.checks.CheckResult``), the overall verdict and exit code."""
-
-    verdict: str
-    verdict_reason: str | None
-    checks: tuple[CheckResult, ...]
-    state: MonitorState
-
-    @property
-    def exit_code(self) -> int:
-        return EXIT_CODES[self.verdict]
-
-
-def _rel_s(t_ns: int | None, t0: int | None) -> float | None:
-    return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
 
 
 class _Semantics:
@@ -179,7 +93,6 @@ class OnlineMonitor:
         # a name that is both a label and a signal is the signal (as verify.certify)
         self._feeds = {n: SignalFeed(n, sc.signals[n], pose_topic=sc.topics.pose) for n in self._names
                        if n in sc.signals}
-        self._region_names = [n for n in self._names if n not in self._feeds]
         self._signal_rows = [k for k, n in enumerate(self._names) if n in self._feeds]
         self.max_signal_lag_ns = round(max_signal_lag_s * 1e9)
         self._newest_ns = -(2**63)  # the newest time pushed on the pose or a signal stream (the monitor's clock)
@@ -192,66 +105,28 @@ class OnlineMonitor:
         self._units: dict[str, str | None] = {"spec_trajectory": self._unit_of(self.formula), "spec_timed_run": "s",
                                               "tube": "m", "workspace": "m", "obstacle_clearance": "m"}
         self._units.update({str(h.formula): self._unit_of(h.formula) for h in self._traj.obligations})
-        eta = sc.robot.radius
-        discs = [r for r in sc.regions if getattr(r, "polygon", None) is None]
-        self._cx = np.array([r.center[0] for r in discs], dtype=np.float64)
-        self._cy = np.array([r.center[1] for r in discs], dtype=np.float64)
-        self._radius = np.array([r.radius for r in discs], dtype=np.float64)
-        self._offset = np.array([(r.radius + eta) if r.unsafe else (r.radius - eta) for r in discs])
-        self._atom_rows = [[k for k, r in enumerate(sc.regions) if name in r.labels and name not in self._feeds]
-                           for name in self._names]
-        # discs only: every region's margin in one broadcast pass; otherwise verify.geometry's functions per batch
-        self._discs = all(getattr(r, "polygon", None) is None for r in sc.regions)
-        self._labels = [frozenset(r.labels) for r in sc.regions]
-        self._unsafe = [k for k, r in enumerate(sc.regions) if r.unsafe]
-        self._period_ns = round(1e9 / sc.mocap.rate_hz)
-        self._tol_m = tube_tolerance_m(sc)
-        self._tube_radius_m = sc.tube_radius_m if "tube" in self.selection else math.nan
-        # pending input
-        # pending input: one list per column (cheap appends; one numpy conversion per batch)
-        self._pose_t: list[int] = []
-        self._pose_x: list[float] = []
-        self._pose_y: list[float] = []
-        self._pose_yaw: list[float] = []
+        self._geometry = RegionGeometry(sc, self._names, self._feeds)
+        self._max_speed_mps = sc.max_speed_mps
+        # input: the samples buffered until judged, per stream
+        self._pose = StreamInput.of("pose", 2)  # x, y
+        self._nom = StreamInput.of("nominal", 2)  # x, y
+        self._cmd = StreamInput.of("cmd", 3)  # u1, u2, u3
         self._conflict: set[int] = set()  # pending pose times whose duplicates disagree (unknown to the formula)
         self._extra: list[tuple[int, float, float]] = []  # the disagreeing duplicates (judged by per-sample checks)
         self._late: list[tuple[int, float, float]] = []  # ... of a sample the formula had judged already
         self._formula_late_conflicts = 0
-        self._nom_t: list[int] = []
-        self._nom_x: list[float] = []
-        self._nom_y: list[float] = []
-        self._cmd_t: list[int] = []
-        self._cmd_u: list[tuple[float, float, float]] = []
-        self._last_values: dict[str, tuple[float, ...]] = {}  # the first sample at each stream's last time
-        self.merged = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.conflicting = {"pose": 0, "nominal": 0, "cmd": 0}
-        self._last_pose = self._last_nom = self._last_cmd = -(2**63)
-        self._judged = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.duplicates = {"pose": 0, "nominal": 0, "cmd": 0}
-        self.out_of_order = {"pose": 0, "nominal": 0, "cmd": 0}
         # judged state
         self.t0_ns: int | None = None
         self._prev: tuple[int, float, float] | None = None  # the last sample judged by the formula
-        self._prev_every: tuple[int, float, float] | None = None  # ... and by the per-sample checks
-        self._prev_set: npt.NDArray[np.bool_] | None = None  # the regions containing the last sample (None: none yet)
-        self._entry_labels: dict[str, frozenset[str]] = {}  # timed-run entry name -> labels
-        self._run_entries: list[tuple[str, float]] = []  # (region, s from time 0): one per region change
-        self._run_changes: list[float] = []  # s from time 0 of every change of the containing set (exits included)
-        self._entry_change: list[int] = []  # per timed-run entry: its index in _run_changes
-        self._run_signal: dict[str, tuple[list[float], list[float]]] = {n: ([], []) for n in self._feeds}
-        self._ws = MarginRun("workspace")
-        self._clear = MarginRun("obstacle_clearance")
-        self._tube = MergedRun("tube", missing_reason="no nominal state logged: tube containment cannot be checked")
-        self._input = MergedRun("input_box", missing_reason="no cmd_vel logged")
-        self._tube_pending: list[tuple[IntArray, FloatArray, FloatArray]] = []
-        self._nominal: tuple[IntArray, FloatArray, FloatArray] = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
-        self._nominal_seen = 0
+        self._run_log = RunLog(sc, list(self._feeds))
+        self._checks = SampleChecks(sc, self._geometry, tube="tube" in self._selected)
         self._reported: set[str] = set()
         self._closed = False
         self._result: OnlineResult | None = None
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
-        self._tube_last_t = -(2**63)  # the last pose sample handed to the tube check
+        # the second half of a judged pose batch (timed run, per-sample checks) left for the next update
+        self._second_half: Callable[[], None] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
     def _unit_of(self, formula: Formula) -> str | None:
@@ -260,43 +135,56 @@ class OnlineMonitor:
 
     # ---- input ----------------------------------------------------------------------------------------------------
     @property
+    def _streams(self) -> tuple[StreamInput, StreamInput, StreamInput]:
+        return self._pose, self._nom, self._cmd
+
+    @property
     def counts(self) -> dict[str, int]:
         """Samples accepted per stream."""
-        return {"pose": self._judged["pose"] + len(self._pose_t), "nominal": self._judged["nominal"] +
-                len(self._nom_t), "cmd": self._judged["cmd"] + len(self._cmd_t)}
+        return {s.name: s.count for s in self._streams}
 
-    def _reject(self, stream: str, t_ns: int, last: int, values: tuple[float, ...]) -> bool:
-        """A sample at or before the stream's last time. Before: counted out of order, never judged. At the same
-        time (as ``verify.ingest.timebase.judged_samples``): merged when its values agree with the first sample
-        there, else a conflict (True: the caller keeps it for the per-sample checks)."""
+    @property
+    def merged(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them with the same values (merged with it)."""
+        return {s.name: s.merged for s in self._streams}
+
+    @property
+    def conflicting(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them with other values."""
+        return {s.name: s.conflicting for s in self._streams}
+
+    @property
+    def duplicates(self) -> dict[str, int]:
+        """Per stream: samples at the time of the one before them (merged or conflicting)."""
+        return {s.name: s.duplicates for s in self._streams}
+
+    @property
+    def out_of_order(self) -> dict[str, int]:
+        """Per stream: samples before the time of the one before them (never judged)."""
+        return {s.name: s.out_of_order for s in self._streams}
+
+    def _reject(self, stream: StreamInput, t_ns: int, values: tuple[float, ...]) -> bool:
+        """A sample at or before the stream's last time (``StreamInput.repeat``; True: a conflict)."""
         if self._closed:
-            raise MonitorClosedError(f"a {stream} sample at t_ns={t_ns} was pushed after close()")
-        if t_ns != last:
-            self.out_of_order[stream] += 1
-            return False
-        self.duplicates[stream] += 1
-        first = self._last_values[stream]
-        if all(abs(a - b) <= AGREE_TOL or (math.isnan(a) and math.isnan(b))
-               for a, b in zip(first, values, strict=True)):
-            self.merged[stream] += 1
-            return False
-        self.conflicting[stream] += 1
-        return True
+            raise MonitorClosedError(f"a {stream.name} sample at t_ns={t_ns} was pushed after close()")
+        return stream.repeat(t_ns, values)
 
     def push_pose(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A pose sample (absolute ns). A sample is judged once the next one (or ``close``) arrives, so that a
         sample repeating its time can still be merged with it or make it unknown."""
-        if t_ns > self._last_pose and not self._closed:
-            self._last_pose = t_ns
-            self._last_values["pose"] = (x_m, y_m, yaw_rad)
-            self._pose_t.append(t_ns)
-            self._pose_x.append(x_m)
-            self._pose_y.append(y_m)
+        pose = self._pose
+        if t_ns > pose.last_ns and not self._closed:
+            pose.last_ns = t_ns
+            pose.last_values = (x_m, y_m, yaw_rad)
+            pose.t.append(t_ns)
+            xs, ys = pose.cols
+            xs.append(x_m)
+            ys.append(y_m)
             self._newest_ns = max(self._newest_ns, t_ns)
-            if len(self._pose_t) > self._pose_trigger:
+            if len(pose.t) > self._pose_trigger:
                 self._process()
-        elif self._reject("pose", t_ns, self._last_pose, (x_m, y_m, yaw_rad)):
-            if self._pose_t and self._pose_t[-1] == t_ns:  # not judged yet: unknown to the formula
+        elif self._reject(pose, t_ns, (x_m, y_m, yaw_rad)):
+            if pose.t and pose.t[-1] == t_ns:  # not judged yet: unknown to the formula
                 self._conflict.add(t_ns)
                 self._extra.append((t_ns, x_m, y_m))
             else:  # the formula has judged the first sample at this time already: it cannot pass any more
@@ -305,28 +193,27 @@ class OnlineMonitor:
 
     def push_nominal(self, t_ns: int, x_m: float, y_m: float, yaw_rad: float = 0.0) -> None:
         """A sample of the MPC's nominal state (absolute ns)."""
-        if t_ns > self._last_nom and not self._closed:
-            self._last_nom = t_ns
-            self._last_values["nominal"] = (x_m, y_m, yaw_rad)
-            self._nom_t.append(t_ns)
-            self._nom_x.append(x_m)
-            self._nom_y.append(y_m)
-            if len(self._nom_t) >= self.max_pending:
+        nom = self._nom
+        if t_ns > nom.last_ns and not self._closed:
+            nom.last_ns = t_ns
+            nom.last_values = (x_m, y_m, yaw_rad)
+            nom.t.append(t_ns)
+            xs, ys = nom.cols
+            xs.append(x_m)
+            ys.append(y_m)
+            if len(nom.t) >= self.max_pending:
                 self._process()
-        elif self._reject("nominal", t_ns, self._last_nom, (x_m, y_m, yaw_rad)):
+        elif self._reject(nom, t_ns, (x_m, y_m, yaw_rad)):
             self._unknown_nominal(t_ns)
 
     def _unknown_nominal(self, t_ns: int) -> None:
         """Nominal samples that disagree at one time: the nominal state there is unknown."""
         self._quiet.block = True
-        if self._nom_t and self._nom_t[-1] == t_ns:
-            self._nom_x[-1] = self._nom_y[-1] = math.nan
+        if self._nom.t and self._nom.t[-1] == t_ns:
+            for c in self._nom.cols:
+                c[-1] = math.nan
             return
-        nt, nx, ny = self._nominal
-        if nt.size and int(nt[-1]) == t_ns:
-            nx, ny = nx.copy(), ny.copy()
-            nx[-1] = ny[-1] = math.nan
-            self._nominal = (nt, nx, ny)
+        self._checks.nominal_unknown(t_ns)
 
     def push_signal(self, name: str, t_ns: int, value: float) -> None:
         """A message of the scenario's signal ``name`` (absolute ns on the pose's time base; the field's value).
@@ -361,37 +248,66 @@ class OnlineMonitor:
     def _judgeable(self, closing: bool) -> int:
         """How many pending pose samples every used signal is known for (a message after them), or that are older
         than the lag bound."""
-        n = len(self._pose_t)
+        pt = self._pose.t
+        n = len(pt)
         if closing or not self._feeds or not n:
             return n
         cover = min(f.newest_ns for f in self._feeds.values())
-        k = bisect_left(self._pose_t, cover)  # samples strictly before the newest message of every signal
-        if k < n and self._pose_t[k] <= self._newest_ns - self.max_signal_lag_ns:
-            k = bisect_right(self._pose_t, self._newest_ns - self.max_signal_lag_ns)
+        k = bisect_left(pt, cover)  # samples strictly before the newest message of every signal
+        if k < n and pt[k] <= self._newest_ns - self.max_signal_lag_ns:
+            k = bisect_right(pt, self._newest_ns - self.max_signal_lag_ns)
         return k
 
     def push_cmd(self, t_ns: int, u1: float, u2: float, u3: float) -> None:
         """An applied input (absolute ns; body frame as logged: vx, vy, wz). Every command is judged, also one
         that repeats a time with other values."""
-        if (t_ns > self._last_cmd and not self._closed) or self._reject("cmd", t_ns, self._last_cmd, (u1, u2, u3)):
-            if t_ns > self._last_cmd:
-                self._last_cmd = t_ns
-                self._last_values["cmd"] = (u1, u2, u3)
-            self._cmd_t.append(t_ns)
-            self._cmd_u.append((u1, u2, u3))
-            if len(self._cmd_t) >= self.max_pending:
+        cmd = self._cmd
+        if (t_ns > cmd.last_ns and not self._closed) or self._reject(cmd, t_ns, (u1, u2, u3)):
+            if t_ns > cmd.last_ns:
+                cmd.last_ns = t_ns
+                cmd.last_values = (u1, u2, u3)
+            cmd.t.append(t_ns)
+            c1, c2, c3 = cmd.cols
+            c1.append(u1)
+            c2.append(u2)
+            c3.append(u3)
+            if len(cmd.t) >= self.max_pending:
                 self._process()
 
     # ---- judging --------------------------------------------------------------------------------------------------
     def update(self) -> list[Decision]:
         """Judge the buffered samples; the checks and obligations decided since the last call (including those
         decided when ``max_pending`` samples made a push judge the buffer). Samples that cannot decide anything
-        (``verify.online.quiet``) may stay buffered until one can or ``max_pending`` wait: the same decisions, at
-        the same call, with the same times, as judging at every call."""
-        if not self._quiet.quiet():
-            self._process()
+        (``verify.online.quiet``) may stay buffered until one can: the same decisions, at the same call, with the
+        same times, as judging at every call. Those are judged one stream at a time, one stream per update, once
+        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once."""
+        loud = self._quiet.loud()
+        if loud:
+            self._process(loud)
+        else:
+            self._judge_quiet_stream()
+        if not self._unreturned:
+            return []
         out, self._unreturned = self._unreturned, []
         return out
+
+    def _judge_quiet_stream(self) -> None:
+        """Judge the buffered samples of the stream ``Quiet.due`` names (all tested quiet: nothing is decided, so
+        neither decisions nor the quiet test's state change)."""
+        if self._second_half is not None:  # the second half of the last pose batch
+            self._finish_pose()
+            return
+        stream = self._quiet.due()
+        if stream == "pose":
+            self._judge_poses(closing=False, defer=True)
+        elif stream == "cmd":
+            self._judge_cmd()
+        elif stream == "nominal":
+            self._judge_nominal()
+            self._checks.resolve_tube(closing=False)
+        else:
+            return
+        self._quiet.judged(stream)
 
     @staticmethod
     def _with_extras(t: IntArray, x: FloatArray, y: FloatArray, extra: list[tuple[int, float, float]]
@@ -402,21 +318,40 @@ class OnlineMonitor:
         at = np.searchsorted(t, et, side="right")
         return (np.insert(t, at, et), np.insert(x, at, [e[1] for e in extra]), np.insert(y, at, [e[2] for e in extra]))
 
-    def _process(self, closing: bool = False) -> None:
-        if self._nom_t:
-            self._judged["nominal"] += len(self._nom_t)
-            self._feed_nominal(np.array(self._nom_t, dtype=np.int64), np.array(self._nom_x, dtype=np.float64),
-                               np.array(self._nom_y, dtype=np.float64))
-            self._nom_t, self._nom_x, self._nom_y = [], [], []
+    def _process(self, streams: frozenset[str] = EVERY_STREAM, closing: bool = False) -> None:
+        """Judge the buffered samples of ``streams`` (those of the others cannot decide anything now), then collect
+        the new decisions."""
+        self._finish_pose()
+        if "nominal" in streams:
+            self._judge_nominal()
+        if "pose" in streams:
+            self._judge_poses(closing)
+        if "cmd" in streams:
+            self._judge_cmd()
+        if "nominal" in streams:
+            self._checks.resolve_tube(closing=False)
+        self._unreturned.extend(self._new_decisions())
+        self._quiet.refresh()
+
+    def _judge_nominal(self) -> None:
+        if self._nom.t:
+            t, (x, y) = self._nom.take()
+            self._checks.feed_nominal(t, x, y)
+
+    def _judge_cmd(self) -> None:
+        if self._cmd.t:
+            t, cols = self._cmd.take()
+            self._checks.feed_cmd(t, np.column_stack(cols))
+
+    def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
+        """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
+        (``defer``: quiet samples, half of whose judging may wait for the next update)."""
+        self._finish_pose()
         late, self._late = self._late, []
         k = self._judgeable(closing)
-        self._pose_trigger = len(self._pose_t) - k + self.max_pending
+        self._pose_trigger = len(self._pose.t) - k + self.max_pending
         if k:
-            self._judged["pose"] += k
-            t = np.array(self._pose_t[:k], dtype=np.int64)
-            x = np.array(self._pose_x[:k], dtype=np.float64)
-            y = np.array(self._pose_y[:k], dtype=np.float64)
-            del self._pose_t[:k], self._pose_x[:k], self._pose_y[:k]
+            t, (x, y) = self._pose.take(k)
             every = None
             if self._conflict:
                 done = int(t[-1])
@@ -428,211 +363,111 @@ class OnlineMonitor:
                 x, y = np.where(bad, np.nan, x), np.where(bad, np.nan, y)
             if late:
                 every = self._with_extras(*(every if every is not None else (t, x, y)), late)
-            self._feed_pose(t, x, y, every)
+            self._feed_pose(t, x, y, every, defer=defer)
         elif late:
             self._feed_every(np.array([e[0] for e in late], dtype=np.int64), np.array([e[1] for e in late]),
                              np.array([e[2] for e in late]))
-        if self._cmd_t:
-            self._judged["cmd"] += len(self._cmd_t)
-            t = np.array(self._cmd_t, dtype=np.int64)
-            u = np.array(self._cmd_u, dtype=np.float64).reshape(-1, 3)
-            self._cmd_t, self._cmd_u = [], []
-            self._feed_cmd(t, u)
-        self._resolve_tube(closing=False)
-        self._unreturned.extend(self._new_decisions())
-        self._quiet.refresh()
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
-                   every: tuple[IntArray, FloatArray, FloatArray] | None) -> None:
+                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: bool = False) -> None:
         """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
-        samples for the per-sample checks (None: the same samples)."""
-        sc = self.scenario
+        samples for the per-sample checks (None: the same samples). The batch is judged with the sample before it
+        (``k0`` = 1), whose gap to the first new sample it closes: the trajectory semantics, then the timed run and
+        the per-sample checks (``defer``: left to ``_finish_pose``, at the next update or any judging before it;
+        with signal atoms the timed run's entries come first, the signals' bounds there being computed with the
+        trajectory's)."""
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
         t0 = self.t0_ns
         prev = self._prev
         k0 = 0 if prev is None else 1
         if prev is not None:
-            t_abs = np.concatenate(([prev[0]], t_abs))
-            x = np.concatenate(([prev[1]], x))
-            y = np.concatenate(([prev[2]], y))
+            t_abs, x, y = prepend(prev, t_abs, x, y)
         self._prev = (int(t_abs[-1]), float(x[-1]), float(y[-1]))
         t_rel = t_abs - t0
-        step = step_bound_m(t_rel, x, y, sc.max_speed_mps)
-        # trajectory semantics: sample points and the gaps between them
-        tr = self._traj
-        region_m, atom_m = self._margins(x, y)
-        nan = np.isnan(atom_m)
-        p_lo, p_hi = (np.where(nan, -np.inf, atom_m), np.where(nan, np.inf, atom_m)) if nan.any() else (atom_m,
-                                                                                                      atom_m)
-        with np.errstate(invalid="ignore"):  # inf - inf (an unknown atom over an unbounded gap): NaN, then unknown
-            mid = 0.5 * (atom_m[:, :-1] + atom_m[:, 1:])  # geometry.gap_bounds on every atom at once
-            half = 0.5 * step
-            g_lo, g_hi = mid - half, mid + half
-        g_lo[np.isnan(g_lo)] = -np.inf
-        g_hi[np.isnan(g_hi)] = np.inf
-        # the timed run's entries (paper, Definition 3): where the containing region changes
-        # (verify.semantics.timed_run.timed_run_of_sets): a new entry where the set of containing regions changes
-        unknown = ~(np.isfinite(x[k0:]) & np.isfinite(y[k0:]))  # an entry of its own, every label unknown
-        inside = np.vstack((self._containment(x[k0:], y[k0:]) & ~unknown, unknown[None, :]))
-        before = np.concatenate((inside[:, :1] if self._prev_set is None else self._prev_set, inside[:, :-1]), axis=1)
-        changed = np.any(inside != before, axis=0)
-        if self._prev_set is None:
-            changed[0] = True
-        self._prev_set = inside[:, -1:].copy()
-        entry = np.flatnonzero(changed & inside.any(axis=0))
-        ch = np.flatnonzero(changed)
-        self._entry_change += (len(self._run_changes) + np.searchsorted(ch, entry)).tolist()
-        self._run_changes += (t_rel[k0:][ch].astype(np.float64) * 1e-9).tolist()
-        members = [self._entry_name(inside[:, int(e)]) for e in entry]
-        conv = np.round(t_rel[k0:].astype(np.float64) * 1e-9 * 1e9).astype(np.int64)  # as timedrun: s -> ns
+        step = step_bound_m(t_rel, x, y, self._max_speed_mps)
+        dist, region_m, atom_m = self._geometry.margins(x, y)
+        bounds = point_and_gap_bounds(atom_m, step)
+        if every is None and self._checks.prev == prev:  # the per-sample checks reuse the steps and margins
+            checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None] = (
+                t_abs, x, y, (step, region_m, k0))
+        else:
+            checks = (*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])), None)
+        entry_dist = None if dist is None else dist[:, k0:]
+        if not self._feeds:
+            self._push_trajectory(t_rel, bounds, k0)
+            self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
+            if not defer:
+                self._finish_pose()
+            return
+        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
-        if self._feeds:  # signal atoms: verify.signals on the messages held around this batch
-            p_lo, p_hi = p_lo.copy(), p_hi.copy()
-            for row in self._signal_rows:
-                name = self._names[row]
-                b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
-                p_lo[row], p_hi[row], g_lo[row], g_hi[row] = b.point_lo, b.point_hi, b.gap_lo, b.gap_hi
-        # the positions of verify.semantics.trajectory.trajectory_positions after the previous sample: each new sample's
-        # preceding gap [t_(i-1) + 1, t_i - 1] (when it holds an instant) then the sample itself
-        m = t_rel.shape[0] - 1
-        start = np.empty(2 * m + 1 - k0, dtype=np.int64)
-        stop = np.empty_like(start)
-        is_point = np.zeros(start.shape[0], dtype=bool)
-        lo = np.empty((len(self._names), start.shape[0]))
-        hi = np.empty_like(lo)
-        o = 1 - k0  # the first sample of the run is a point with no gap before it
-        if o:
-            start[0] = stop[0] = t_rel[0]
-            is_point[0] = True
-            lo[:, 0], hi[:, 0] = p_lo[:, 0], p_hi[:, 0]
-        start[o::2], stop[o::2] = t_rel[:-1] + 1, t_rel[1:] - 1
-        start[o + 1 :: 2] = stop[o + 1 :: 2] = t_rel[1:]
-        is_point[o + 1 :: 2] = True
-        lo[:, o::2], hi[:, o::2] = g_lo, g_hi
-        lo[:, o + 1 :: 2], hi[:, o + 1 :: 2] = p_lo[:, 1:], p_hi[:, 1:]
-        keep = is_point | (stop >= start)  # two samples 1 ns apart leave no gap
-        if not keep.all():
-            start, stop, is_point, lo, hi = start[keep], stop[keep], is_point[keep], lo[:, keep], hi[:, keep]
+        bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
+        for row in self._signal_rows:  # signal atoms: verify.signals on the messages held around this batch
+            name = self._names[row]
+            b, entry_values[name] = self._feeds[name].bounds(t_abs, t0 + conv[entry])
+            for rows, values in zip(bounds, (b.point_lo, b.point_hi, b.gap_lo, b.gap_hi), strict=True):
+                rows[row] = values
+        self._push_trajectory(t_rel, bounds, k0)
+        self._push_run(conv, entry, members, entry_values)
+        self._feed_every(*checks)
+
+    def _run_and_checks(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None,
+                        checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None]
+                        ) -> None:
+        """The second half of a pose batch without signal atoms: the timed run, then the per-sample checks."""
+        entry, members, conv = self._run_changes(t_rel, x, y, dist)
+        self._push_run(conv, entry, members, {})
+        self._feed_every(*checks)
+
+    def _finish_pose(self) -> None:
+        """The second half of the last pose batch, if it was left for later."""
+        if self._second_half is not None:
+            second, self._second_half = self._second_half, None
+            second()
+
+    def _push_trajectory(self, t_rel: IntArray, bounds: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+                         k0: int) -> None:
+        """Trajectory semantics: the positions after the previous sample (its gap to each new sample, then the
+        sample) with every atom's bounds there, then one evaluation step."""
+        tr = self._traj
+        start, stop, is_point, lo, hi = positions_after(t_rel, *bounds, first=k0 == 0)
         known = np.where(is_point, start, stop + 1)
         for k, name in enumerate(self._names):
             tr.atoms[name].push(lo[k], hi[k], known)
         tr.track.append(start, stop, is_point)
         tr.track.tick(t_rel[k0:])
         tr.evaluation.step()
-        # timed-run semantics: the entries
+
+    def _run_changes(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None
+                     ) -> tuple[IntArray, list[str], IntArray]:
+        """The timed run's new entries (``RunLog.changes``)."""
+        return self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
+
+    def _push_run(self, conv: IntArray, entry: IntArray, members: list[str],
+                  entry_values: dict[str, tuple[FloatArray, FloatArray]]) -> None:
+        """Timed-run semantics: the new entries with every atom's value there, the new ticks, one evaluation step."""
         run = self._run
         if entry.size:
             t_e = conv[entry]
-            self._run_entries += [(m, float(t) * 1e-9) for m, t in zip(members, t_e, strict=True)]
+            self._run_log.record(members, t_e, entry_values)
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
+            unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
             for name in self._names:
                 if name in entry_values:
                     e_lo, e_hi = entry_values[name]
                     run.atoms[name].push(e_lo, e_hi, t_e)
-                    self._run_signal[name][0].extend(e_lo.tolist())
-                    self._run_signal[name][1].extend(e_hi.tolist())
                     continue
-                holds = np.array([name in self._entry_labels[m] for m in members], dtype=bool)
-                v1 = np.where(holds, 1.0, -1.0)
-                unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
+                labels = self._run_log.entry_labels
+                v1 = np.where(np.array([name in labels[m] for m in members], dtype=bool), 1.0, -1.0)
                 run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
         run.track.tick(conv)
         run.evaluation.step()
-        # per-sample checks on every sample: workspace, obstacle clearance, tube
-        if every is None and self._prev_every == prev:
-            self._feed_every(t_abs, x, y, (step, region_m, k0))
-        else:
-            self._feed_every(*(every if every is not None else (t_abs[k0:], x[k0:], y[k0:])))
 
     def _feed_every(self, et: IntArray, ex: FloatArray, ey: FloatArray,
                     reuse: tuple[FloatArray, FloatArray, int] | None = None) -> None:
-        """Workspace, obstacle clearance and (pending until a nominal sample at or after them) tube on every
-        sample; ``reuse``: step bounds, region margins and offset already computed with the previous sample."""
-        sc = self.scenario
-        if reuse is not None:
-            e_step, e_margin, k1 = reuse
-        else:
-            k1 = 0 if self._prev_every is None else 1
-            if self._prev_every is not None:
-                pt, px, py = self._prev_every
-                et, ex, ey = np.concatenate(([pt], et)), np.concatenate(([px], ex)), np.concatenate(([py], ey))
-            e_step = step_bound_m(et - (self.t0_ns or 0), ex, ey, sc.max_speed_mps)
-            e_margin = self._margins(ex, ey)[0]
-        self._prev_every = (int(et[-1]), float(ex[-1]), float(ey[-1]))
-        self._ws.feed(et, workspace_margin(ex, ey, sc), e_step, k1)
-        if self._unsafe:
-            margins = e_margin[self._unsafe]
-            hit = self._clear.feed(et, -np.max(margins, axis=0), e_step, k1)
-            if hit is not None:
-                self._clear.fail_detail["region"] = sc.regions[self._unsafe[int(np.argmax(margins[:, hit]))]].name
-        if "tube" in self._selected:
-            self._tube_pending.append((et[k1:], ex[k1:], ey[k1:]))
-        self._tube_last_t = int(et[-1])
-
-    def _margins(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Every region's margin (rows in scenario order) and every atom's (rows in name order), as
-        ``verify.geometry.region_margins`` / ``label_margins`` give them (bit for bit)."""
-        if not self._discs:
-            atom = label_margins(x, y, self.scenario, frozenset(self._region_names))
-            atom_m = np.array([atom[n] if n in atom else np.full(x.shape[0], -np.inf) for n in self._names]
-                              ).reshape(-1, x.shape[0])
-            return region_margins(x, y, self.scenario), atom_m
-        region_m = self._offset[:, None] - np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        atom_m = np.empty((len(self._names), x.shape[0]))
-        for k, rows in enumerate(self._atom_rows):
-            atom_m[k] = region_m[rows].max(axis=0) if rows else -np.inf
-        return region_m, atom_m
-
-    def _containment(self, x: FloatArray, y: FloatArray) -> npt.NDArray[np.bool_]:
-        """``verify.geometry.containment``: (regions, samples), whether the region contains the robot's disc."""
-        if not self._discs:
-            return containment(x, y, self.scenario)
-        dist = np.hypot(x[None, :] - self._cx[:, None], y[None, :] - self._cy[:, None])
-        return dist + self.scenario.robot.radius <= self._radius[:, None]
-
-    def _entry_name(self, column: npt.NDArray[np.bool_]) -> str:
-        """A timed-run entry's name (its regions joined with ``+``); its labels (their union) are kept by name."""
-        if column[-1]:  # the last row: the sample's position is unknown
-            self._entry_labels.setdefault(UNKNOWN_ENTRY, frozenset())
-            return UNKNOWN_ENTRY
-        rows = np.flatnonzero(column[:-1])
-        name = "+".join(self.scenario.regions[int(k)].name for k in rows)
-        if name not in self._entry_labels:
-            self._entry_labels[name] = frozenset(lab for k in rows for lab in self._labels[int(k)])
-        return name
-
-    def _feed_nominal(self, t: IntArray, x: FloatArray, y: FloatArray) -> None:
-        nt, nx, ny = self._nominal
-        self._nominal = (np.concatenate((nt, t)), np.concatenate((nx, x)), np.concatenate((ny, y)))
-        self._nominal_seen += t.shape[0]
-
-    def _feed_cmd(self, t: IntArray, u: FloatArray) -> None:
-        res = check_input_box(t, u, self.scenario.inputs)
-        self._input.feed(res, t.shape[0])
-
-    def _resolve_tube(self, closing: bool) -> None:
-        """Judge the pose samples whose nearest nominal sample is known (a nominal sample at or after them)."""
-        if not self._tube_pending:
-            return
-        t = np.concatenate([p[0] for p in self._tube_pending])
-        x = np.concatenate([p[1] for p in self._tube_pending])
-        y = np.concatenate([p[2] for p in self._tube_pending])
-        nt, nx, ny = self._nominal
-        if nt.size == 0:
-            self._tube_pending = [(t, x, y)] if not closing else []
-            return
-        nt, nx, ny = self._nominal
-        k = t.shape[0] if closing else int(np.searchsorted(t, nt[-1], side="right"))
-        if k:
-            res = check_tube(t[:k], x[:k], y[:k], self._nominal, radius_m=self._tube_radius_m,
-                             tolerance_m=self._tol_m, match_ns=self._period_ns // 2)
-            self._tube.feed(res, k)
-        self._tube_pending = [(t[k:], x[k:], y[k:])] if k < t.shape[0] else []
-        # keep the nominal samples a later pose sample can still match: from the last one before it
-        keep_from = int(t[k]) if k < t.shape[0] else self._tube_last_t + 1
-        j = max(int(np.searchsorted(nt, keep_from, side="left")) - 1, 0)
-        self._nominal = (nt[j:], nx[j:], ny[j:])
+        """The per-sample checks on pose samples (``SampleChecks.feed_poses``)."""
+        self._checks.feed_poses(et, ex, ey, self.t0_ns or 0, reuse)
 
     # ---- state -------------------------------------------------------------------------------------------------------
     def _head_state(self, name: str, h: Head, *, margin: bool) -> CheckState:
@@ -644,8 +479,8 @@ class OnlineMonitor:
         if margin:
             m = reported_margin(verdict, h.lo, h.hi)
             m = m if m is not None and math.isfinite(m) else None
-        decided_at = _rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
-        first = _rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        decided_at = rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
+        first = rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
         return CheckState(name, verdict, h.decided, decided_at, m, first, h.margin_final,
                           self._units.get(name) if margin else None)
 
@@ -655,7 +490,7 @@ class OnlineMonitor:
             end = self._traj.track.end_ns
             return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
-                               _rel_s(c.first_violation_ns, t0), True,
+                               rel_s(c.first_violation_ns, t0), True,
                                c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
@@ -663,19 +498,12 @@ class OnlineMonitor:
         t0 = self.t0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
-        runs: list[MergedRun | MarginRun] = [self._tube, self._input, self._ws, self._clear]
-        for run in runs:
-            if isinstance(run, MarginRun):
-                failed, when, m = run.fail_ns is not None, run.fail_ns, run.sample_min
-            else:
-                failed = run.fail is not None
-                when = run.fail.first_violation_ns if run.fail is not None else None
-                m = run.margin
-            if run.name == "obstacle_clearance" and not self._unsafe:
-                out.append(CheckState(run.name, "pass", True, 0.0, None, None))
+        for name, failed, when, m in self._checks.running():
+            if name == "obstacle_clearance" and not self._checks.unsafe:
+                out.append(CheckState(name, "pass", True, 0.0, None, None))
                 continue
-            out.append(CheckState(run.name, "fail" if failed else "inconclusive", failed,
-                                  _rel_s(when, t0), m, _rel_s(when, t0)))
+            out.append(CheckState(name, "fail" if failed else "inconclusive", failed, rel_s(when, t0), m,
+                                  rel_s(when, t0)))
         return out
 
     def state(self) -> MonitorState:
@@ -721,7 +549,7 @@ class OnlineMonitor:
         self._closed = True
         for sem in (self._traj, self._run):
             sem.evaluation.step(closing=True)
-        self._resolve_tube(closing=True)
+        self._checks.resolve_tube(closing=True)
         checks = self._final_checks()
         self._final = checks
         self._final_decisions = self._unreturned + self._new_decisions()
@@ -731,7 +559,7 @@ class OnlineMonitor:
             problems["pose"] = (f"{self.out_of_order['pose']} pose sample(s) arrived out of time order and were not "
                                 f"judged")
         for name, feed in sorted(self._feeds.items()):  # as certify: the run is the pose's span, and cannot pass
-            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._last_pose):
+            if self.t0_ns is not None and feed.violates_outside(self.t0_ns, self._pose.last_ns):
                 problems[f"signal {name}"] = ("messages outside the pose's span violate its predicate: the run is "
                                               "the pose's span, so they are not judged and the run cannot pass")
         verdict, why = overall_verdict([(c.name, c.verdict) for c in checks], partial=partial, problems=problems)
@@ -742,22 +570,6 @@ class OnlineMonitor:
     def final_decisions(self) -> list[Decision]:
         """The decisions made by ``close`` (every check still open at the end)."""
         return list(getattr(self, "_final_decisions", []))
-
-    def _timed_run_margin_s(self, t0: int) -> tuple[float | None, str | None]:
-        """A failed timed run's temporal margin (or why it has none), as the certificate states it
-        (``verify.semantics.timed_run``): computed once at the end on the entries kept (one per region change)."""
-        if not self._run_entries:
-            return None, None
-        last_ns = self._last_pose - t0
-        end_s = max(last_ns * 1e-9, self._run_entries[-1][1])
-        labels = {name: sorted(lab) for name, lab in self._entry_labels.items()}
-        values = {n: (np.array(lo), np.array(hi)) for n, (lo, hi) in self._run_signal.items()}
-        # as verify.semantics.timed_run.entry_exits: the next change of the containing set, or the last sample
-        last_s = float(np.float64(last_ns) * 1e-9)
-        exits = [self._run_changes[j + 1] if j + 1 < len(self._run_changes) else last_s for j in self._entry_change]
-        tr = check_timed_run(str(self.formula), self._run_entries, labels, end=end_s, atom_values=values,
-                             exits=exits)
-        return tr.margin_s, tr.margin_reason
 
     def _formula_doubt(self) -> str | None:
         """Why the formula, as judged online, cannot pass: pose or signal samples that arrived for an instant
@@ -788,7 +600,8 @@ class OnlineMonitor:
                                     traj.witness_ns + t0 if v == "fail" and traj.witness_ns is not None else None,
                                     {"guaranteed_margin_m": traj.lo, "optimistic_margin_m": traj.hi})
             rv = run.verdict if self._run.track.count else "inconclusive"
-            run_margin, run_reason = self._timed_run_margin_s(t0) if rv == "fail" else (None, None)
+            run_margin, run_reason = (self._run_log.margin_s(str(self.formula), self._pose.last_ns - t0)
+                                      if rv == "fail" else (None, None))
             spec_run = CheckResult("spec_timed_run", rv, run_margin,
                                    run.witness_ns + t0 if rv == "fail" and run.witness_ns is not None else None,
                                    ({} if self._run.track.count else {"reason": "the timed run is empty"})
@@ -797,14 +610,7 @@ class OnlineMonitor:
         if why:  # a judged sample turned out unknown (or may have been judged otherwise): the formula cannot pass
             spec_traj, spec_run = (CheckResult(c.name, "inconclusive", None, None, {**c.details, "reason": why})
                                    if c.verdict == "pass" else c for c in (spec_traj, spec_run))
-        tube = self._tube.result({"radius_m": self._tube_radius_m, "noise_tolerance_m": self._tol_m})
-        if self._nominal_seen == 0:
-            tube = CheckResult("tube", "inconclusive", None, None,
-                               {"reason": "no nominal state logged: tube containment cannot be checked"})
-        clear = self._clear.result() if self._unsafe else CheckResult(
-            "obstacle_clearance", "pass", None, None, {"reason": "no unsafe regions"})
-        every = [spec_traj, spec_run, tube, self._input.result({"max_abs": list(self.scenario.inputs.max_abs)}),
-                 self._ws.result(), clear]
+        every = [spec_traj, spec_run, *self._checks.results()]
         return [c for c in every if c.name in self._selected]
 
 

@@ -1,11 +1,11 @@
 """Whether judging the buffered samples now could decide anything: the online monitor's cheap per-sample test.
 
 input: the ``OnlineMonitor`` (its scenario, its buffered samples, the state of its heads and checks) -> output:
-``Quiet.quiet()``, True only when judging the buffered samples now cannot make any check or obligation final, so
-that ``update`` may leave them buffered (at most ``max_pending`` of them) and return no decision, exactly as judging
-them would have. Judging them later, together with the samples that follow, gives the same verdicts and the same
-decision times (the monitor's verdicts do not depend on the batching), so decisions come at the same ``update`` as
-when every call judges.
+``Quiet.loud()``, the streams whose buffered samples can make a check or obligation final if judged now (none: the
+update may leave them buffered and return no decision, exactly as judging them would have; ``due`` then names a
+stream whose tested samples are judged at this update, one stream per update, ``batch`` at a time). Judging them
+later, together with the samples that follow, gives the same verdicts and the same decision times (the monitor's
+verdicts do not depend on the batching), so decisions come at the same ``update`` as when every call judges.
 
 The test is scalar (plain floats, a few operations per sample) and conservative: any doubt -- a value within
 ``EPS`` of a limit, a NaN, a duplicate that disagrees, a formula or scenario it does not cover -- says "not quiet".
@@ -32,26 +32,35 @@ covered: the monitor then judges at every ``update`` as before.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Not, Or
 from verify.checks import INPUT_COMPONENTS, INPUT_TOLERANCE
-from verify.online.stream import BoolHead, Head, OfflineHead, StreamHead, WindowHead
+from verify.online.heads import BoolHead, Head, OfflineHead, StreamHead, WindowHead
 
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
 
-__all__ = ["EPS", "MAX_WAITING", "Quiet"]
+__all__ = ["EPS", "EVERY_STREAM", "MAX_WAITING", "QUIET_BATCH", "Quiet"]
 
 #: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
 #: rounding differences between this scalar arithmetic and the vectorised judging
 EPS = 1e-6
 #: slack (ns) on a window's end: the timed run rounds its times through seconds
 _END_SLACK_NS = 1_000
-#: at most this many pose samples wait for an update that judges (with ``max_pending``, if lower): a judging costs
-#: a fixed few hundred microseconds plus a few per sample, so this bounds the slowest update near 1 ms
-MAX_WAITING = 64
+#: quiet samples of one stream judged together (fewer if ``max_pending`` is lower): one stream per update, so that
+#: an update pays at most one stream's fixed judging cost, and that cost is shared by this many samples
+QUIET_BATCH = 256
+#: at most this many pose samples wait for an update that judges (a bound on memory should a stream stall the others)
+MAX_WAITING = 2 * QUIET_BATCH
+
+#: the buffered streams an update may judge
+EVERY_STREAM = frozenset({"pose", "nominal", "cmd"})
+_POSE_AND_NOMINAL = frozenset({"pose", "nominal"})
+_CMD = frozenset({"cmd"})
+_NONE: frozenset[str] = frozenset()
 
 Value = Callable[[list[float]], float]
 
@@ -102,9 +111,10 @@ class Quiet:
     def __init__(self, mon: OnlineMonitor) -> None:
         self.mon = mon
         sc = mon.scenario
-        rows = {n: list(r) for n, r in zip(mon._names, mon._atom_rows, strict=True)}
+        geometry = mon._geometry
+        rows = {n: list(r) for n, r in zip(mon._names, geometry.atom_rows, strict=True)}
         self.values: dict[int, Value] = {}
-        covered = not mon._feeds and mon._discs and sc.workspace.polygon is None
+        covered = not mon._feeds and geometry.discs and sc.workspace.polygon is None
         for leaf in _leaves(mon._traj.head):
             if isinstance(leaf, WindowHead):
                 assert isinstance(leaf.formula, Eventually | Always)
@@ -116,16 +126,19 @@ class Quiet:
             elif not isinstance(leaf, StreamHead | OfflineHead):
                 covered = False
         self.enabled = covered
+        self.batch = max(1, min(QUIET_BATCH, mon.max_pending - 8))  # below the pushes' own trigger
         self.block = False  # a nominal sample made unknown: judge at the next update
         regions = [r for r in sc.regions if getattr(r, "polygon", None) is None]
         eta = sc.robot.radius
         # per disc: centre, offset of its margin (verify.geometry: r + eta for unsafe, r - eta otherwise), radius
         self.discs = [(float(r.center[0]), float(r.center[1]), float(off), float(r.radius), bool(r.unsafe))
-                      for r, off in zip(regions, mon._offset.tolist(), strict=True)]
+                      for r, off in zip(regions, geometry.offset.tolist(), strict=True)]
         self.eta = eta
-        self.unsafe = list(mon._unsafe)
+        self.unsafe = list(geometry.unsafe)
         ws = sc.workspace
-        self.box = (float(ws.x[0]), float(ws.x[1]), float(ws.y[0]), float(ws.y[1]))
+        # the workspace box shrunk by the robot's radius and EPS: a sample inside it has a margin above EPS
+        self.inner_box = (float(ws.x[0]) + eta + EPS, float(ws.x[1]) - eta - EPS, float(ws.y[0]) + eta + EPS,
+                          float(ws.y[1]) - eta - EPS)
         limits = sc.inputs
         if limits.model == "holonomic":
             bounds = [float(b) for b in limits.max_abs]
@@ -135,8 +148,8 @@ class Quiet:
             self.cols = [0, 2, 1]
         assert len(INPUT_COMPONENTS[limits.model]) == 3
         self.cmd_limit = [b + INPUT_TOLERANCE - EPS for b in bounds]
-        self.tube_limit = mon._tube_radius_m + mon._tol_m - EPS
-        self.match_ns = mon._period_ns // 2
+        self.tube_limit = mon._checks.tube_radius_m + mon._checks.tol_m - EPS
+        self.match_ns = mon._checks.period_ns // 2
         self.refresh()
 
     def refresh(self) -> None:
@@ -148,12 +161,13 @@ class Quiet:
         # limit, the time from which it must be tested again)
         self.ref: tuple[float, float, float, float] | None = None
         sel = mon._selected
-        self.ws = "workspace" in sel and mon._ws.fail_ns is None
-        self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and mon._clear.fail_ns is None
-        self.cmd = "input_box" in sel and mon._input.fail is None
-        self.tube = "tube" in sel and mon._tube.fail is None
+        checks = mon._checks
+        self.ws = "workspace" in sel and checks.ws.fail_ns is None
+        self.clear = "obstacle_clearance" in sel and bool(self.unsafe) and checks.clear.fail_ns is None
+        self.cmd = "input_box" in sel and checks.input.fail is None
+        self.tube = "tube" in sel and checks.tube.fail is None
         # no nominal sample yet: none can be matched before the first one arrives, which is then judged at once
-        self.tube_wait = self.tube and mon._nominal_seen == 0
+        self.tube_wait = self.tube and checks.nominal_seen == 0
         t0 = mon.t0_ns
         self.windows: list[tuple[bool, int, float, Value]] = []  # (G?, window start, end (abs ns), phi)
         ends: list[float] = []
@@ -172,122 +186,170 @@ class Quiet:
         self.run_open = "spec_timed_run" in sel and not mon._run.head.decided
         # the last judged sample (the formula's) and the regions containing it, as the judging saw them
         self.prev_t = mon._prev[0] if mon._prev is not None else None
-        ps = mon._prev_set
+        ps = mon._run_log.prev_set
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
-        self.unmatched: list[tuple[int, float, float]] = []
-        for t, x, y in mon._tube_pending:
+        self.unmatched: deque[tuple[int, float, float]] = deque()
+        for t, x, y in checks.tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
-        nt, nx, ny = mon._nominal
-        cut = min([mon._last_pose, *(u[0] for u in self.unmatched[:1])]) - self.match_ns
+        nt, nx, ny = checks.nominal
+        last = mon._pose.last_ns
+        cut = min(last, self.unmatched[0][0] if self.unmatched else last) - self.match_ns
         k = int(nt.searchsorted(cut)) if nt.size else 0
-        self.noms: list[tuple[int, float, float]] = list(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
-                                                             strict=True))
+        self.noms: deque[tuple[int, float, float]] = deque(zip(nt[k:].tolist(), nx[k:].tolist(), ny[k:].tolist(),
+                                                               strict=True))
 
-    def quiet(self) -> bool:
-        """True when judging the buffered samples now decides nothing (see the module docstring)."""
+    def loud(self) -> frozenset[str]:
+        """The streams whose buffered samples must be judged now for the decisions to come at this update (empty:
+        judging now decides nothing; see the module docstring). Each call tests the samples pushed since the last
+        one (one per stream, typically). The pose samples are judged with the nominal ones (for the tube)."""
         mon = self.mon
         if (not self.enabled or self.block or mon.t0_ns is None or mon._conflict or mon._late or mon._extra
-                or len(mon._pose_t) >= MAX_WAITING):
-            return False
-        if mon._nom_t and self.nom_seen < len(mon._nom_t):
-            self.noms.extend(zip(mon._nom_t[self.nom_seen:], mon._nom_x[self.nom_seen:], mon._nom_y[self.nom_seen:],
-                                 strict=True))
-            self.nom_seen = len(mon._nom_t)
-        if self.tube_wait and mon._nom_t:
-            return False
-        if self.cmd and not self._commands_quiet():
-            return False
-        pt = mon._pose_t
-        if self.pose_seen < len(pt) and not self._poses_quiet():
-            return False
-        return not (self.tube and self.unmatched) or self._tube_quiet()
+                or len(mon._pose.t) >= MAX_WAITING):
+            return EVERY_STREAM
+        nom_t = mon._nom.t
+        if nom_t:
+            if self.tube_wait:
+                return EVERY_STREAM
+            if self.nom_seen < len(nom_t):
+                k = self.nom_seen
+                nx, ny = mon._nom.cols
+                self.noms.extend(zip(nom_t[k:], nx[k:], ny[k:], strict=True))
+                self.nom_seen = len(nom_t)
+        cmd = self.cmd and self.cmd_seen < len(mon._cmd.t) and not self._commands_quiet()
+        pose = self.pose_seen < len(mon._pose.t) and not self._poses_quiet()
+        if pose or (self.tube and self.unmatched and not self._tube_quiet()):
+            return EVERY_STREAM if cmd else _POSE_AND_NOMINAL
+        return _CMD if cmd else _NONE
+
+    def due(self) -> str | None:
+        """After ``quiet``: the stream whose tested samples should be judged now ("pose", "cmd", "nominal"; the
+        fullest of those holding ``batch`` samples), or None."""
+        mon = self.mon
+        pose, cmd, nom, batch = len(mon._pose.t), len(mon._cmd.t), len(mon._nom.t), self.batch
+        if pose < batch and cmd < batch and nom < batch:
+            return None
+        return max((pose, "pose"), (cmd, "cmd"), (nom, "nominal"))[1]
+
+    def judged(self, stream: str) -> None:
+        """The tested samples of ``stream`` were judged (deciding nothing): the test goes on from the rest."""
+        if stream == "pose":
+            self.pose_seen = len(self.mon._pose.t)
+        elif stream == "cmd":
+            self.cmd_seen = len(self.mon._cmd.t)
+        else:
+            self.nom_seen = len(self.mon._nom.t)
 
     def _commands_quiet(self) -> bool:
-        mon = self.mon
-        cols, limit = self.cols, self.cmd_limit
-        for u in mon._cmd_u[self.cmd_seen:]:
-            for c, lim in zip(cols, limit, strict=True):
-                if not abs(u[c]) <= lim:  # also NaN
-                    return False
-        self.cmd_seen = len(mon._cmd_u)
+        cmd = self.mon._cmd
+        u0, u1, u2 = (cmd.cols[c] for c in self.cols)
+        l0, l1, l2 = self.cmd_limit
+        for k in range(self.cmd_seen, len(cmd.t)):
+            if not (abs(u0[k]) <= l0 and abs(u1[k]) <= l1 and abs(u2[k]) <= l2):  # also NaN
+                return False
+        self.cmd_seen = len(cmd.t)
         return True
 
     def _poses_quiet(self) -> bool:
+        """The pose samples pushed since the last test, each near the last sample tested in full (every margin
+        tested is 1-Lipschitz in the position, so none has come within EPS of its limit, no region was entered or
+        left, no window argument changed sides) or tested in full (``_tested``)."""
         mon = self.mon
-        eta, discs = self.eta, self.discs
-        ws, clear, run_open, windows = self.ws, self.clear, self.run_open, self.windows
-        x0, x1, y0, y1 = self.box
-        x0, x1, y0, y1 = x0 + eta + EPS, x1 - eta - EPS, y0 + eta + EPS, y1 - eta - EPS
-        hypot, isfinite, inf = math.hypot, math.isfinite, math.inf
-        prev_t, prev_key = self.prev_t, self.prev_key
-        deadline = self.deadline
+        pt, (px, py) = mon._pose.t, mon._pose.cols
+        hypot, isfinite = math.hypot, math.isfinite
+        prev_t, ref, deadline = self.prev_t, self.ref, self.deadline
         unmatched = self.unmatched if self.tube and not self.tube_wait else None
-        ref = self.ref
-        start = self.pose_seen
-        for t, x, y in zip(mon._pose_t[start:], mon._pose_x[start:], mon._pose_y[start:], strict=True):
+        for i in range(self.pose_seen, len(pt)):
+            t, x, y = pt[i], px[i], py[i]
             if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
-                return False
-            # still near the last fully tested sample: every margin tested is 1-Lipschitz in the position, so none
-            # has come within EPS of its limit, no region was entered or left, no window argument changed sides
+                return self._loud_from(i)
             if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
-                if ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
-                    return False
-                slack = min(x - x0, x1 - x, y - y0, y1 - y) if ws else inf
-                until = deadline
-                mg = []
-                key = []
-                for cx, cy, off, r, unsafe in discs:
-                    d = hypot(x - cx, y - cy)
-                    if unsafe and clear:
-                        if off - d > -EPS:  # obstacle clearance below EPS
-                            return False
-                        slack = min(slack, d - off - EPS)
-                    if run_open:
-                        c = d + eta - r
-                        if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
-                            return False
-                        key.append(c < 0)
-                        slack = min(slack, abs(c) - EPS)
-                    mg.append(off - d)
-                if run_open:
-                    key.append(False)  # the "position unknown" row: a finite sample
-                    if key != prev_key:  # a new timed-run entry
-                        return False
-                for always, lo, hi, value in windows:
-                    v = value(mg)
-                    room = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
-                    if room > 0:
-                        slack = min(slack, room)
-                    elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
-                        return False
-                    else:  # the window has not started: test again when it does
-                        until = min(until, lo)
-                ref = (x, y, slack, until) if slack > 0 else None
+                ok, ref = self._tested(t, x, y, prev_t)
+                if not ok:
+                    return self._loud_from(i)
             if unmatched is not None:
                 unmatched.append((t, x, y))
             prev_t = t
-        self.prev_t, self.prev_key, self.ref = prev_t, prev_key, ref
-        self.pose_seen = len(mon._pose_t)
+        self.prev_t, self.ref = prev_t, ref
+        self.pose_seen = len(pt)
         return True
+
+    def _loud_from(self, i: int) -> bool:
+        """The pose sample ``i`` is not quiet: the pose samples are judged now, so the tube test takes it and those
+        after it too (False)."""
+        if self.tube and not self.tube_wait:
+            mon = self.mon
+            pt, (px, py) = mon._pose.t, mon._pose.cols
+            self.unmatched.extend(zip(pt[i:], px[i:], py[i:], strict=True))
+        return False
+
+    def _tested(self, t: int, x: float, y: float, prev_t: int) -> tuple[bool, tuple[float, float, float, float] | None]:
+        """The full test of one sample: whether it is quiet, and (if some room is left) the reference the next
+        samples are compared with: (x, y, how far the robot may move before any tested value can reach its limit,
+        the time from which it must be tested again)."""
+        x0, x1, y0, y1 = self.inner_box
+        if self.ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
+            return False, None
+        slack = min(x - x0, x1 - x, y - y0, y1 - y) if self.ws else math.inf
+        room = self._discs_room(x, y)
+        if room is None:
+            return False, None
+        slack = min(slack, room[0])
+        mg = room[1]
+        until = self.deadline
+        for always, lo, hi, value in self.windows:
+            v = value(mg)
+            margin = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
+            if margin > 0:
+                slack = min(slack, margin)
+            elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
+                return False, None
+            else:  # the window has not started: test again when it does
+                until = min(until, lo)
+        return True, ((x, y, slack, until) if slack > 0 else None)
+
+    def _discs_room(self, x: float, y: float) -> tuple[float, list[float]] | None:
+        """Obstacle clearance and the timed run's containing set at one sample: None when a clearance is below
+        EPS, the sample is on a region's boundary or the set changes; else how far the robot may move before one
+        of those can happen, and every disc's margin."""
+        eta, clear, run_open, hypot = self.eta, self.clear, self.run_open, math.hypot
+        slack = math.inf
+        mg: list[float] = []
+        key: list[bool] = []
+        for cx, cy, off, r, unsafe in self.discs:
+            d = hypot(x - cx, y - cy)
+            if unsafe and clear:
+                if off - d > -EPS:  # obstacle clearance below EPS
+                    return None
+                slack = min(slack, d - off - EPS)
+            if run_open:
+                c = d + eta - r
+                if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
+                    return None
+                key.append(c < 0)
+                slack = min(slack, abs(c) - EPS)
+            mg.append(off - d)
+        if run_open:
+            key.append(False)  # the "position unknown" row: a finite sample
+            if key != self.prev_key:  # a new timed-run entry
+                return None
+        return slack, mg
 
     def _tube_quiet(self) -> bool:
         """The pose samples the next judging can match are inside the tube against every candidate nominal."""
-        noms = self.noms
+        noms, unmatched = self.noms, self.unmatched
         if not noms:
             return True
         last_nom = noms[-1][0]
         match, limit, hypot = self.match_ns, self.tube_limit, math.hypot
-        keep: list[tuple[int, float, float]] = []
-        for t, x, y in self.unmatched:
-            if t > last_nom:  # not matched by the next judging
-                keep.append((t, x, y))
-                continue
+        while unmatched and unmatched[0][0] <= last_nom:  # in time order: the ones the next judging matches
+            t, x, y = unmatched[0]
             for nt, nx, ny in noms:
                 if abs(nt - t) <= match and not hypot(x - nx, y - ny) <= limit:  # also NaN
                     return False
-        self.unmatched = keep
-        cut = min([self.mon._last_pose, *(u[0] for u in keep[:1])]) - match
-        if noms[0][0] < cut:
-            self.noms = [n for n in noms if n[0] >= cut]
+            unmatched.popleft()
+        last = self.mon._pose.last_ns
+        cut = min(last, unmatched[0][0] if unmatched else last) - match
+        while noms and noms[0][0] < cut:  # no later pose sample can match these
+            noms.popleft()
         return True

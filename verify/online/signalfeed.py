@@ -29,7 +29,7 @@ import numpy.typing as npt
 from tubempc.scenario import SignalSpec
 from verify.ingest.fields import SignalStream, median_period_ns, signal_margin, signal_period_ns
 from verify.ingest.quality import DROPOUT_FACTOR
-from verify.online.stream import Buffer
+from verify.online.track import Buffer
 from verify.signals import SignalBounds, signal_bounds, values_at
 
 __all__ = ["SignalFeed"]

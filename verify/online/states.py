@@ -1,0 +1,96 @@
+"""What the online monitor reports: the state of a check or obligation, a decision, the monitor's state, the result
+of ``close``.
+
+input: the monitor's heads and accumulated checks -> output: frozen values (``CheckState``, ``Decision``,
+``MonitorState``, ``OnlineResult``) whose times are seconds from the first pose sample and whose margins follow the
+certificate's rule (``verify.semantics.trajectory.reported_margin``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from verify.checks import CheckResult
+from verify.judging import EXIT_CODES
+
+__all__ = ["CheckState", "Decision", "MonitorState", "OnlineResult", "rel_s"]
+
+
+@dataclass(frozen=True, slots=True)
+class CheckState:
+    """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
+    margin so far (the certificate's rule, ``verify.semantics.trajectory.reported_margin``, on the bounds so far),
+    whether that margin is final (no later sample can change it) and the first violation (s)."""
+
+    name: str
+    verdict: str
+    decided: bool
+    decided_at_s: float | None
+    margin: float | None
+    first_violation_s: float | None
+    margin_final: bool = False
+    unit: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """A check or obligation became final: its verdict, when (``time_s``), its first violation, and its margin when
+    that is final too (None while a later sample can still change it: an ``F`` already true may become more so,
+    a violated ``G`` more violated; the margin is then in ``final_lines`` at the end). So nothing a decision states
+    depends on how the samples were batched."""
+
+    name: str
+    verdict: str
+    time_s: float
+    margin: float | None
+    first_violation_s: float | None
+    unit: str | None = "m"  # the margin's unit (None: not stated, e.g. a formula mixing metres and a signal's unit)
+
+    def line(self) -> str:
+        margin = "" if self.margin is None or not math.isfinite(self.margin) else f" margin {self.margin:+.4g}"
+        unit = "" if not margin or not self.unit else f" {self.unit}"
+        at = "" if self.first_violation_s is None else f" (violated at {self.first_violation_s:.2f} s)"
+        return f"{self.time_s:8.2f} s  {self.name} {self.verdict.upper()}{margin}{unit}{at}"
+
+
+@dataclass(frozen=True, slots=True)
+class MonitorState:
+    verdict: str  # "fail" as soon as one check fails; "pass" only after close
+    checks: tuple[CheckState, ...]
+    obligations: tuple[CheckState, ...]
+    samples: dict[str, int]
+    closed: bool
+
+    @property
+    def all_decided(self) -> bool:
+        return all(c.decided for c in (*self.checks, *self.obligations))
+
+    def final_lines(self) -> list[str]:
+        """At the end (``close``): one line per obligation and check with its final verdict, margin and first
+        violation, the values the certificate states for the same samples."""
+        out = []
+        for c in (*self.obligations, *self.checks):
+            margin = "" if c.margin is None else f" margin {c.margin:+.4g}" + (f" {c.unit}" if c.unit else "")
+            at = "" if c.first_violation_s is None else f" (violated at {c.first_violation_s:.2f} s)"
+            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{at}")
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class OnlineResult:
+    """What ``close`` returns: the checks (as ``verify.checks.CheckResult``), the overall verdict and exit code."""
+
+    verdict: str
+    verdict_reason: str | None
+    checks: tuple[CheckResult, ...]
+    state: MonitorState
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES[self.verdict]
+
+
+def rel_s(t_ns: int | None, t0: int | None) -> float | None:
+    """``t_ns`` in seconds from ``t0`` (rounded to the ns), None if either is."""
+    return None if t_ns is None or t0 is None else round((t_ns - t0) * 1e-9, 9)
