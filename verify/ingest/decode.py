@@ -138,6 +138,8 @@ def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray, 
     owner = np.repeat(np.arange(start.shape[0]), length)
     within = np.arange(total) - np.repeat(np.cumsum(length) - length, length)
     high = u8[start[owner] + within] >= 0x80
+    if not high.any():
+        return True  # ASCII only (and np.unique, which imports numpy.ma on first use, is not needed)
     for k in np.unique(owner[high]).tolist():
         a = int(start[k])
         try:
