@@ -104,6 +104,15 @@ def _plan(wts: object, f: Formula, **kw: object) -> LassoRun | None:
                {("A", "B"): Fraction(2), ("B", "A"): Fraction(2), ("B", "C"): Fraction(3), ("C", "B"): Fraction(3),
                 ("A", "C"): Fraction(4), ("C", "A"): Fraction(4)}),
          f=parse("G[2,2] p"))
+@example(case=({"A": ("p",), "B": ("q",), "C": ()},  # the optimum (5 s) misses the lower bound of F[4,5] p (4 s)
+               {("A", "B"): Fraction(2), ("B", "A"): Fraction(2), ("B", "C"): Fraction(3), ("C", "B"): Fraction(3),
+                ("A", "C"): Fraction(4), ("C", "A"): Fraction(4)}),
+         f=parse("G(p -> F[3,4] q) & F[4,5] p"))
+@example(case=({"A": ("p", "q"), "B": ("p",), "C": (), "D": ()},  # the lasso enters at 2 s: its state recurs at 4 s
+               {("A", "C"): Fraction(3), ("A", "D"): Fraction(1), ("B", "C"): Fraction(1), ("B", "D"): Fraction(1),
+                ("C", "B"): Fraction(1), ("C", "D"): Fraction(1), ("D", "A"): Fraction(1), ("D", "B"): Fraction(3),
+                ("D", "C"): Fraction(1)}),  # with the F[3,5] copy anchored at 0 s met and another anchored at 2 s
+         f=parse("G(p -> F[3,5] q) & F[2,2] p"))
 @settings(max_examples=max(20, settings().max_examples), deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 def test_zone_search_agrees_with_the_explicit_searches(case: tuple[Labels, Weights], f: Formula) -> None:

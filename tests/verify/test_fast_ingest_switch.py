@@ -32,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 FAST_PIECES: list[tuple[ModuleType, str]] = [
     (raw_mod, "read_ros1_fast"), (raw_mod, "_read_sqlite_quick"), (raw_mod, "_read_rosbag2_fast"),
     (decode_mod, "_pose_fast"), (decode_mod, "_twist_stamped_fast"), (decode_mod, "_joined"),
+    (decode_mod, "_strings_fast"),
     (fields_mod, "_bulk_field"),
 ]
 
@@ -239,3 +240,45 @@ def test_unknown_storage_plugin_is_one_line_exit_3(make_log: Callable[..., Path]
     err = capsys.readouterr().err.strip()
     assert exc.value.code == 3
     assert len(err.splitlines()) == 1 and str(bag) in err and "rosbag_v2_fancy" in err, err
+
+
+@pytest.mark.parametrize("ros1", [True, False])
+def test_string_decoder_agrees_with_rosbags_on_every_damage(monkeypatch: pytest.MonkeyPatch, ros1: bool) -> None:
+    """The bulk std_msgs/String decoder (solver status, run metadata) gives exactly rosbags' texts, and a topic with
+    one message rosbags refuses (cut, no NUL, bad UTF-8, bytes after the string) goes to the per-message path,
+    which skips only that message."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from verify.ingest.raw import RawTopic
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    cls = store.types["std_msgs/msg/String"]
+    ser = store.serialize_ros1 if ros1 else store.serialize_cdr
+    texts = ['{"success": true, "k": 1}', "", "é ✓", '{"success": false}' * 7]
+    good = [bytes(ser(cls(data=t), "std_msgs/msg/String")) for t in texts]
+    whole = RawTopic("/status", "std_msgs/msg/String", True, list(range(len(good))), good)
+    fast = decode_mod.decode_strings(whole, ros1, fast=True)
+    assert fast == decode_mod.decode_strings(whole, ros1, fast=False) == list(enumerate(texts))
+    body = 4 if ros1 else 8  # the string's first byte
+    damaged = {
+        "cut": good[0][:-3],
+        "bad utf-8": good[2][:body] + b"\xff" + good[2][body + 1:],
+        "trailing bytes": good[0] + b"\x00" * 5,
+        "no nul": good[0][:-1] + b"x" if not ros1 else good[0] + b"\x01",
+        "length past the end": good[0][:body - 4] + (10**6).to_bytes(4, "little") + good[0][body:],
+    }
+    declined: list[bool] = []
+    real = decode_mod._strings_fast
+
+    def spy(raw: Any, r1: bool) -> Any:
+        got = real(raw, r1)
+        declined.append(got is None)
+        return got
+
+    monkeypatch.setattr(decode_mod, "_strings_fast", spy)
+    for what, payload in damaged.items():
+        topic = RawTopic("/status", "std_msgs/msg/String", True, list(range(len(good) + 1)), [*good, payload])
+        declined.clear()
+        fast = decode_mod.decode_strings(topic, ros1, fast=True)
+        assert declined == [True], what  # the bulk decoder declined the topic
+        assert fast == decode_mod.decode_strings(topic, ros1, fast=False), what

@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from verify.errors import ScenarioInputError
+from verify.ingest.stats import median
 
 __all__ = [
     "CLOCK_OFFSET_LIMIT_S",
@@ -87,7 +88,7 @@ def median_offset_s(t_used_ns: IntArray, log_ns: IntArray) -> float | None:
     """Median of ``time used - log time`` (s); None without samples."""
     if t_used_ns.shape[0] == 0 or t_used_ns.shape != log_ns.shape:
         return None
-    return round(float(np.median((t_used_ns - log_ns).astype(np.float64))) * 1e-9, 9)
+    return round(float(median((t_used_ns - log_ns).astype(np.float64))) * 1e-9, 9)
 
 
 def clock_report(pose_topic: str, streams: dict[str, tuple[str, float | None]], applied_s: dict[str, float],

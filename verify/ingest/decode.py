@@ -47,6 +47,7 @@ TWIST = "geometry_msgs/msg/Twist"
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 TF = "tf2_msgs/msg/TFMessage"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
+STRING = "std_msgs/msg/String"
 FAST_TYPES = frozenset({POSE_STAMPED, ODOMETRY, TWIST, TWIST_STAMPED})
 
 
@@ -137,6 +138,8 @@ def _utf8_strings(u8: npt.NDArray[np.uint8], start: IntArray, length: IntArray, 
     owner = np.repeat(np.arange(start.shape[0]), length)
     within = np.arange(total) - np.repeat(np.cumsum(length) - length, length)
     high = u8[start[owner] + within] >= 0x80
+    if not high.any():
+        return True  # ASCII only (and np.unique, which imports numpy.ma on first use, is not needed)
     for k in np.unique(owner[high]).tolist():
         a = int(start[k])
         try:
@@ -338,8 +341,15 @@ def decode_twist(raw: RawTopic, ros1: bool, *, fast: bool | None = None) -> Twis
     return TwistColumns(log_ns, u, False, stamps)
 
 
-def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:
-    """std_msgs/String payloads -> (log time ns, text); undecodable messages are skipped (the caller counts them)."""
+def decode_strings(raw: RawTopic, ros1: bool, *, fast: bool | None = None) -> list[tuple[int, str]]:
+    """std_msgs/String payloads -> (log time ns, text); undecodable messages are skipped (the caller counts them).
+    ``fast``: whether the bulk decoder may be used (default: ``fast_ingest()``)."""
+    if fast is None:
+        fast = fast_ingest()
+    if fast and raw.msgtype == STRING and raw.payloads:
+        got = _strings_fast(raw, ros1)
+        if got is not None:
+            return got
     store = typestore(ros1)
     deser = store.deserialize_ros1 if ros1 else store.deserialize_cdr
     out: list[tuple[int, str]] = []
@@ -349,3 +359,31 @@ def decode_strings(raw: RawTopic, ros1: bool) -> list[tuple[int, str]]:
         except LibraryError:
             continue
     return out
+
+
+def _strings_fast(raw: RawTopic, ros1: bool) -> list[tuple[int, str]] | None:
+    """Vectorized std_msgs/String decode: the layout of every message checked at once as rosbags checks it (CDR
+    little-endian header, the string inside the message, NUL-terminated and UTF-8, nothing after it but CDR
+    padding), then one slice per message; None when any message fails a check (the slow path then decides each)."""
+    n = len(raw.payloads)
+    u8, offs, lens = _joined(raw.payloads)
+    base = 0 if ros1 else 4
+    if np.any(lens < base + 4):
+        return None
+    packed = int(lens[0]) if np.all(lens == lens[0]) and u8.shape[0] == n * int(lens[0]) else None
+    if not ros1:
+        enc = u8[offs[:, None] + np.arange(2)]
+        if not (np.all(enc[:, 0] == 0) and np.all(enc[:, 1] == 1)):
+            return None
+    len_at = offs + base
+    str_len = _u32(u8, len_at, packed)
+    end = offs + lens
+    if not _strings_ok(u8, len_at, str_len, end, ros1, packed=packed):
+        return None
+    if not _size_ok(len_at + 4 + str_len, end, ros1):
+        return None
+    start = (len_at + 4).tolist()
+    stop = (len_at + 4 + str_len - (0 if ros1 else 1)).tolist()
+    blob = u8.tobytes()
+    return [(log_ns, blob[a:b].decode("utf-8")) for log_ns, a, b in zip(raw.log_ns, start, stop, strict=True)]
+

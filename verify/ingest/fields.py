@@ -31,6 +31,7 @@ from verify.ingest.decode import _joined, _size_ok, _strings_ok, typestore
 from verify.ingest.quality import DROPOUT_FACTOR
 from verify.ingest.raw import RawLog, RawTopic, fast_ingest
 from verify.ingest.rules import ReadingRules
+from verify.ingest.stats import median
 from verify.ingest.timebase import TimeBase, judged_samples
 
 __all__ = ["HOLD_FOREVER_NS", "RATE_HZ_RANGE", "FieldSamples", "SignalStream", "decode_field", "median_period_ns",
@@ -302,7 +303,7 @@ def decode_field(raw: RawTopic, ros1: bool, field: str, *, fast: bool | None = N
 def median_period_ns(t_ns: npt.NDArray[np.int64]) -> int:
     """A signal's expected period without ``rate_hz``: the median spacing of its (sorted, distinct) message times;
     0 (unknown) with fewer than two."""
-    return int(np.median(np.diff(t_ns))) if t_ns.shape[0] >= 2 else 0
+    return int(median(np.diff(t_ns))) if t_ns.shape[0] >= 2 else 0
 
 
 #: ``signals.<name>.rate_hz`` must lie in this range (Hz): its period (1 ns .. 11.6 days) is an int64 nanosecond count
@@ -345,7 +346,7 @@ def read_signals(raw: RawLog, rules: ReadingRules, base: TimeBase, path: str, *,
                 raise type(err)(f"signal {name}: {err.reason}", path=path) from err
         cols = cache[key]
         tb, t = rules.stream_times(spec.topic, cols.stamp_ns, cols.log_ns, pose_base=base.name)
-        offset_vs_log = round(float(np.median((t - cols.log_ns).astype(np.float64))) * 1e-9, 9)
+        offset_vs_log = round(float(median((t - cols.log_ns).astype(np.float64))) * 1e-9, 9)
         # one value per instant; duplicates of an instant that disagree make the atom unknown there (NaN)
         js = judged_samples(t, cols.value, agree_tol=0.0)
         v = cols.value[js.index].copy()

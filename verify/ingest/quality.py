@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from verify.ingest.stats import median
+
 __all__ = ["NEAR_1970_NS", "CleanOrder", "clean_order", "pose_findings", "stream_findings", "yaw_from_quaternion"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -53,8 +55,8 @@ def stream_findings(stamps_ns: IntArray, log_ns: IntArray | None, order: CleanOr
                            "out_of_order_stamps": order.out_of_order}
     if t.size >= 2:
         dt = np.diff(t)
-        out["rate_hz"] = round(1e9 / float(np.median(dt)), 6) if np.median(dt) > 0 else None
-        period_ns = float(np.median(dt))  # the stream's own rate; the expected rate is reported beside it
+        out["rate_hz"] = round(1e9 / float(median(dt)), 6) if median(dt) > 0 else None
+        period_ns = float(median(dt))  # the stream's own rate; the expected rate is reported beside it
         out["expected_rate_hz"] = expected_rate_hz
         gaps = np.flatnonzero(dt > DROPOUT_FACTOR * period_ns)
         out["dropouts"] = {
@@ -71,7 +73,7 @@ def stream_findings(stamps_ns: IntArray, log_ns: IntArray | None, order: CleanOr
     if log_ns is not None and log_ns.shape == stamps_ns.shape and stamps_ns.size:
         # header stamp minus log (receive) time: negative when the header lags the recorder's clock (latency)
         off = (stamps_ns - log_ns).astype(np.float64) * 1e-9
-        out["header_vs_log_offset_s"] = {"median": round(float(np.median(off)), 9),
+        out["header_vs_log_offset_s"] = {"median": round(float(median(off)), 9),
                                          "max_abs": round(float(np.max(np.abs(off))), 9),
                                          "convention": "header stamp - log time"}
     return out

@@ -16,15 +16,13 @@ with C-level ``map``/``b"".join`` (no Python statement per row).
 from __future__ import annotations
 
 from collections.abc import Collection
-from itertools import compress
-from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
 import apsw
 import numpy as np
 import numpy.typing as npt
-from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition, MessageDefinitionFormat
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition, MessageDefinitionFormat, Qos
 from rosbags.rosbag2 import Reader as Reader2
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import ReaderMetadata, parse_qos
@@ -97,10 +95,28 @@ class QuickSqlite3Reader(Sqlite3Reader):
             raise ReaderError(f"database {self.path}: topic ids are not unique")  # rosbags groups them
         self.connections = [
             Connection(r[0], r[1], r[2], msgdef_of(r[2]), r[5] if schema >= 4 else "", 0,
-                       ConnectionExtRosbag2(r[3], parse_qos(r[4]) if schema >= 2 else []), self)
+                       ConnectionExtRosbag2(r[3], _parse_qos(r[4]) if schema >= 2 else []), self)
             for r in rows]
         self.schema, self.msgtypes = schema, msgtypes
         self.metadata = ReaderMetadata(0, 2**63 - 1, 0, 0, None, None, None, None)
+
+
+_QOS_MEMO: dict[str, tuple[Qos, ...]] = {}
+_QOS_MEMO_MAX = 256  # distinct profile texts kept (a process reading many logs sees a few)
+
+
+def _parse_qos(text: Any) -> list[Qos]:
+    """``parse_qos`` of a ``topics.offered_qos_profiles`` text, memoised per text: rosbags builds a new YAML parser
+    for every topic, though a log's topics mostly share one profile text (``Qos`` is an immutable tuple). Errors are
+    rosbags' own (raised by ``parse_qos`` and never memoised)."""
+    if not isinstance(text, str):
+        return parse_qos(text)
+    hit = _QOS_MEMO.get(text)
+    if hit is None:
+        if len(_QOS_MEMO) >= _QOS_MEMO_MAX:
+            _QOS_MEMO.clear()
+        hit = _QOS_MEMO[text] = tuple(parse_qos(text))
+    return list(hit)
 
 
 def _check_size(path: Path) -> None:
@@ -153,31 +169,30 @@ def read_sqlite_storage(storage: Sqlite3Reader, connections: Collection[Connecti
         return None  # rosbags runs the same query and reports the error
     n = len(rows)
     try:
-        stamps = list(map(itemgetter(1), rows))
-        if not all(map(int.__instancecheck__, stamps)):
+        tids, stamps, payloads = zip(*rows, strict=True) if n else ((), (), ())
+        if not all(map(int.__instancecheck__, stamps)) or not all(map(bytes.__instancecheck__, payloads)):
             return None
-        log_ns = np.fromiter(stamps, dtype=np.int64, count=n)
-        payloads = list(map(itemgetter(2), rows))
-        if not all(map(bytes.__instancecheck__, payloads)):
-            return None
+        log_ns = np.array(stamps, dtype=np.int64).reshape(n)
+        lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=n)
+        data = np.frombuffer(b"".join(payloads), dtype=np.uint8)
         topics = sorted(set(topic_of.values()))
         if len(topics) == 1:
-            return {topics[0]: _pack(log_ns, payloads)}
+            return {topics[0]: _packed(log_ns, data, lengths)}
         code = {tid: topics.index(t) for tid, t in topic_of.items()}
-        codes = np.fromiter(map(code.__getitem__, map(itemgetter(0), rows)), dtype=np.int64, count=n)
+        codes = np.fromiter(map(code.__getitem__, tids), dtype=np.int64, count=n)
     except (TypeError, OverflowError, ValueError, KeyError):
         return None
+    byte_codes = np.repeat(codes, lengths)  # the topic of every payload byte
     out: dict[str, TopicMessages] = {}
     for k, t in enumerate(topics):
         mine = codes == k
-        out[t] = _pack(log_ns[mine], list(compress(payloads, mine.tolist())))
+        out[t] = _packed(log_ns[mine], data[byte_codes == k], lengths[mine])
     return out
 
 
-def _pack(log_ns: IntArray, payloads: list[bytes]) -> TopicMessages:
-    n = len(payloads)
-    lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=n)
-    offsets = np.zeros(n, dtype=np.int64)
-    if n > 1:
+def _packed(log_ns: IntArray, data: U8Array, lengths: IntArray) -> TopicMessages:
+    """Back-to-back payloads of ``lengths`` in ``data`` -> their ``TopicMessages`` (offsets: the running sum)."""
+    offsets = np.zeros(lengths.shape[0], dtype=np.int64)
+    if lengths.shape[0] > 1:
         np.cumsum(lengths[:-1], out=offsets[1:])
-    return TopicMessages(log_ns, np.frombuffer(b"".join(payloads), dtype=np.uint8), offsets, lengths)
+    return TopicMessages(log_ns, data, offsets, lengths)

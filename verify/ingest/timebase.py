@@ -27,6 +27,7 @@ import numpy.typing as npt
 from numpy.lib.stride_tricks import sliding_window_view
 
 from verify.ingest.quality import NEAR_1970_NS
+from verify.ingest.stats import median
 
 __all__ = ["TIME_BASES", "UNORDERABLE_FRACTION", "JudgedSamples", "TimeBase", "choose_time_base", "header_outliers",
            "judged_samples", "stream_time_base"]
@@ -72,7 +73,7 @@ def header_outliers(stamps_ns: IntArray) -> BoolArray:
     bad = stamps_ns <= 0
     if bool(np.all(bad)):
         return bad
-    typical = int(np.median(stamps_ns[~bad]))
+    typical = int(median(stamps_ns[~bad]))
     if typical >= NEAR_1970_NS:
         bad |= stamps_ns < NEAR_1970_NS
     good_idx = np.flatnonzero(~bad)
@@ -80,7 +81,7 @@ def header_outliers(stamps_ns: IntArray) -> BoolArray:
     if s.size < 3:
         return bad
     d = np.abs(np.diff(s))
-    period = float(np.median(d))
+    period = float(median(d))
     tol = max(float(OUTLIER_MIN_NS), OUTLIER_PERIODS * period)
     big = np.flatnonzero(d > tol)
     if big.size == 0:
@@ -89,7 +90,7 @@ def header_outliers(stamps_ns: IntArray) -> BoolArray:
     half = min(OUTLIER_WINDOW // 2, s.size - 1)
     padded = np.pad(s, half, mode="reflect")
     windows = sliding_window_view(padded, 2 * half + 1)[cand]
-    med = np.median(windows, axis=1)
+    med = median(windows, axis=1)
     far = np.abs(s[cand].astype(np.float64) - med) > tol
     bad[good_idx[cand[far]]] = True
     return bad
