@@ -568,11 +568,41 @@ def workspace_figure(certificate: Certificate, scenario: Scenario, trajectory: p
     return png_bytes(workspace_map(certificate, scenario, trajectory, nominal).figure)
 
 
+def _title_needs_placing(ax: Axes) -> bool:
+    """Whether matplotlib's automatic title placement could move ``ax``'s title off its plain place (``y = 1``, its
+    pad above the axes): only when the x axis has tick labels or its label on top, when the y axis shows an offset
+    text (``1e-5``, ``+1e3``) for the ticks it will draw, or when other axes are attached to it (child axes, a twin).
+    The y ticks are computed as a draw computes them (locator, then formatter)."""
+    xaxis = ax.xaxis
+    if xaxis.get_label_position() == "top" or xaxis.get_ticks_position() in ("top", "default") or \
+            any(tick.label2.get_visible() for tick in (*xaxis.majorTicks[:1], *xaxis.minorTicks[:1])):
+        return True
+    fig = ax.get_figure()
+    box = ax.get_position().bounds
+    if ax.child_axes or fig is None or any(other is not ax and other.get_position().bounds == box
+                                           for other in fig.axes):  # a twin shares its axes' place
+        return True
+    formatter = ax.yaxis.get_major_formatter()
+    formatter.format_ticks(ax.yaxis.get_majorticklocs())
+    return bool(ax.yaxis.offsetText.get_visible() and formatter.get_offset())
+
+
+def _fix_title_positions(fig: Figure) -> None:
+    """Keep each title at its plain place where automatic placement would leave it there (``_title_needs_placing``).
+    matplotlib otherwise re-places every titled axes' title at each draw by measuring the tick labels of its axes
+    (about an eighth of drawing a report's figures); fixed where nothing can move it, the pixels are the same."""
+    for ax in fig.axes:
+        if any(ax.get_title(loc) for loc in ("center", "left", "right")) and not _title_needs_placing(ax):
+            ax._autotitlepos = False  # what set_title(..., y=1.0) sets: the title is not re-placed at each draw
+
+
 def png_bytes(fig: Figure) -> bytes:
     """A figure as PNG at the reports' resolution. zlib level 3 instead of Pillow's default 6: the same pixels,
-    files about 7 % larger, encoded in about half the time."""
+    files about 7 % larger, encoded in about half the time. Titles that nothing can move are not re-placed at the
+    draw (``_fix_title_positions``)."""
     import io
 
+    _fix_title_positions(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=_DPI, pil_kwargs={"compress_level": 3})
     return buf.getvalue()
