@@ -642,7 +642,7 @@ def _title_needs_placing(ax: Axes) -> bool:
                                            for other in fig.axes):  # a twin shares its axes' place
         return True
     formatter = ax.yaxis.get_major_formatter()
-    formatter.format_ticks(ax.yaxis.get_majorticklocs())
+    formatter.format_ticks([float(v) for v in ax.yaxis.get_majorticklocs()])
     return bool(ax.yaxis.offsetText.get_visible() and formatter.get_offset())
 
 
@@ -652,7 +652,7 @@ def _fix_title_positions(fig: Figure) -> None:
     (about an eighth of drawing a report's figures); fixed where nothing can move it, the pixels are the same."""
     for ax in fig.axes:
         if any(ax.get_title(loc) for loc in ("center", "left", "right")) and not _title_needs_placing(ax):
-            ax._autotitlepos = False  # what set_title(..., y=1.0) sets: the title is not re-placed at each draw
+            ax._autotitlepos = False  # type: ignore[attr-defined]  # what set_title(y=1.0) sets: not re-placed
 
 
 def png_bytes(fig: Figure) -> bytes:

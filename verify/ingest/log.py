@@ -47,6 +47,11 @@ IntArray = npt.NDArray[np.int64]
 T = TypeVar("T")
 
 
+def _optional_errors() -> tuple[type[BaseException], ...]:
+    """What makes an optional stream a finding instead of an error: ours, and the readers' (``read_errors``)."""
+    return (VerifyError, *read_errors())
+
+
 @dataclass(frozen=True, slots=True)
 class PoseStream:
     """Sorted, de-duplicated poses: absolute time (ns, in the chosen time base), x, y (m), yaw (rad)."""
@@ -217,7 +222,7 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
     """Decode an optional stream; a stream whose messages cannot be decoded becomes a finding (not an error)."""
     try:
         return decode()
-    except (VerifyError, *read_errors()) as err:
+    except _optional_errors() as err:
         words = err.reason if isinstance(err, UnusableInputError) else in_words(err)
         quality[what] = {"missing": True, "undecodable": True, "topic": topic, "error": words}
         quality["notes"].append(f"{topic}: messages cannot be decoded ({words}); the {what} stream is not used")
