@@ -151,3 +151,15 @@ def test_certify_of_a_ros1_bag_imports_nothing_ros2() -> None:
     mcap = subprocess.run([sys.executable, "-c", probe, "certify", str(root / "logs" / "demo.mcap"), "--scenario",
                            "nexus-sml", "--json"], capture_output=True, text=True, timeout=300, check=False)
     assert mcap.stderr.strip().splitlines()[-1].startswith("0 ['rosbags.rosbag2'"), mcap.stderr
+
+
+@pytest.mark.parametrize(("call", "frozen"), [("main()", True), ("main(['spec', 'F[0,1] a'])", False)])
+def test_only_a_one_command_process_freezes_its_imports(call: str, frozen: bool) -> None:
+    """``tubempc`` (``main()``) freezes the command's imported modules out of garbage collection (the process runs
+    one command); a caller that runs commands in its own process (``main(argv)``: tests, tools) keeps its collector
+    as it was."""
+    probe = ("import gc, sys\nfrom tubempc.cli import main\nsys.argv = ['tubempc', 'spec', 'F[0,1] a']\n"
+             f"try:\n    {call}\nexcept SystemExit:\n    pass\nprint(gc.get_freeze_count() > 0)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == str(frozen)
