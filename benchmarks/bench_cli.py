@@ -7,7 +7,9 @@ at 50 Hz, a simulated clock) and a scenario for it (``tubempc scenario init``), 
 (the median of ``--repeat`` runs, wall clock): ``python -c pass``; ``tubempc -V``; ``tubempc --help``;
 ``tubempc certify LOG --scenario S --json``; and a plain rosbags read of the same log (every message read and
 deserialized, in a fresh process too). Each is printed with its ratio to ``python -c pass``; the last line is
-``version_s= help_s= certify_json_s= rosbags_read_s=``. Run it on an idle machine: the times are wall clock.
+``version_s= help_s= certify_json_s= rosbags_read_s=``. Run it on an idle machine: the times are wall clock. Each
+row also prints the median CPU time (user + system) of its process: on a loaded machine the wall time measures the
+load, the CPU time the work.
 
 Every command runs once untimed first, with ``PYTHONDONTWRITEBYTECODE`` removed from its environment, so that
 each is timed as an installed package runs (modules compiled once, their bytecode cached), not recompiling every
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -76,18 +79,26 @@ def jackal_like_log(path: Path) -> Path:
     return kit.write_messages(path, messages)  # type: ignore[no-any-return]
 
 
-def timed(cmd: list[str], repeat: int) -> float:
-    """Median wall time of ``cmd`` as a fresh process (it must succeed or exit with a verdict code)."""
+def _children_cpu_s() -> float:
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return used.ru_utime + used.ru_stime
+
+
+def timed(cmd: list[str], repeat: int) -> tuple[float, float]:
+    """Median wall time and median CPU time of ``cmd`` as a fresh process (it must succeed or exit with a verdict
+    code)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    times = []
+    times, cpus = [], []
     for i in range(repeat + 1):  # the first run caches the bytecode; it is not timed
+        cpu = _children_cpu_s()
         start = time.perf_counter()
         done = subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=ROOT, env=env)
         if i:
             times.append(time.perf_counter() - start)
+            cpus.append(_children_cpu_s() - cpu)
         if done.returncode not in (0, 1, 2):
             raise RuntimeError(f"{' '.join(cmd)} exited {done.returncode}: {done.stderr.strip()}")
-    return statistics.median(times)
+    return statistics.median(times), statistics.median(cpus)
 
 
 def main() -> None:
@@ -101,7 +112,7 @@ def main() -> None:
         init = subprocess.run([py, "-m", "tubempc", "scenario", "init", str(log)], capture_output=True, text=True,
                               check=True, cwd=ROOT)
         scenario.write_text(init.stdout)
-        base = timed([py, "-c", "pass"], args.repeat)
+        base, base_cpu = timed([py, "-c", "pass"], args.repeat)
         rows = {
             "version_s": timed([py, "-m", "tubempc", "-V"], args.repeat),
             "help_s": timed([py, "-m", "tubempc", "--help"], args.repeat),
@@ -109,10 +120,10 @@ def main() -> None:
                                     args.repeat),
             "rosbags_read_s": timed([py, "-c", ROSBAGS_READ, str(log)], args.repeat),
         }
-    print(f"python -c pass: {base:.3f} s (baseline)")
-    for name, value in rows.items():
-        print(f"{name.removesuffix('_s')}: {value:.3f} s ({value / base:.1f}x python -c pass)")
-    print(" ".join(f"{name}={value:.3f}" for name, value in rows.items()))
+    print(f"python -c pass: {base:.3f} s (baseline), CPU {base_cpu:.3f} s")
+    for name, (value, cpu) in rows.items():
+        print(f"{name.removesuffix('_s')}: {value:.3f} s ({value / base:.1f}x python -c pass), CPU {cpu:.3f} s")
+    print(" ".join(f"{name}={value:.3f}" for name, (value, _) in rows.items()))
 
 
 if __name__ == "__main__":

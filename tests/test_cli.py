@@ -132,3 +132,34 @@ def test_certify_json_imports_no_plotting_or_planning_module() -> None:
     out = subprocess.run([sys.executable, "-c", probe, "certify", str(log), "--scenario", "nexus-sml", "--json"],
                          capture_output=True, text=True, timeout=300, check=False)
     assert out.stderr.strip().splitlines()[-1] == "0 []", out.stderr
+
+
+ROS2_ONLY = ("rosbags.rosbag2", "ruamel.yaml", "verify.ingest.mcap", "verify.ingest.mcapfile", "verify.ingest.sqlite")
+
+
+def test_certify_of_a_ros1_bag_imports_nothing_ros2() -> None:
+    """A ROS1 bag needs neither rosbags.rosbag2 (nor the YAML library it loads) nor the MCAP and sqlite3 readers:
+    they are imported for the logs that need them (``verify.ingest.raw``), so certify --json starts sooner."""
+    root = Path(__file__).resolve().parents[1]
+    probe = ("import sys\nfrom tubempc.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n"
+             f"    code = e.code\nprint(code, sorted(m for m in {ROS2_ONLY!r} if m in sys.modules), file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", probe, "certify", str(root / "logs" / "diffdrive_odom.bag"),
+                          "--scenario", str(root / "docs" / "examples" / "diffdrive-room.yaml"), "--json"],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert out.stderr.strip().splitlines()[-1] == "0 []", out.stderr
+    # and a ROS2 log still gets them (the same command on the demo MCAP log passes)
+    mcap = subprocess.run([sys.executable, "-c", probe, "certify", str(root / "logs" / "demo.mcap"), "--scenario",
+                           "nexus-sml", "--json"], capture_output=True, text=True, timeout=300, check=False)
+    assert mcap.stderr.strip().splitlines()[-1].startswith("0 ['rosbags.rosbag2'"), mcap.stderr
+
+
+@pytest.mark.parametrize(("call", "frozen"), [("main()", True), ("main(['spec', 'F[0,1] a'])", False)])
+def test_only_a_one_command_process_freezes_its_imports(call: str, frozen: bool) -> None:
+    """``tubempc`` (``main()``) freezes the command's imported modules out of garbage collection (the process runs
+    one command); a caller that runs commands in its own process (``main(argv)``: tests, tools) keeps its collector
+    as it was."""
+    probe = ("import gc, sys\nfrom tubempc.cli import main\nsys.argv = ['tubempc', 'spec', 'F[0,1] a']\n"
+             f"try:\n    {call}\nexcept SystemExit:\n    pass\nprint(gc.get_freeze_count() > 0)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == str(frozen)

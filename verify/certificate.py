@@ -12,7 +12,8 @@ margin with the atom and unit it comes from, first violation, when it was decide
 atom or window was unknown, when, why and what would decide it, with a one-sentence ``explanation`` that every
 report shows as is. Checks keep their own detail fields (``subformula``, ``reason``,
 ``radius_m``, ...) beside the common ones; the top level admits no field the schema does not name, so a new field
-is a schema change (and a ``CERTIFICATE_VERSION`` bump), never a silent one.
+is a schema change (and a ``CERTIFICATE_VERSION`` bump), never a silent one. Every model is built on first use
+(``defer_build``): certify validates one ``Certificate``, whose validator holds the nested models' schemas.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ class Verdict(StrEnum):
 class CheckEntry(BaseModel):
     """One check: name, verdict, margin with its unit, first violation; check-specific details beside them."""
 
-    model_config = ConfigDict(frozen=True, extra="allow")
+    model_config = ConfigDict(frozen=True, extra="allow", defer_build=True)
 
     name: str = Field(description="check name: spec_trajectory, spec_timed_run, tube, input_box, workspace, "
                                   "obstacle_clearance, ...")
@@ -81,7 +82,7 @@ class CheckEntry(BaseModel):
 class UnknownEntry(BaseModel):
     """What left an obligation undecided: an atom over a stretch of time, or a window the log does not cover."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     subformula: str = Field(description="the undecided sub-formula the witness walk reached")
     atom: str | None = Field(description="the atom that was unknown (null: a window or next sample, not an atom)")
@@ -95,7 +96,7 @@ class ObligationEntry(BaseModel):
     """The formula's judgement under the trajectory semantics: for the whole formula (role ``formula``, the same
     values as the spec_trajectory check) and for each top-level conjunct (role ``conjunct``)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     formula: str = Field(description="canonical text of the obligation")
     role: Literal["formula", "conjunct"]
@@ -132,7 +133,7 @@ class ObligationEntry(BaseModel):
 class TimedRunEntry(BaseModel):
     """Definition 3: the robot disc became fully contained in ``region`` at ``time`` (s from time 0)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     region: str
     time: float
@@ -140,7 +141,7 @@ class TimedRunEntry(BaseModel):
 
 
 class TubeInfo(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     radius_m: float
     noise_tolerance_m: float
@@ -151,7 +152,7 @@ class RobotEntry(BaseModel):
     """One robot of a multi-robot scenario: where its poses came from, its disc and speed bound, its own checks
     (named ``robot/check`` under ``checks``), its timed run and the quality of its streams."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     name: str
     pose_source: Any = Field(description="topic and type the robot's poses were read from")
@@ -170,7 +171,7 @@ class RobotEntry(BaseModel):
 class FleetInfo(BaseModel):
     """How the robots were judged together: the joint span (every robot observed), the separation asked for."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     robots: list[str]
     joint_span_s: tuple[float, float] | None = Field(description="[start, end] of the stretch every robot was "
@@ -183,7 +184,7 @@ class FleetInfo(BaseModel):
 class NotChecked(BaseModel):
     """A check that was not run, and why (not selected, or its data is not in the scenario)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     name: str
     reason: str
@@ -192,7 +193,7 @@ class NotChecked(BaseModel):
 class Certificate(BaseModel):
     """The certificate of one log (``certificate.json``, ``tubempc certify --json``)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", title="tubempc certificate")
+    model_config = ConfigDict(frozen=True, extra="forbid", title="tubempc certificate", defer_build=True)
 
     certificate_version: Literal[5] = Field(description="bumped on every change of this schema")
     verdict: Verdict = Field(description="fail if any check fails; else inconclusive if any check is inconclusive "
@@ -268,7 +269,7 @@ class Certificate(BaseModel):
 class UnusableLog(BaseModel):
     """A log that could not be certified, as ``certify --json`` lists it among several logs' certificates."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     log: str
     verdict: Literal["unusable", "error"] = Field(description="unusable input (exit 3) or an internal error (70)")

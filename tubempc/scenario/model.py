@@ -50,7 +50,9 @@ _ATOM_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 
 
 class _Frozen(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=False, populate_by_name=True)
+    # defer_build: a model's validator is built on first use, not at import (loading a scenario builds only the
+    # Scenario's, which holds its nested models' schemas; the same checks, a quicker start for every command)
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=False, populate_by_name=True, defer_build=True)
 
 
 class Workspace(_Frozen):

@@ -36,7 +36,7 @@ from verify.ingest.digest import (
 from verify.ingest.fields import SignalStream, outside_span, read_signals
 from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stream_findings, yaw_from_quaternion
 from verify.ingest.raw import RawLog, check_bag_folder, read_raw, special_file_kind
-from verify.ingest.readerrors import READ_ERRORS, in_words
+from verify.ingest.readerrors import in_words, read_errors
 from verify.ingest.rules import TF_TOPIC, ReadingRules
 from verify.ingest.timebase import JudgedSamples, judged_samples
 
@@ -45,7 +45,11 @@ __all__ = ["LogData", "PoseStream", "file_sha256", "log_digest", "read_log", "wa
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 T = TypeVar("T")
-_OPTIONAL_ERRORS: tuple[type[BaseException], ...] = (VerifyError, *READ_ERRORS)
+
+
+def _optional_errors() -> tuple[type[BaseException], ...]:
+    """What makes an optional stream a finding instead of an error: ours, and the readers' (``read_errors``)."""
+    return (VerifyError, *read_errors())
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,7 +172,7 @@ def read_log(path: str | Path, scenario: Scenario, *, time_base: str = "auto", s
     except BaseException as err:
         if job is not None:
             job.cancel()  # the file digest of a log that cannot be certified is not needed
-        if isinstance(err, READ_ERRORS) and not isinstance(err, VerifyError):
+        if isinstance(err, read_errors()) and not isinstance(err, VerifyError):
             raise _unreadable(p, err) from err
         if isinstance(err, LogReadError) and err.path is None:  # a reader's error that could not name the file
             raise LogReadError(err.reason, path=str(p)) from err
@@ -199,7 +203,7 @@ def log_digest(path: str | Path, scenario: Scenario, algorithm: str = DEFAULT_DI
             got = digest_path(p, algorithm)
     except VerifyError:
         raise
-    except READ_ERRORS as err:
+    except read_errors() as err:
         raise _unreadable(p, err) from err
     if got is None:  # only a cancelled digest has no value
         raise RuntimeError(f"digest of {p} was not computed")
@@ -218,7 +222,7 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
     """Decode an optional stream; a stream whose messages cannot be decoded becomes a finding (not an error)."""
     try:
         return decode()
-    except _OPTIONAL_ERRORS as err:
+    except _optional_errors() as err:
         words = err.reason if isinstance(err, UnusableInputError) else in_words(err)
         quality[what] = {"missing": True, "undecodable": True, "topic": topic, "error": words}
         quality["notes"].append(f"{topic}: messages cannot be decoded ({words}); the {what} stream is not used")
@@ -248,7 +252,7 @@ def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | No
         cols = decode_pose(praw, raw.ros1, child_frame=child)
     except LogReadError as err:
         raise LogReadError(err.reason, path=str(p)) from err
-    except READ_ERRORS as err:
+    except read_errors() as err:
         raise LogReadError(f"pose topic {pose_topic}: {praw.msgtype} messages cannot be decoded: {in_words(err)}",
                            path=str(p)) from err
     if cols.stamp_ns.size == 0:

@@ -14,7 +14,8 @@ partial. A log path or bag folder holding a FIFO, device or socket is refused be
 ``TUBEMPC_FAST_INGEST=0`` (``fast_ingest``) turns our own fast readers off: ROS1 and sqlite3 logs are then opened
 and read by plain ``rosbags`` (its ``Reader.messages``), MCAP by the record scan, and every payload decoded by one
 ``deserialize`` per message (``verify.ingest.decode``, ``.fields``). The format of a log is decided by rosbags' own
-dispatch (``detect_format``).
+dispatch (``detect_format``). What only some formats need (``rosbags.rosbag2`` and the YAML library it loads, the
+MCAP, sqlite3 and salvage readers) is imported when a log of that format is read.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter, itemgetter
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import apsw  # rosbags reads sqlite3 bags through apsw; its errors must be wrapped like sqlite3's
 import numpy as np
@@ -36,21 +38,19 @@ import yaml
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import ReaderError as ReaderError1
-from rosbags.rosbag2 import Reader as Reader2
-from rosbags.rosbag2 import ReaderError as ReaderError2
-from rosbags.rosbag2.reader import DirectoryReader
-from rosbags.rosbag2.storage_mcap import McapReader
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 
 from tubempc.runtime.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
-from verify.ingest.mcap import TopicMessages, read_mcap_storage
-from verify.ingest.mcapfile import read_bag_metadata, read_mcap_log
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic, rosbag2_errors
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
-from verify.ingest.salvage import SalvagedMessage, walk_mcap, walk_ros1
-from verify.ingest.sqlite import QuickReader, read_sqlite_storage
+
+if TYPE_CHECKING:
+    from rosbags.rosbag2 import Reader as Reader2
+
+    from verify.ingest.mcap import TopicMessages
+    from verify.ingest.salvage import SalvagedMessage
+    from verify.ingest.sqlite import QuickReader
 
 __all__ = ["FAST_INGEST_ENV", "RawLog", "RawTopic", "check_bag_folder", "check_log_path", "detect_format",
            "fast_ingest", "read_raw", "special_file_kind"]
@@ -109,17 +109,22 @@ def detect_format(path: Path) -> str:
         storage_id = _storage_identifier(meta)
         if storage_id is None:
             return _format_from_files(path)
+        from rosbags.rosbag2.reader import DirectoryReader  # ROS2 logs only (module docstring)
+
         plugin = DirectoryReader.STORAGE_PLUGINS.get(storage_id)
-        if plugin is None or plugin not in _PLUGIN_FORMATS:
+        if plugin is None or plugin not in _plugin_formats():
             raise LogReadError(f"metadata.yaml names the storage plugin {storage_id!r}; rosbags reads "
                                f"{' and '.join(sorted(DirectoryReader.STORAGE_PLUGINS))} bags", path=str(path))
-        return _PLUGIN_FORMATS[plugin]
+        return _plugin_formats()[plugin]
     if path.suffix.lower() == ".bag":  # rosbags' ROS1 reader opens any file name
         return "ros1"
+    from rosbags.rosbag2 import Reader as Reader2  # ROS2 logs only (module docstring)
+
+    formats = _plugin_formats()
     plugin = Reader2.STORAGE_PLUGINS.get(path.suffix)
-    if plugin in _PLUGIN_FORMATS:
-        return _PLUGIN_FORMATS[plugin]
-    known = sorted({".bag", *(k for k, v in Reader2.STORAGE_PLUGINS.items() if v in _PLUGIN_FORMATS)})
+    if plugin in formats:
+        return formats[plugin]
+    known = sorted({".bag", *(k for k, v in Reader2.STORAGE_PLUGINS.items() if v in formats)})
     if path.suffix.lower() in known:
         raise LogReadError(f"extension {path.suffix!r}: rosbags recognizes {path.suffix.lower()!r} in lower case "
                            f"only (rename the file)", path=str(path))
@@ -127,8 +132,14 @@ def detect_format(path: Path) -> str:
                        f"{', '.join(known)} or a ROS2 bag directory", path=str(path))
 
 
-#: rosbags' storage reader classes -> our format names
-_PLUGIN_FORMATS: dict[object, str] = {McapReader: "mcap", Sqlite3Reader: "sqlite3"}
+def _plugin_formats() -> dict[object, str]:
+    """rosbags' storage reader classes -> our format names."""
+    from rosbags.rosbag2.storage_mcap import McapReader  # ROS2 logs only (module docstring)
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    return {McapReader: "mcap", Sqlite3Reader: "sqlite3"}
+
+
 #: libyaml's safe loader when PyYAML has it (10x faster on a bag's metadata.yaml), else the pure-Python one
 _SAFE_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _METADATA_MAX_BYTES = 64 << 20  # a metadata.yaml is a few KiB; a bigger one is damage (files decide)
@@ -229,6 +240,8 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
             raise
         if fmt == "sqlite3":
             raise TruncatedLogError(f"{err.reason}; --salvage supports ROS1 and MCAP logs only", path=str(p)) from err
+        from verify.ingest.mcapfile import read_bag_metadata  # ROS2 logs only (module docstring)
+
         if p.is_dir() and read_bag_metadata(p).compression_mode is not None:
             raise TruncatedLogError(f"{err.reason}; --salvage does not read compressed bag folders", path=str(p)
                                     ) from err
@@ -239,11 +252,15 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
 #: What rosbags' readers raise on a damaged file, caught only around their calls (open, messages): rosbags checks
 #: its index with ``assert`` and indexes its records unguarded, so KeyError, IndexError, TypeError, AttributeError
 #: and AssertionError from it mean damaged bytes (apsw: rosbags' sqlite3 driver, e.g. CorruptError on a truncated
-#: .db3).
-_READ_ERRORS: tuple[type[Exception], ...] = (
-    ReaderError1, ReaderError2, OSError, sqlite3.DatabaseError, apsw.Error, struct.error, EOFError, ValueError,
+#: .db3). rosbags.rosbag2's ReaderError joins them once that package is loaded (``_read_errors``).
+_BASE_READ_ERRORS: tuple[type[Exception], ...] = (
+    ReaderError1, OSError, sqlite3.DatabaseError, apsw.Error, struct.error, EOFError, ValueError,
     KeyError, IndexError, TypeError, AttributeError, AssertionError, UnicodeDecodeError, OverflowError, MemoryError,
     RecursionError, NotImplementedError, SerdeError, *DECOMPRESS_ERRORS)
+
+
+def _read_errors() -> tuple[type[Exception], ...]:
+    return (*_BASE_READ_ERRORS, *rosbag2_errors())
 
 
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
@@ -260,6 +277,8 @@ def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
 def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
     own = fast_ingest()
     if fmt == "mcap":
+        from verify.ingest.mcapfile import read_mcap_log  # MCAP logs only (module docstring)
+
         got = read_mcap_log(path, wanted, fast=own)
         out = {topic: RawTopic(topic, t.msgtype, t.has_definition, t.log_ns, t.payloads)
                for topic, t in got.topics.items()}
@@ -267,11 +286,13 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
     if fmt == "sqlite3" and own and (quick := _read_sqlite_quick(path, wanted, notes)) is not None:
         return quick
     reader: Reader1 | Reader2
+    if fmt != "ros1":
+        from rosbags.rosbag2 import Reader as Reader2  # ROS2 logs only (module docstring)
     try:
         reader = Reader1(path) if fmt == "ros1" else Reader2(path)
         reader.open()
-    except _READ_ERRORS as err:
-        if path.is_dir() and isinstance(err, KeyError | TypeError | AttributeError | ReaderError2) and not \
+    except _read_errors() as err:
+        if path.is_dir() and isinstance(err, (KeyError, TypeError, AttributeError, *rosbag2_errors())) and not \
                 isinstance(err, sqlite3.DatabaseError | apsw.Error):
             raise LogReadError(f"unreadable {fmt} ROS2 bag: its metadata.yaml is incomplete or malformed "
                                f"({err.__class__.__name__}: {' '.join(str(err).split())[:160]})",
@@ -283,11 +304,11 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         selected = [c for c in conns if c.topic in wanted]
         out = _topics_from(selected)
         rows: list[tuple[Connection, int, bytes | memoryview]] = []
-        fast = _read_rosbag2_fast(reader, selected) if own and selected and isinstance(reader, Reader2) else None
+        fast = _read_rosbag2_fast(reader, selected) if own and selected and not isinstance(reader, Reader1) else None
         if selected and fast is None:
             try:
                 rows = list(reader.messages(connections=selected))
-            except _READ_ERRORS as err:
+            except _read_errors() as err:
                 raise _wrap_error(path, fmt, err) from err
     finally:
         reader.close()
@@ -335,10 +356,12 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
     definitions without its two counting scans of ``messages``) and our fast reader; None when no wanted topic is
     present, on any error and on anything the fast reader declines: then rosbags opens and reads the log as before
     (so errors, truncation and their messages are rosbags')."""
+    from verify.ingest.sqlite import QuickReader  # sqlite3 logs only (module docstring)
+
     try:
         reader = QuickReader(path)
         reader.open()
-    except _READ_ERRORS:  # what rosbags' open raises on a damaged log: rosbags' own open then decides and reports
+    except _read_errors():  # what rosbags' open raises on a damaged log: rosbags' own open then decides and reports
         return None
     try:
         conns = list(reader.connections)
@@ -346,12 +369,12 @@ def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog
         fast = _read_rosbag2_fast(reader, selected) if selected else None
         if fast is not None:  # the counts rosbags' open declares (its count scan, for the selected topics only)
             selected = _with_counts(reader, selected)
-    except _READ_ERRORS:  # as above
+    except _read_errors():  # as above
         fast = None
     finally:
         try:
             reader.close()
-        except _READ_ERRORS:  # as above
+        except _read_errors():  # as above
             fast = None
     if fast is None:
         return None
@@ -369,6 +392,8 @@ def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connec
     (``count(messages.id)`` of a left join of ``topics`` and ``messages``): a damaged table or index can make the
     ordered read return other rows than the table holds, which the count check then names, as on rosbags' own
     path."""
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader  # ROS2 logs only (module docstring)
+
     storage = reader.storage
     if not isinstance(storage, Sqlite3Reader) or storage.dbconn is None:
         return selected  # a bag folder: its metadata.yaml declares the counts
@@ -383,6 +408,10 @@ def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connec
 def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:
     """(storage, its connections to read) in the order rosbags' ``Reader.messages(selected)`` reads them; None for
     what the fast readers do not reproduce (per-message compression, unknown storage)."""
+    from rosbags.rosbag2.reader import DirectoryReader  # ROS2 logs only (module docstring)
+    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
     st = reader.storage
     if isinstance(st, McapReader | Sqlite3Reader):
         return [(st, selected)]
@@ -402,6 +431,12 @@ def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[obj
 def _read_rosbag2_fast(reader: Reader2, selected: list[Connection]) -> dict[str, TopicMessages] | None:
     """The selected topics' messages through our MCAP / sqlite3 readers (verify.ingest.mcap, .sqlite), storage
     after storage as rosbags reads them; None when any storage declines (then rosbags reads the log)."""
+    from rosbags.rosbag2.storage_mcap import McapReader  # ROS2 logs only (module docstring)
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    from verify.ingest.mcap import TopicMessages, read_mcap_storage
+    from verify.ingest.sqlite import read_sqlite_storage
+
     plan = _storage_plan(reader, selected)
     if plan is None:
         return None
@@ -471,6 +506,8 @@ def _topics_from(conns: Iterable[Connection]) -> dict[str, RawTopic]:
 
 
 def _salvage(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> RawLog:
+    from verify.ingest.salvage import walk_mcap, walk_ros1  # --salvage only (module docstring)
+
     messages: Iterator[SalvagedMessage]
     out: dict[str, RawTopic] = {}
     logs: dict[str, list[int]] = {}

@@ -1,29 +1,33 @@
 """Library errors met while reading a damaged log -> one line in words (the library's message is detail).
 
 input: an exception raised by rosbags, sqlite3/apsw, the decompressors or our own readers on bad bytes -> output:
-the problem in words (``in_words``), and ``READ_ERRORS``, the exception classes the read boundary
+the problem in words (``in_words``), and ``read_errors()``, the exception classes the read boundary
 (``verify.ingest.log.read_log``) turns into ``LogReadError`` (exit 3) instead of an internal error (exit 70).
+
+``rosbags.rosbag2`` (and the YAML library it loads) is imported only for the logs that need it (ROS2 bags, MCAP,
+sqlite3): its ``ReaderError`` joins ``read_errors()`` once that package is loaded, since nothing else raises it.
+``READ_ERRORS``, the full tuple, imports it when first named.
 """
 
 from __future__ import annotations
 
 import sqlite3
 import struct
+import sys
 import zlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import apsw  # rosbags' sqlite3 driver
 from rosbags.rosbag1 import ReaderError as ReaderError1
-from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.serde import SerdeError
 
 from verify.errors import LogReadError
 from verify.ingest.mcaprecords import zstd
 
 __all__ = [
-    "DECOMPRESS_ERRORS", "DESERIALIZE_ERRORS", "READ_ERRORS", "LibraryError", "deserialize", "in_words",
-    "one_type_per_topic"]
+    "DECOMPRESS_ERRORS", "DESERIALIZE_ERRORS", "LibraryError", "deserialize", "in_words",
+    "one_type_per_topic", "read_errors", "rosbag2_errors"]
 
 #: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
 DECOMPRESS_ERRORS: tuple[type[Exception], ...] = (zlib.error, OSError, RuntimeError, zstd.ZstdError)
@@ -57,11 +61,35 @@ def deserialize(deser: Callable[[Any, str], Any], payload: Any, msgtype: str) ->
 #: what the read boundary (``read_log``, ``log_digest``) turns into exit 3: the readers' own errors on damaged
 #: bytes, and library errors translated where the library is called (``LibraryError``). A ``TypeError``,
 #: ``AttributeError``, ``KeyError``, ``IndexError`` or ``AssertionError`` is not here: raised by our code it is a bug
-#: (exit 70); raised by a library on bad bytes it arrives as ``LibraryError``.
-READ_ERRORS: tuple[type[BaseException], ...] = (
-    ReaderError1, ReaderError2, SerdeError, LibraryError, OverflowError, UnicodeDecodeError, ValueError,
+#: (exit 70); raised by a library on bad bytes it arrives as ``LibraryError``. Without rosbags.rosbag2's
+#: ``ReaderError``: ``read_errors()`` adds it once that package is loaded.
+_BASE_READ_ERRORS: tuple[type[BaseException], ...] = (
+    ReaderError1, SerdeError, LibraryError, OverflowError, UnicodeDecodeError, ValueError,
     struct.error, EOFError, sqlite3.Error, apsw.Error, MemoryError, RecursionError, NotImplementedError,
     *DECOMPRESS_ERRORS)
+
+
+def rosbag2_errors() -> tuple[type[Exception], ...]:
+    """rosbags.rosbag2's ``ReaderError`` when that package is loaded, else nothing (only it raises that error, so
+    a log read without it cannot meet one)."""
+    errors = sys.modules.get("rosbags.rosbag2.errors")
+    return () if errors is None else (errors.ReaderError,)
+
+
+def read_errors() -> tuple[type[BaseException], ...]:
+    """The exception classes the read boundary turns into exit 3 (see ``_BASE_READ_ERRORS``), with rosbags.rosbag2's
+    ``ReaderError`` once that package is loaded: ``except read_errors()`` is evaluated when an error is met."""
+    return (*_BASE_READ_ERRORS, *rosbag2_errors())
+
+
+def __getattr__(name: str) -> tuple[type[BaseException], ...]:
+    """``READ_ERRORS``: the full tuple, rosbags.rosbag2's ``ReaderError`` included (importing that package)."""
+    if name == "READ_ERRORS":
+        import rosbags.rosbag2  # noqa: F401  # its ReaderError belongs in the tuple
+
+        return read_errors()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 _DETAIL_CHARS = 160
 
@@ -102,7 +130,7 @@ def in_words(err: BaseException) -> str:
         words = "it ends in the middle of a record (truncated)"
     elif isinstance(err, OSError):
         words = "it cannot be read from disk"
-    elif isinstance(err, ReaderError1 | ReaderError2) and "YAML" in str(err):
+    elif isinstance(err, (ReaderError1, *rosbag2_errors())) and "YAML" in str(err):
         words = "its metadata.yaml is not valid YAML"
     else:
         words = "its records are malformed"
