@@ -22,8 +22,8 @@ from enum import IntEnum
 
 from verify.ingest.mcaprecords import lz4_decompress
 
-__all__ = ["MAGIC", "CutError", "MalformedError", "Op", "Record", "Ros1Message", "Ros1Stream", "connection_of",
-           "decompress", "header_fields", "record_at"]
+__all__ = ["DAMAGE", "MAGIC", "BagState", "CutError", "MalformedError", "Op", "Record", "Ros1Message", "Ros1Stream",
+           "bag_state", "connection_of", "decompress", "header_fields", "record_at"]
 
 #: the first 13 bytes of every ROS1 bag (format 2.0)
 MAGIC = b"#ROSBAG V2.0\n"
@@ -46,6 +46,11 @@ class CutError(Exception):
 
 class MalformedError(Exception):
     """A record's fields contradict its lengths or the format (damaged bytes)."""
+
+
+#: what reading a complete record raises when its bytes are damaged: malformed fields, or a chunk that does not
+#: decompress (bz2: OSError, ValueError, EOFError; lz4: RuntimeError)
+DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, EOFError, OSError, RuntimeError)
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +142,40 @@ def decompress(data: bytes | memoryview, compression: str) -> bytes:
 class _Chunk:
     pos: int  # the chunk record
     compression: str
+    #: per connection, (log time, offset in the chunk's records) of each message record read so far
+    entries: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class _ChunkIndex:
+    """A closed chunk whose index data records (one per connection in it, right after the chunk) are being read."""
+
+    pos: int
+    entries: dict[int, list[tuple[int, int]]]
+    indexed: set[int] = field(default_factory=set)
+
+    def check(self, header: dict[str, bytes], data: bytes | memoryview) -> None:
+        """An index data record -> ``MalformedError`` unless it lists exactly the chunk's message records of its
+        connection (their log times and offsets)."""
+        if _u32(header, "ver") != 1:
+            raise MalformedError(f"the index data of the chunk at byte {self.pos} is not version 1")
+        cid, count = _u32(header, "conn"), _u32(header, "count")
+        if len(data) != 12 * count:
+            raise MalformedError(f"the index data of the chunk at byte {self.pos} for connection {cid} holds "
+                                 f"{len(data)} bytes for {count} entries")
+        if cid in self.indexed:
+            raise MalformedError(f"the chunk at byte {self.pos} has two index data records for connection {cid}")
+        self.indexed.add(cid)
+        listed = sorted((sec * 10**9 + nsec, off) for sec, nsec, off in struct.iter_unpack("<III", data))
+        if listed != sorted(self.entries.get(cid, ())):
+            raise MalformedError(f"the index data of the chunk at byte {self.pos} disagrees with its message records "
+                                 f"of connection {cid}")
+
+    def complete(self) -> None:
+        """The chunk's index data records are over: every connection with messages in it must have had one."""
+        missing = sorted(set(self.entries) - self.indexed)
+        if missing:
+            raise MalformedError(f"the chunk at byte {self.pos} has no index data record for connection {missing[0]}")
 
 
 @dataclass(slots=True)
@@ -145,7 +184,13 @@ class Ros1Stream:
     recorder has written so far) and get the messages of the records complete in them, in file order.
 
     ``pos`` is the next record to read (top level, or inside the chunk being read); ``connections`` maps ids to
-    (topic, type, has definition); ``closed`` is set at the bag's index (its header's ``index_pos``)."""
+    (topic, type, has definition); ``closed`` is set at the bag's index (its header's ``index_pos``) once the index
+    is complete: the one rule of "closed by its recorder" for every reader.
+
+    Each closed chunk's index data records (which follow it) must list exactly its message records, connection by
+    connection (log time and offset): an index that disagrees with the records it indexes is damage
+    (``MalformedError`` at the index record), whoever reads the bag -- the indexed reader reads messages through
+    that index, so a bag whose index contradicts its records is never read as whole."""
 
     pos: int = len(MAGIC)
     connections: dict[int, tuple[str, str, bool]] = field(default_factory=dict)
@@ -153,6 +198,7 @@ class Ros1Stream:
     index_records: int = 0  # connection + chunk info records the bag header says its index holds
     closed: bool = False
     chunk: _Chunk | None = None
+    indexing: _ChunkIndex | None = None  # the last closed chunk, while its index data records are read
 
     @property
     def resume_at(self) -> int:
@@ -160,10 +206,11 @@ class Ros1Stream:
         its sizes when it closes the chunk), else ``pos``."""
         return self.chunk.pos if self.chunk is not None else self.pos
 
-    def feed(self, buf: bytes | memoryview, base: int, out: list[Ros1Message]) -> None:
+    def feed(self, buf: bytes | memoryview, base: int, out: list[Ros1Message] | None) -> None:
         """Append to ``out`` the messages of the records complete in ``buf`` (the file's bytes from ``base`` ==
-        ``resume_at``); stops quietly at a record not complete yet (``pos`` stays there); raises ``MalformedError``,
-        ``struct.error`` or a decompressor's error on damaged bytes (``out`` then holds the messages before)."""
+        ``resume_at``); stops quietly at a record not complete yet (``pos`` stays there); raises one of ``DAMAGE``
+        on damaged bytes (``out`` then holds the messages before). ``out`` None: the records are checked, no
+        payload is copied."""
         end = base + len(buf)
         try:
             while not self.closed:
@@ -173,11 +220,14 @@ class Ros1Stream:
                     continue
                 if self.index_pos and self.pos >= self.index_pos:
                     # closed once its whole index is there (an index still being written, or cut, is not a close)
+                    self._chunk_indexed()
                     self.closed = self._index_complete(buf, base)
                     break
                 if self.pos >= end:
                     break
                 head = record_at(buf, self.pos - base, len(buf), head_only=True)
+                if head.op != Op.INDEX_DATA:
+                    self._chunk_indexed()
                 if head.op == Op.CHUNK:
                     self.chunk = _Chunk(self.pos, head.header.get("compression", b"none").decode("ascii", "replace"))
                     continue
@@ -190,9 +240,22 @@ class Ros1Stream:
                     self.index_records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
                 elif rec.op == Op.CONNECTION:
                     self._connection(rec, buf)
+                elif rec.op == Op.INDEX_DATA:
+                    if self.indexing is None:
+                        raise MalformedError(f"an index data record at byte {self.pos} follows no chunk")
+                    self.indexing.check(rec.header, memoryview(buf)[rec.data_start : rec.end])
                 self.pos = base + rec.end
         except CutError:
             pass
+
+    def _chunk_indexed(self) -> None:
+        if self.indexing is not None:
+            self.indexing.complete()
+            self.indexing = None
+
+    def _close_chunk(self, chunk: _Chunk, end: int) -> None:
+        self.pos, self.chunk = end, None
+        self.indexing = _ChunkIndex(chunk.pos, chunk.entries)
 
     def _index_complete(self, buf: bytes | memoryview, base: int) -> bool:
         """Whether the index the bag header announces (its connection and chunk info records) is complete in
@@ -211,8 +274,8 @@ class Ros1Stream:
         cid, topic, typ, has_def = connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
         self.connections[cid] = (topic, typ, has_def)
 
-    def _in_chunk(self, chunk: _Chunk, buf: bytes | memoryview, base: int, end: int, out: list[Ros1Message]
-                  ) -> bool:
+    def _in_chunk(self, chunk: _Chunk, buf: bytes | memoryview, base: int, end: int,
+                  out: list[Ros1Message] | None) -> bool:
         """Read on in ``chunk``; True when it is done (``pos`` after it), False to wait for more bytes."""
         head = record_at(buf, chunk.pos - base, len(buf), head_only=True)
         size = head.header.get("size", b"")
@@ -223,24 +286,25 @@ class Ros1Stream:
             if chunk_end is None or chunk_end > end:
                 return False  # a compressed chunk is read when it is complete
             inner = decompress(memoryview(buf)[head.data_start : head.end], chunk.compression)
-            self._inner(inner, 0, len(inner), out, strict=True)
-            self.pos, self.chunk = chunk_end, None
+            self._inner(chunk, inner, 0, len(inner), out, origin=0, strict=True)
+            self._close_chunk(chunk, chunk_end)
             return True
         limit = end if chunk_end is None else min(end, chunk_end)
-        got, foreign = self._inner(buf, self.pos - base, limit - base, out, strict=False)
+        got, foreign = self._inner(chunk, buf, self.pos - base, limit - base, out, origin=head.data_start, strict=False)
         self.pos = base + got
         if chunk_end is not None and self.pos >= chunk_end:
-            self.chunk = None
+            self._close_chunk(chunk, chunk_end)
             return True
         if chunk_end is not None and foreign:
             raise MalformedError("a closed chunk holds a record that is not a message or connection")
         return False  # open (or not all here yet): wait for more bytes, re-reading the chunk's header
 
-    def _inner(self, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message], *, strict: bool
-               ) -> tuple[int, bool]:
-        """Records of a chunk from ``pos`` to ``limit``: connections noted, messages appended to ``out``; returns the
-        position after the last complete record and whether reading stopped at a record that is not a chunk's
-        (``strict``: every record must be complete and a chunk's)."""
+    def _inner(self, chunk: _Chunk, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message] | None,
+               *, origin: int, strict: bool) -> tuple[int, bool]:
+        """Records of ``chunk`` (whose records start at ``origin`` in ``buf``) from ``pos`` to ``limit``: connections
+        noted, messages appended to ``out`` and to the chunk's entries; returns the position after the last complete
+        record and whether reading stopped at a record that is not a chunk's (``strict``: every record must be
+        complete and a chunk's)."""
         while pos < limit:
             try:
                 rec = record_at(buf, pos, limit)
@@ -256,10 +320,36 @@ class Ros1Stream:
                 if len(raw) != 8:
                     raise MalformedError("a message record without a u64 time")
                 sec, nsec = struct.unpack("<II", raw)
-                out.append(Ros1Message(cid, sec * 10**9 + nsec, bytes(memoryview(buf)[rec.data_start : rec.end])))
+                log_ns = sec * 10**9 + nsec
+                chunk.entries.setdefault(cid, []).append((log_ns, pos - origin))
+                if out is not None:
+                    out.append(Ros1Message(cid, log_ns, bytes(memoryview(buf)[rec.data_start : rec.end])))
             else:
                 if strict:
                     raise MalformedError("a chunk holds a record that is not a message or connection")
                 return pos, True
             pos = rec.end
         return pos, False
+
+
+@dataclass(frozen=True, slots=True)
+class BagState:
+    """How a bag's bytes stand by the record layer: ``closed`` by its recorder (its header points to a complete
+    index, every record before it whole and every chunk's index data agreeing with its records); else ``damage``
+    says what is malformed and ``at`` where, or both are None: the bytes end early (cut, or never indexed)."""
+
+    closed: bool
+    damage: str | None = None
+    at: int | None = None
+
+
+def bag_state(buf: bytes | memoryview) -> BagState:
+    """The ``Ros1Stream`` over a whole bag, payloads not kept -> its ``BagState``."""
+    if bytes(buf[: len(MAGIC)]) != MAGIC:
+        return BagState(False, "not a ROS1 bag (bad magic)", 0)
+    stream = Ros1Stream()
+    try:
+        stream.feed(buf, 0, None)
+    except DAMAGE as err:
+        return BagState(False, " ".join(str(err).split()) or err.__class__.__name__, stream.resume_at)
+    return BagState(stream.closed)

@@ -25,6 +25,7 @@ from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.raw import check_log_path
 from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
 from verify.ingest.ros1records import CutError as Ros1CutError
 from verify.ingest.ros1records import MalformedError as Ros1MalformedError
@@ -36,8 +37,6 @@ __all__ = ["Follower", "log_bytes", "open_follower"]
 
 #: what a complete MCAP record raises when its bytes are damaged
 _MCAP_DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, ImportError, *DECOMPRESS_ERRORS)
-_ROS1_DAMAGE: tuple[type[Exception], ...] = (Ros1MalformedError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
-
 
 
 class Follower(Protocol):
