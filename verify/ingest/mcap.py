@@ -302,35 +302,57 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
     start, usize = int(chunk.chunk_start_offset), int(chunk.uncompressed_size)
     if os.pread(fd, 4, start + _CHUNK_CRC_AT) != b"\0\0\0\0":
         return False
+    cand = _indexed_starts(chunk, region, lo)
+    if cand is None or (cand and cand[-1] + RECORD_HEAD > usize):
+        return False
+    heads = _record_heads(fd, base, cand)
+    return heads is not None and _heads_chain(fd, base, usize, heads, known)
+
+
+def _indexed_starts(chunk: ChunkInfo, region: bytes, lo: int) -> list[int] | None:
+    """Every record start the chunk's message index records give (sorted); None when one is not a well-formed
+    message index record (``region``: the file's bytes from ``lo`` holding them)."""
     starts: set[int] = set()
     for off in chunk.message_index_offsets.values():  # small per chunk: struct, not numpy
         rel = int(off) - lo
         if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
-            return False
+            return None
         (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
         if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
-            return False
+            return None
         starts.update(struct.unpack_from(f"<{arr_len // 8}Q", region, rel + 15)[1::2])
-    cand = sorted(starts)
-    if cand and cand[-1] + RECORD_HEAD > usize:
-        return False
-    heads: dict[int, tuple[int, int, int]] = {}  # record position -> opcode, content length, first u16 (channel)
+    return sorted(starts)
+
+
+def _record_heads(fd: int, base: int, cand: list[int]) -> dict[int, tuple[int, int, int]] | None:
+    """The heads of the records at ``cand`` (chunk positions; the chunk's records start at file position ``base``):
+    position -> (opcode, content length, first u16: a message's channel), nearby ones in one read; None when the
+    file ends first."""
+    heads: dict[int, tuple[int, int, int]] = {}
     i = 0
-    while i < len(cand):  # the heads of the indexed records, nearby ones in one read
+    while i < len(cand):
         j = i
         while j + 1 < len(cand) and cand[j + 1] - cand[i] < _HEAD_CLUSTER_B:
             j += 1
         n = cand[j] - cand[i] + RECORD_HEAD + 2
         piece = os.pread(fd, n, base + cand[i])
         if len(piece) != n:
-            return False
+            return None
         for k in range(i, j + 1):
-            r = cand[k] - cand[i]
-            heads[cand[k]] = struct.unpack_from("<BQH", piece, r)
+            heads[cand[k]] = struct.unpack_from("<BQH", piece, cand[k] - cand[i])
         i = j + 1
+    return heads
+
+
+def _heads_chain(fd: int, base: int, usize: int, heads: dict[int, tuple[int, int, int]], known: dict[int, str]
+                 ) -> bool:
+    """The walk of a chunk's ``usize`` bytes of records by their heads (``heads``: those already read; the others
+    read one by one): every record ends where the next begins, the last at the chunk's end, every indexed start is
+    a record of the walk, messages hold their fixed fields on a declared channel, and schema, channel and
+    statistics records parse."""
     pos = 0
     while pos < usize:
-        head = heads.get(pos)
+        head = heads.pop(pos, None)
         if head is None:
             raw = os.pread(fd, RECORD_HEAD + 2, base + pos)
             if len(raw) != RECORD_HEAD + 2:
@@ -345,7 +367,6 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
                 return False  # the scan refuses a message on a channel the file never declares
         elif op in _PARSED_OPS and not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
             return False
-        heads.pop(pos, None)
         pos = end
     return pos == usize and not heads  # every indexed record was a record of the walk
 

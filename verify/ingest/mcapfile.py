@@ -426,8 +426,33 @@ def _same_channels(found: Scan, storage: McapReader) -> bool:
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:
     """The wanted topics of one storage file by a scan of all its records (module docstring)."""
     where = f"storage file {file.name}: " if named else ""
+    found, kept, channel_ids = _scan_file(file, want, shown, where)
+    _refuse_stop(found, shown, where)
+    for cid in sorted(channel_ids - set(found.channels)):
+        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
+                           f"declares", path=shown)
+    one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
+                        if ch.topic in want and ch.schema_id in found.schemas), path=shown)
+    topics = _scanned_topics(found, kept, want, shown, where)
+    available: dict[str, str] = {}
+    for ch in found.channels.values():
+        schema = found.schemas.get(ch.schema_id)
+        available.setdefault(ch.topic, schema.name if schema is not None else "")
+    counts: dict[str, int] = {}
+    for cid, n in (found.declared or {}).items():
+        declared = found.channels.get(cid)
+        if declared is not None and declared.topic in want:
+            counts[declared.topic] = counts.get(declared.topic, 0) + n
+    return McapLog(topics, available), counts
+
+
+def _scan_file(file: Path, want: set[str], shown: str, where: str
+               ) -> tuple[Scan, list[tuple[int, int, bytes]], set[int]]:
+    """The record layer's scan of one file -> what it found, the wanted messages (channel id, log time, payload;
+    a message of a channel not declared yet is kept: its channel may come later) and every channel id messages
+    refer to."""
     found = Scan({}, {})
-    kept: list[tuple[int, int, bytes]] = []  # channel id, log time, payload
+    kept: list[tuple[int, int, bytes]] = []
     channel_ids: set[int] = set()
     try:
         with file.open("rb") as fh:
@@ -444,26 +469,32 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
     except OSError as err:
         raise LogReadError(f"unreadable mcap log: {where}it cannot be read from disk ({err.strerror})",
                            path=shown) from err
+    return found, kept, channel_ids
+
+
+def _refuse_stop(found: Scan, shown: str, where: str) -> None:
+    """A scan that stopped before the footer -> the error that says where and why (cut: ``TruncatedLogError``)."""
     stop = found.error
-    if stop is not None or not found.complete:
-        at = f" at byte {found.stopped_at}" if found.stopped_at is not None else ""
-        if isinstance(stop, CutError) or stop is None:
-            raise TruncatedLogError(f"truncated or unindexed mcap log: {where}it ends inside a record{at} (a "
-                                    f"recorder that was killed; --salvage reads its complete records)", path=shown)
-        if isinstance(stop, MalformedError) and str(stop) == "bad magic":
-            raise LogReadError(f"unreadable mcap log: {where}not an MCAP file (its first bytes are not the MCAP "
-                               f"magic)", path=shown)
-        if isinstance(stop, DECOMPRESS_ERRORS):
-            raise LogReadError(f"unreadable mcap log: {where}a compressed chunk{at} cannot be decompressed "
-                               f"({stop.__class__.__name__})", path=shown)
-        raise LogReadError(f"unreadable mcap log: {where}a record{at} is malformed: {in_words(stop)}", path=shown)
-    for cid in sorted(channel_ids - set(found.channels)):
-        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
-                           f"declares", path=shown)
-    one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
-                        if ch.topic in want and ch.schema_id in found.schemas), path=shown)
+    if stop is None and found.complete:
+        return
+    at = f" at byte {found.stopped_at}" if found.stopped_at is not None else ""
+    if isinstance(stop, CutError) or stop is None:
+        raise TruncatedLogError(f"truncated or unindexed mcap log: {where}it ends inside a record{at} (a "
+                                f"recorder that was killed; --salvage reads its complete records)", path=shown)
+    if isinstance(stop, MalformedError) and str(stop) == "bad magic":
+        raise LogReadError(f"unreadable mcap log: {where}not an MCAP file (its first bytes are not the MCAP "
+                           f"magic)", path=shown)
+    if isinstance(stop, DECOMPRESS_ERRORS):
+        raise LogReadError(f"unreadable mcap log: {where}a compressed chunk{at} cannot be decompressed "
+                           f"({stop.__class__.__name__})", path=shown)
+    raise LogReadError(f"unreadable mcap log: {where}a record{at} is malformed: {in_words(stop)}", path=shown)
+
+
+def _scanned_topics(found: Scan, kept: list[tuple[int, int, bytes]], want: set[str], shown: str, where: str
+                    ) -> dict[str, McapTopic]:
+    """The wanted channels' messages per topic, sorted stably by log time: indexed reading's order (log time, then
+    file position); a wanted channel without its schema, or not CDR, is refused naming it."""
     topics: dict[str, McapTopic] = {}
-    columns: dict[str, tuple[list[int], list[bytes]]] = {}
     for cid, ch in sorted(found.channels.items()):
         if ch.topic not in want:
             continue
@@ -478,23 +509,14 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
             topics[ch.topic] = McapTopic(schema.name, schema.has_data, [], [])
         else:
             topics[ch.topic].has_definition &= schema.has_data
-    # stable sort by log time: indexed reading's order (log time, then file position)
     kept.sort(key=itemgetter(1))
-    for topic in topics:
-        columns[topic] = ([], [])
+    columns: dict[str, tuple[list[int], list[bytes]]] = {topic: ([], []) for topic in topics}
     for cid, log_ns, payload in kept:
-        col = columns[found.channels[cid].topic]
+        col = columns.get(found.channels[cid].topic)
+        if col is None:
+            continue  # a message before its channel's record, on a topic not wanted
         col[0].append(log_ns)
         col[1].append(payload)
     for topic, (logs, payloads) in columns.items():
         topics[topic].log_ns, topics[topic].payloads = logs, payloads
-    available: dict[str, str] = {}
-    for ch in found.channels.values():
-        schema = found.schemas.get(ch.schema_id)
-        available.setdefault(ch.topic, schema.name if schema is not None else "")
-    counts: dict[str, int] = {}
-    for cid, n in (found.declared or {}).items():
-        ch = found.channels.get(cid)
-        if ch is not None and ch.topic in want:
-            counts[ch.topic] = counts.get(ch.topic, 0) + n
-    return McapLog(topics, available), counts
+    return topics

@@ -259,9 +259,11 @@ def _ros1_state(path: Path) -> BagState | None:
             buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except (OSError, ValueError):
         return None
+    view = memoryview(buf)
     try:
-        return bag_state(buf)
+        return bag_state(view)
     finally:
+        view.release()
         with contextlib.suppress(BufferError):
             buf.close()
 
