@@ -28,10 +28,11 @@ import os
 import stat
 import struct
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path, PurePath
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -130,18 +131,7 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
     rel = info.get("relative_file_paths")
     if not isinstance(rel, list) or not all(isinstance(x, str) for x in rel):
         raise bad("relative_file_paths is not a list of file names")
-    mode = info.get("compression_mode") or None
-    if mode is not None and not isinstance(mode, str):
-        raise bad("compression_mode is not a string")
-    mode = None if mode is None or mode.lower() == "none" else mode.lower()
-    if mode is not None:
-        fmt = info.get("compression_format")
-        if mode not in ("file", "message"):
-            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
-                               f"writes 'file' or 'message'", path=str(folder))
-        if not isinstance(fmt, str) or fmt.lower() != "zstd":
-            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
-                               f"'zstd' is read", path=str(folder))
+    mode = _compression_mode(info, folder, bad)
     types: dict[str, str] = {}
     counts: dict[str, int] = {}
     entries = info.get("topics_with_message_count", [])
@@ -163,6 +153,24 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
                                path=str(folder))
         regular_file(f, "storage file")
     return BagMetadata(files, mode, types, counts)
+
+
+def _compression_mode(info: dict[str, Any], folder: Path, bad: Callable[[str], LogReadError]) -> str | None:
+    """A metadata.yaml's compression: None, "file" or "message" (rosbag2's modes), in zstd, the one format read."""
+    mode = info.get("compression_mode") or None
+    if mode is not None and not isinstance(mode, str):
+        raise bad("compression_mode is not a string")
+    mode = None if mode is None or mode.lower() == "none" else mode.lower()
+    if mode is None:
+        return None
+    fmt = info.get("compression_format")
+    if mode not in ("file", "message"):
+        raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
+                           f"writes 'file' or 'message'", path=str(folder))
+    if not isinstance(fmt, str) or fmt.lower() != "zstd":
+        raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
+                           f"'zstd' is read", path=str(folder))
+    return mode
 
 
 def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:

@@ -21,6 +21,11 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import IntEnum
 
+import numpy as np
+import numpy.typing as npt
+
+from verify.ingest.records import MCAP, CutError, MalformedError, lz4_decompress, walk_chain
+
 if sys.version_info >= (3, 14):
     from compression import zstd
 else:
@@ -40,6 +45,7 @@ __all__ = [
     "Scan",
     "SchemaRecord",
     "chunk_content",
+    "chunk_records",
     "decompress",
     "lz4_decompress",
     "parse_channel",
@@ -82,14 +88,6 @@ class Op(IntEnum):
     METADATA_INDEX = 0x0D
     SUMMARY_OFFSET = 0x0E
     DATA_END = 0x0F
-
-
-class CutError(Exception):
-    """The bytes end inside a record (a truncated file, or a file still being written)."""
-
-
-class MalformedError(Exception):
-    """A record's fields contradict its length or the format (damaged bytes)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,13 +169,6 @@ def parse_statistics(rec: bytes | memoryview) -> dict[int, int]:
     return {int(c): int(n) for c, n in struct.iter_unpack("<HQ", bytes(rec[fixed + 4 : fixed + 4 + mlen]))}
 
 
-def lz4_decompress(data: bytes | memoryview) -> bytes:
-    from lz4.frame import decompress as lz4_frame  # type: ignore[import-untyped]  # a rosbags dependency
-
-    out: bytes = lz4_frame(bytes(data))
-    return out
-
-
 def decompress(data: bytes | memoryview, compression: str, usize: int) -> bytes:
     """A chunk's records from its stored bytes; raises the decompressor's own error on damaged data, and
     ``MalformedError`` on an unknown compression or a size that disagrees with the chunk's."""
@@ -204,6 +195,18 @@ def chunk_content(rec: bytes | memoryview) -> tuple[str, int, int, memoryview]:
     (clen,) = struct.unpack_from("<Q", rec, p)
     _need(rec, p + 8, clen)
     return compression, int(usize), int(crc), memoryview(rec)[p + 8 : p + 8 + clen]
+
+
+IntArray = npt.NDArray[np.int64]
+
+
+def chunk_records(buf: bytes | memoryview, hints: IntArray | None = None) -> tuple[IntArray, IntArray, IntArray]:
+    """A chunk's records (``buf``: its decompressed records) -> (start, opcode, content length) of every record, in
+    order, by the vectorised walk (``verify.ingest.records.walk_chain``; ``hints``: record starts its message index
+    gives); ``MalformedError`` when a record runs past the chunk's end."""
+    pos, end = walk_chain(buf, MCAP, hints)
+    u8 = np.frombuffer(buf, dtype=np.uint8)
+    return pos, u8[pos].astype(np.int64), end - pos - RECORD_HEAD
 
 
 def walk(buf: bytes | memoryview, pos: int, end: int) -> Iterator[tuple[int, memoryview, int]]:
@@ -302,8 +305,10 @@ def record_messages(op: int, rec: memoryview, found: Scan, *, check_crc: bool = 
     if check_crc and crc and zlib.crc32(inner) != crc:
         raise MalformedError("a chunk's records do not match its CRC")
     out: list[MessageRecord] = []
-    for iop, irec, _ in walk(inner, 0, len(inner)):
-        out.extend(_record(iop, irec, found))
+    view = memoryview(inner)
+    pos, ops, lengths = chunk_records(inner)
+    for at, iop, n in zip(pos.tolist(), ops.tolist(), lengths.tolist(), strict=True):
+        out.extend(_record(iop, view[at + RECORD_HEAD : at + RECORD_HEAD + n], found))
     return out
 
 

@@ -20,7 +20,7 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from verify.ingest.mcaprecords import lz4_decompress
+from verify.ingest.records import ROS1, CutError, MalformedError, lz4_decompress, walk_chain
 
 __all__ = ["DAMAGE", "MAGIC", "BagState", "CutError", "MalformedError", "Op", "Record", "Ros1Message", "Ros1Stream",
            "bag_state", "connection_of", "decompress", "header_fields", "record_at"]
@@ -38,14 +38,6 @@ class Op(IntEnum):
     CHUNK = 0x05
     CHUNK_INFO = 0x06
     CONNECTION = 0x07
-
-
-class CutError(Exception):
-    """The bytes end inside a record (a truncated bag, or one still being written)."""
-
-
-class MalformedError(Exception):
-    """A record's fields contradict its lengths or the format (damaged bytes)."""
 
 
 #: what reading a complete record raises when its bytes are damaged: malformed fields, or a chunk that does not
@@ -282,54 +274,69 @@ class Ros1Stream:
         open_chunk = head.data_len == 0 and size in (b"", b"\0\0\0\0")  # rosbag's placeholder while recording
         chunk_end = None if open_chunk else base + head.end
         self.pos = max(self.pos, base + head.data_start)
+        if chunk_end is not None and chunk_end <= end:
+            # closed and all here: its records walked whole (a compressed chunk decompressed first)
+            if chunk.compression != "none":
+                inner = decompress(memoryview(buf)[head.data_start : head.end], chunk.compression)
+                self._walk_whole(chunk, inner, 0, len(inner), out, origin=0)
+            else:
+                self._walk_whole(chunk, buf, self.pos - base, head.end, out, origin=head.data_start)
+            self._close_chunk(chunk, chunk_end)
+            return True
         if chunk.compression != "none":
-            if chunk_end is None or chunk_end > end:
-                return False  # a compressed chunk is read when it is complete
-            inner = decompress(memoryview(buf)[head.data_start : head.end], chunk.compression)
-            self._inner(chunk, inner, 0, len(inner), out, origin=0, strict=True)
-            self._close_chunk(chunk, chunk_end)
-            return True
+            return False  # a compressed chunk is read when it is complete
         limit = end if chunk_end is None else min(end, chunk_end)
-        got, foreign = self._inner(chunk, buf, self.pos - base, limit - base, out, origin=head.data_start, strict=False)
+        got, foreign = self._walk_open(chunk, buf, self.pos - base, limit - base, out, origin=head.data_start)
         self.pos = base + got
-        if chunk_end is not None and self.pos >= chunk_end:
-            self._close_chunk(chunk, chunk_end)
-            return True
         if chunk_end is not None and foreign:
             raise MalformedError("a closed chunk holds a record that is not a message or connection")
         return False  # open (or not all here yet): wait for more bytes, re-reading the chunk's header
 
-    def _inner(self, chunk: _Chunk, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message] | None,
-               *, origin: int, strict: bool) -> tuple[int, bool]:
-        """Records of ``chunk`` (whose records start at ``origin`` in ``buf``) from ``pos`` to ``limit``: connections
-        noted, messages appended to ``out`` and to the chunk's entries; returns the position after the last complete
-        record and whether reading stopped at a record that is not a chunk's (``strict``: every record must be
-        complete and a chunk's)."""
+    def _walk_whole(self, chunk: _Chunk, buf: bytes | memoryview, lo: int, hi: int, out: list[Ros1Message] | None,
+                    *, origin: int) -> None:
+        """The records of a complete chunk from ``lo`` to its end ``hi`` in ``buf`` by the format's walk
+        (``verify.ingest.records.walk_chain``): every record must end by the chunk's end and be a message or a
+        connection."""
+        starts, _ends = walk_chain(memoryview(buf)[lo:hi], ROS1)
+        for at in starts.tolist():
+            rec = record_at(buf, lo + at, hi)
+            if not self._chunk_record(chunk, buf, rec, lo + at - origin, out):
+                raise MalformedError("a chunk holds a record that is not a message or connection")
+
+    def _walk_open(self, chunk: _Chunk, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message] | None,
+                   *, origin: int) -> tuple[int, bool]:
+        """The records of an open (or not yet complete) chunk from ``pos`` to ``limit``, as far as they are
+        complete -> the position after the last one, and whether reading stopped at a record that is not a
+        chunk's."""
         while pos < limit:
             try:
                 rec = record_at(buf, pos, limit)
             except CutError:
-                if strict:
-                    raise MalformedError("a chunk ends inside a record") from None
                 return pos, False
-            if rec.op == Op.CONNECTION:
-                self._connection(rec, buf)
-            elif rec.op == Op.MESSAGE_DATA:
-                cid = _u32(rec.header, "conn")
-                raw = rec.header.get("time", b"")
-                if len(raw) != 8:
-                    raise MalformedError("a message record without a u64 time")
-                sec, nsec = struct.unpack("<II", raw)
-                log_ns = sec * 10**9 + nsec
-                chunk.entries.setdefault(cid, []).append((log_ns, pos - origin))
-                if out is not None:
-                    out.append(Ros1Message(cid, log_ns, bytes(memoryview(buf)[rec.data_start : rec.end])))
-            else:
-                if strict:
-                    raise MalformedError("a chunk holds a record that is not a message or connection")
+            if not self._chunk_record(chunk, buf, rec, pos - origin, out):
                 return pos, True
             pos = rec.end
         return pos, False
+
+    def _chunk_record(self, chunk: _Chunk, buf: bytes | memoryview, rec: Record, offset: int,
+                      out: list[Ros1Message] | None) -> bool:
+        """A record of ``chunk`` at ``offset`` in its records: a connection noted, a message appended to ``out``
+        and to the chunk's entries; False when it is neither."""
+        if rec.op == Op.CONNECTION:
+            self._connection(rec, buf)
+            return True
+        if rec.op != Op.MESSAGE_DATA:
+            return False
+        cid = _u32(rec.header, "conn")
+        raw = rec.header.get("time", b"")
+        if len(raw) != 8:
+            raise MalformedError("a message record without a u64 time")
+        sec, nsec = struct.unpack("<II", raw)
+        log_ns = sec * 10**9 + nsec
+        chunk.entries.setdefault(cid, []).append((log_ns, offset))
+        if out is not None:
+            out.append(Ros1Message(cid, log_ns, bytes(memoryview(buf)[rec.data_start : rec.end])))
+        return True
 
 
 @dataclass(frozen=True, slots=True)
