@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
@@ -51,6 +51,8 @@ from verify.ingest.mcaprecords import (
     MalformedError,
     Op,
     Scan,
+    chunk_layout,
+    declares_counts,
     record_messages,
     scan,
     zstd,
@@ -394,21 +396,7 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                     if info is None or int(info.chunk_length) != RECORD_HEAD + length:
                         return False
                     seen += 1
-                    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
-                    if len(fixed) < CHUNK_FIXED + 4:
-                        return False
-                    (usize,) = struct.unpack_from("<Q", fixed, 16)
-                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
-                    if CHUNK_FIXED + 4 + name_len + 8 > length:
-                        return False
-                    at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
-                    name = os.pread(fd, name_len, at - name_len)
-                    (stored,) = struct.unpack("<Q", os.pread(fd, 8, at))
-                    if CHUNK_FIXED + 4 + name_len + 8 + stored > length:
-                        return False
-                    # the chunk as the index describes it (the indexed reader reads it by the index)
-                    if (usize, stored, name) != (int(info.uncompressed_size), int(info.compressed_size),
-                                                 str(info.compression).encode()):
+                    if not _chunk_as_indexed(fd, pos, length, info):
                         return False
                 elif op in _PARSED:
                     content = os.pread(fd, length, pos + RECORD_HEAD)
@@ -418,6 +406,23 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                 pos = nxt
     except (OSError, struct.error, MalformedError, ValueError, MemoryError, OverflowError):
         return False
+
+
+def _chunk_as_indexed(fd: int, pos: int, length: int, info: ChunkInfo) -> bool:
+    """Whether the chunk record at ``pos`` (content ``length`` bytes) passes the record layer's structural check
+    (``chunk_layout``: fields within the record, a compression the format defines) and is the chunk its index
+    entry describes (the indexed reader reads it by the index): only its fixed fields and compression are read."""
+    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4), pos + RECORD_HEAD)
+    if len(fixed) < CHUNK_FIXED + 4:
+        return False
+    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
+    head = os.pread(fd, min(length, CHUNK_FIXED + 4 + name_len + 8), pos + RECORD_HEAD)
+    try:
+        compression, usize, _crc, _at, stored = chunk_layout(head, length)
+    except MalformedError:
+        return False
+    return (usize, stored, compression) == (int(info.uncompressed_size), int(info.compressed_size),
+                                            str(info.compression))
 
 
 def _same_channels(found: Scan, storage: McapReader) -> bool:
@@ -469,7 +474,10 @@ def _scan_file(file: Path, want: set[str], shown: str, where: str
                 raise TruncatedLogError(f"truncated mcap log: {where}the file is empty", path=shown)
             # mapped, not read: the scan copies only the wanted payloads (the map is released with its last view)
             buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-            for msg in scan(memoryview(buf), found):
+            view = memoryview(buf)
+            # chunks holding no wanted topic: checked, not read (as indexed reading), where counts are declared
+            skip = frozenset(want) if declares_counts(view) else None
+            for msg in scan(view, found, wanted=skip):
                 channel_ids.add(msg.channel_id)
                 ch = found.channels.get(msg.channel_id)
                 if ch is None or ch.topic in want:
