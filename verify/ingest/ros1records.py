@@ -63,19 +63,20 @@ class Ros1Message:
 
 def header_fields(raw: bytes | memoryview) -> dict[str, bytes]:
     """A record header -> its ``name=value`` fields."""
+    data = bytes(raw)
     out: dict[str, bytes] = {}
-    pos, size = 0, len(raw)
+    pos, size = 0, len(data)
     while pos < size:
         if pos + 4 > size:
             raise MalformedError("a header field is cut")
-        (flen,) = struct.unpack_from("<I", raw, pos)
-        if pos + 4 + flen > size:
+        stop = pos + 4 + int.from_bytes(data[pos : pos + 4], "little")
+        if stop > size:
             raise MalformedError("a header field runs past its header")
-        name, eq, value = bytes(raw[pos + 4 : pos + 4 + flen]).partition(b"=")
-        if not eq:
+        eq = data.find(b"=", pos + 4, stop)
+        if eq < 0:
             raise MalformedError("a header field without '='")
-        out[name.decode("ascii", "replace")] = value
-        pos += 4 + flen
+        out[data[pos + 4 : eq].decode("ascii", "replace")] = data[eq + 1 : stop]
+        pos = stop
     return out
 
 
