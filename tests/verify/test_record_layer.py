@@ -123,16 +123,21 @@ def _noise() -> str:
     return "".join(random.Random(7).choices(string.ascii_letters, k=8000))
 
 
+def _payloads(*, ros1: bool) -> tuple[bytes, bytes]:
+    """A Twist command and a camera frame's stand-in (a String of 8000 letters), serialized for the format."""
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ser = store.serialize_ros1 if ros1 else store.serialize_cdr
+    lin = store.types["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0)
+    return (bytes(ser(store.types[CDR_TWIST](linear=lin, angular=lin), CDR_TWIST)),
+            bytes(ser(store.types[CDR_STRING](data=_noise()), CDR_STRING)))
+
+
 def _mcap_with_camera_chunks(path: Path) -> tuple[Path, list[tuple[int, int]]]:
     """An MCAP file (zstd chunks, statistics, the writer's indexes): 40 /cmd messages in the first chunks, then 4
     "camera" frames of 8 KB, each alone in its chunk -> the file and each camera chunk's (record position, length)."""
     import mcap.writer as mcap_writer
 
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    ty = store.types
-    lin = ty["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0)
-    twist = bytes(store.serialize_cdr(ty[CDR_TWIST](linear=lin, angular=lin), CDR_TWIST))
-    frame = bytes(store.serialize_cdr(ty[CDR_STRING](data=_noise()), CDR_STRING))
+    twist, frame = _payloads(ros1=False)
     t0 = 1_700_000_000 * 10**9
     with path.open("wb") as fh:
         w = mcap_writer.Writer(fh, chunk_size=2048, compression=mcap_writer.CompressionType.ZSTD)
@@ -209,10 +214,7 @@ def _bag_with_camera_chunks(path: Path, compression: str | None) -> tuple[Path, 
     from rosbags.rosbag1 import Writer
 
     store = get_typestore(Stores.ROS1_NOETIC)
-    ty = store.types
-    lin = ty["geometry_msgs/msg/Vector3"](x=1.0, y=0.0, z=0.0)
-    twist = bytes(store.serialize_ros1(ty[CDR_TWIST](linear=lin, angular=lin), CDR_TWIST))
-    frame = bytes(store.serialize_ros1(ty[CDR_STRING](data=_noise()), CDR_STRING))
+    twist, frame = _payloads(ros1=True)
     t0 = 1_700_000_000 * 10**9
     w = Writer(path)
     if compression is not None:
