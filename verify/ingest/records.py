@@ -166,18 +166,39 @@ def walk_chain(buf: bytes | memoryview, kind: str, hints: IntArray | None = None
             seg_end.append(c_end[i : j + 1])
             pos, i = int(c_end[j]), j + 1
             continue
-        try:
-            n = record_size_at(view, kind, pos, size - pos)
-        except SpanError as err:
-            raise MalformedError(f"a record at byte {pos} of a chunk runs past its end") from err
-        if n is None:
-            raise MalformedError(f"a chunk ends inside the record at byte {pos}")
-        one_pos.append(pos)
-        one_end.append(pos + n)
-        pos += n
+        stop = i if i < k else None  # step up to the next candidate (or the end) without leaving this loop
+        pos = _step(view, kind, pos, size, until=cand_l[stop] if stop is not None else size, starts=one_pos,
+                    ends=one_end)
     seg_pos.append(np.array(one_pos, dtype=np.int64))
     seg_end.append(np.array(one_end, dtype=np.int64))
     return np.concatenate(seg_pos), np.concatenate(seg_end)
+
+
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+
+
+def _step(view: memoryview, kind: str, pos: int, size: int, *, until: int, starts: list[int], ends: list[int]) -> int:
+    """Records stepped over one by one from ``pos`` (appended to ``starts``/``ends``) until one ends at or past
+    ``until`` -> the position after the last; ``MalformedError`` when a record does not end by ``size``."""
+    u32, u64 = _U32.unpack_from, _U64.unpack_from
+    while True:
+        if kind == ROS1:
+            if pos + 8 > size or pos + 8 + u32(view, pos)[0] > size:
+                raise MalformedError(f"a chunk ends inside the record at byte {pos}")
+            hlen = u32(view, pos)[0]
+            nxt = pos + 8 + hlen + u32(view, pos + 4 + hlen)[0]
+        else:
+            if pos + 9 > size:
+                raise MalformedError(f"a chunk ends inside the record at byte {pos}")
+            nxt = pos + 9 + u64(view, pos + 1)[0]
+        if nxt > size:
+            raise MalformedError(f"the record at byte {pos} of a chunk runs past its end")
+        starts.append(pos)
+        ends.append(nxt)
+        pos = nxt
+        if pos >= until:
+            return pos
 
 
 def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16,

@@ -20,10 +20,29 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+import numpy as np
+import numpy.typing as npt
+
 from verify.ingest.records import ROS1, CutError, MalformedError, lz4_decompress, walk_chain
 
-__all__ = ["DAMAGE", "MAGIC", "BagState", "CutError", "MalformedError", "Op", "Record", "Ros1Message", "Ros1Stream",
-           "bag_state", "connection_of", "decompress", "header_fields", "record_at"]
+__all__ = [
+    "DAMAGE",
+    "INDEX_ENTRY",
+    "MAGIC",
+    "BagState",
+    "CutError",
+    "MalformedError",
+    "Op",
+    "Record",
+    "Ros1Message",
+    "Ros1Stream",
+    "bag_state",
+    "connection_of",
+    "decompress",
+    "header_fields",
+    "index_data",
+    "record_at",
+]
 
 #: the first 13 bytes of every ROS1 bag (format 2.0)
 MAGIC = b"#ROSBAG V2.0\n"
@@ -106,6 +125,21 @@ def _u32(header: dict[str, bytes], name: str) -> int:
     return int(struct.unpack("<I", value)[0])
 
 
+#: an index data record's entries: the log time (sec, nsec) and offset in the chunk's records of each message
+INDEX_ENTRY = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
+
+
+def index_data(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, npt.NDArray[np.void]]:
+    """An index data record (version 1: one per connection after each chunk) -> (connection id, its entries as
+    ``INDEX_ENTRY`` rows); ``MalformedError`` on another version or a length that is not its count's."""
+    if _u32(header, "ver") != 1:
+        raise MalformedError("an index data record that is not version 1")
+    cid, count = _u32(header, "conn"), _u32(header, "count")
+    if len(data) != INDEX_ENTRY.itemsize * count:
+        raise MalformedError(f"an index data record of connection {cid} holds {len(data)} bytes for {count} entries")
+    return cid, np.frombuffer(data, dtype=INDEX_ENTRY)
+
+
 def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, str, str, bool]:
     """A connection record -> (id, topic, type as pkg/msg/Name, whether it carries the message definition)."""
     cid = _u32(header, "conn")
@@ -150,16 +184,12 @@ class _ChunkIndex:
     def check(self, header: dict[str, bytes], data: bytes | memoryview) -> None:
         """An index data record -> ``MalformedError`` unless it lists exactly the chunk's message records of its
         connection (their log times and offsets)."""
-        if _u32(header, "ver") != 1:
-            raise MalformedError(f"the index data of the chunk at byte {self.pos} is not version 1")
-        cid, count = _u32(header, "conn"), _u32(header, "count")
-        if len(data) != 12 * count:
-            raise MalformedError(f"the index data of the chunk at byte {self.pos} for connection {cid} holds "
-                                 f"{len(data)} bytes for {count} entries")
+        cid, entries = index_data(header, data)
         if cid in self.indexed:
             raise MalformedError(f"the chunk at byte {self.pos} has two index data records for connection {cid}")
         self.indexed.add(cid)
-        listed = sorted((sec * 10**9 + nsec, off) for sec, nsec, off in struct.iter_unpack("<III", data))
+        times = (entries["sec"].astype(np.int64) * 10**9 + entries["nsec"].astype(np.int64)).tolist()
+        listed = sorted(zip(times, entries["offset"].tolist(), strict=True))
         if listed != sorted(self.entries.get(cid, ())):
             raise MalformedError(f"the index data of the chunk at byte {self.pos} disagrees with its message records "
                                  f"of connection {cid}")
@@ -226,11 +256,7 @@ class Ros1Stream:
                     continue
                 rec = record_at(buf, self.pos - base, len(buf))
                 if rec.op == Op.BAG_HEADER:
-                    raw = rec.header.get("index_pos", b"")
-                    if len(raw) != 8:
-                        raise MalformedError("bag header without a u64 index_pos")
-                    self.index_pos = int(struct.unpack("<Q", raw)[0])
-                    self.index_records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
+                    self._bag_header(rec)
                 elif rec.op == Op.CONNECTION:
                     self._connection(rec, buf)
                 elif rec.op == Op.INDEX_DATA:
@@ -240,6 +266,23 @@ class Ros1Stream:
                 self.pos = base + rec.end
         except CutError:
             pass
+
+    def _bag_header(self, rec: Record) -> None:
+        raw = rec.header.get("index_pos", b"")
+        if len(raw) != 8:
+            raise MalformedError("bag header without a u64 index_pos")
+        records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
+        self.index_pos, self.index_records = int(struct.unpack("<Q", raw)[0]), records
+
+    def reread_header(self, head: bytes | memoryview) -> None:
+        """The bag header again (``head``: the file's first bytes): a recorder rewrites its ``index_pos`` when it
+        closes the bag. A header not all there, or not a bag header, changes nothing."""
+        try:
+            rec = record_at(head, len(MAGIC), len(head))
+            if rec.op == Op.BAG_HEADER:
+                self._bag_header(rec)
+        except (CutError, MalformedError, struct.error):
+            return
 
     def _chunk_indexed(self) -> None:
         if self.indexing is not None:
