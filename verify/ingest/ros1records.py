@@ -169,8 +169,8 @@ def decompress(data: bytes | memoryview, compression: str) -> bytes:
 class _Chunk:
     pos: int  # the chunk record
     compression: str
-    #: per connection, (log time, offset in the chunk's records) of each message record read so far
-    entries: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    #: per connection, the log times and the offsets in the chunk's records of its message records read so far
+    entries: dict[int, tuple[list[int], list[int]]] = field(default_factory=dict)
 
 
 @dataclass(slots=True)
@@ -178,7 +178,7 @@ class _ChunkIndex:
     """A closed chunk whose index data records (one per connection in it, right after the chunk) are being read."""
 
     pos: int
-    entries: dict[int, list[tuple[int, int]]]
+    entries: dict[int, tuple[list[int], list[int]]]
     indexed: set[int] = field(default_factory=set)
 
     def check(self, header: dict[str, bytes], data: bytes | memoryview) -> None:
@@ -188,9 +188,11 @@ class _ChunkIndex:
         if cid in self.indexed:
             raise MalformedError(f"the chunk at byte {self.pos} has two index data records for connection {cid}")
         self.indexed.add(cid)
-        times = (entries["sec"].astype(np.int64) * 10**9 + entries["nsec"].astype(np.int64)).tolist()
-        listed = sorted(zip(times, entries["offset"].tolist(), strict=True))
-        if listed != sorted(self.entries.get(cid, ())):
+        order = np.argsort(entries["offset"], kind="stable")  # the records were read in offset order
+        times = entries["sec"].astype(np.int64)[order] * 10**9 + entries["nsec"].astype(np.int64)[order]
+        read_times, read_offsets = self.entries.get(cid, ([], []))
+        if not (np.array_equal(entries["offset"][order], np.array(read_offsets, dtype=np.int64))
+                and np.array_equal(times, np.array(read_times, dtype=np.int64))):
             raise MalformedError(f"the index data of the chunk at byte {self.pos} disagrees with its message records "
                                  f"of connection {cid}")
 
@@ -377,7 +379,9 @@ class Ros1Stream:
             raise MalformedError("a message record without a u64 time")
         sec, nsec = struct.unpack("<II", raw)
         log_ns = sec * 10**9 + nsec
-        chunk.entries.setdefault(cid, []).append((log_ns, offset))
+        times, offsets = chunk.entries.setdefault(cid, ([], []))
+        times.append(log_ns)
+        offsets.append(offset)
         if out is not None:
             out.append(Ros1Message(cid, log_ns, bytes(memoryview(buf)[rec.data_start : rec.end])))
         return True
