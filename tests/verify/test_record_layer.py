@@ -258,3 +258,35 @@ def test_ros1_damage_to_the_structure_of_such_a_chunk_is_refused_on_both_paths(
     fast, plain = _read_cmd(path, monkeypatch, True), _read_cmd(path, monkeypatch, False)
     assert isinstance(fast, str), fast
     assert fast == plain
+
+
+# ---- the one walk over a chunk's records ---------------------------------------------------------------------------
+def test_the_chunk_walk_takes_nothing_from_its_hints_that_the_walk_does_not_confirm() -> None:
+    """``walk_chain`` with any hints (true record starts, positions inside records, past the end) gives the records
+    of the plain sequential walk; a record that runs past the chunk's end is damage, whatever the hints."""
+    import numpy as np
+
+    from verify.ingest.records import MCAP, ROS1, walk_chain
+    from verify.ingest.records import MalformedError as WalkError
+
+    def ros1_record(n: int) -> bytes:
+        header = struct.pack("<I", 4) + b"op=\x02"
+        return struct.pack("<I", len(header)) + header + struct.pack("<I", n) + bytes(n)
+
+    def mcap_record(n: int) -> bytes:
+        return bytes([McapOp.MESSAGE]) + struct.pack("<Q", n) + bytes(n)
+
+    rng = random.Random(3)
+    for kind, make in ((ROS1, ros1_record), (MCAP, mcap_record)):
+        sizes = [rng.choice([0, 1, 5, 30, 30, 30]) for _ in range(200)]
+        buf = b"".join(make(n) for n in sizes)
+        plain = walk_chain(buf, kind)
+        starts = plain[0].tolist()
+        assert len(starts) == 200 and plain[1][-1] == len(buf)
+        for _ in range(20):
+            hints = sorted(set(rng.sample(starts, rng.randrange(len(starts)))
+                               + [rng.randrange(len(buf) + 50) for _ in range(rng.randrange(30))]))
+            got = walk_chain(buf, kind, np.array(hints, dtype=np.int64))
+            assert np.array_equal(got[0], plain[0]) and np.array_equal(got[1], plain[1])
+        with pytest.raises(WalkError):
+            walk_chain(buf[:-1], kind, plain[0])

@@ -158,6 +158,8 @@ def walk_chain(buf: bytes | memoryview, kind: str, hints: IntArray | None = None
             while breaks[b] < i:
                 b += 1
             j = breaks[b]  # candidates i..j chain; j's record ends at c_end[j]
+            if c_end[j] < 0:
+                j -= 1  # j's length runs past the end: the run ends at j's start, where the walk steps on
             if one_pos:
                 seg_pos.append(np.array(one_pos, dtype=np.int64))
                 seg_end.append(np.array(one_end, dtype=np.int64))
