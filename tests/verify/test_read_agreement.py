@@ -104,8 +104,8 @@ def test_a_chunk_length_the_index_contradicts(seeds: dict[str, Path], tmp_path: 
 def test_an_unwanted_record_cut_inside_a_chunk_read_message_by_message(seeds: dict[str, Path], tmp_path: Path,
                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     """An uncompressed chunk shared with a camera topic is read message by message (only the wanted records); a
-    camera record whose length is damaged stops the scan, so the indexed reader now checks the chunk's record
-    chain (heads only) and both salvage the same records."""
+    camera record whose length is damaged stops the scan, so the indexed reader checks the chunk's record chain
+    (heads only) and both refuse the file alike."""
     buf = bytearray(seeds["mcap-cam"].read_bytes())
     camera = channel_ids(bytes(buf))[CAMERA]
     chunks = [s for op, s, _e in top_records(bytes(buf)) if op == Op.CHUNK]
@@ -118,7 +118,8 @@ def test_an_unwanted_record_cut_inside_a_chunk_read_message_by_message(seeds: di
     path = tmp_path / "damaged.mcap"
     path.write_bytes(bytes(buf))
     got = both(path, monkeypatch)
-    assert got[0] == "read" and got[1] is True
+    # a record that runs past the end of its (complete) chunk is damage, not a cut: refused, never salvaged
+    assert got[0] == "refused" and "malformed" in got[1] and "runs past its end" in got[1], got
 
 
 def test_a_malformed_channel_record_inside_a_chunk(seeds: dict[str, Path], tmp_path: Path,

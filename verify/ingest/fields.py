@@ -215,55 +215,70 @@ def _bulk_field(raw: RawTopic, ros1: bool, steps: list[str | int]) -> FloatArray
             return None
         if not (np.all(u8[offs] == 0) and np.all(u8[offs + 1] == 1)):
             return None  # big-endian or other encapsulation
-    whole = _Walk(store, u8, offs, lens, ros1)
+    if not _layout_explains(_Walk(store, u8, offs, lens, ros1), raw.msgtype, ros1):
+        return None
     try:
-        for _, fdesc in store.fielddefs[raw.msgtype][1]:
+        return _walk_to_field(_Walk(store, u8, offs, lens, ros1), raw.msgtype, steps)
+    except (_DeclineError, KeyError, IndexError, ValueError):
+        return None
+
+
+def _layout_explains(whole: _Walk, msgtype: str, ros1: bool) -> bool:
+    """Whether the type's layout, walked over every message, ends where each message ends (bytes the layout does
+    not explain, or too few: rosbags refuses, the per-message path says so)."""
+    try:
+        for _, fdesc in whole.store.fielddefs[msgtype][1]:
             whole.skip(fdesc)
     except (_DeclineError, KeyError, IndexError, ValueError):
-        return None
-    if not _size_ok(whole.pos, whole.end, ros1):
-        return None  # bytes the layout does not explain (or too few): rosbags refuses, the per-message path says so
-    walk = _Walk(store, u8, offs, lens, ros1)
-    msgtype = raw.msgtype
+        return False
+    return _size_ok(whole.pos, whole.end, ros1)
+
+
+def _walk_to_field(walk: _Walk, msgtype: str, steps: list[str | int]) -> FloatArray | None:
+    """Step through nested messages along ``steps`` to the field, then read it (a primitive, or one element of a
+    primitive array); None where the walk declines."""
     k = 0
-    try:
-        while k < len(steps):
-            name = steps[k]
-            fields = store.fielddefs[msgtype][1]
-            desc = None
-            for fname, fdesc in fields:
-                if fname == name:
-                    desc = fdesc
-                    break
-                walk.skip(fdesc)
-            if desc is None:
-                return None
-            kind = int(desc[0])
-            last = k == len(steps) - 1
-            if kind == 2 and not last:
-                msgtype = desc[1]
-                k += 1
-                continue
-            if kind == 1 and last and desc[1][0] in _PRIMITIVES:
-                dtype, size = _PRIMITIVES[desc[1][0]]
-                walk.align(size)
-                return walk.read(dtype, size).astype(np.float64)
-            if kind in (3, 4) and k == len(steps) - 2 and isinstance(steps[k + 1], int):
-                sub, length = desc[1]
-                if int(sub[0]) != 1 or sub[1][0] not in _PRIMITIVES:
-                    return None
-                dtype, size = _PRIMITIVES[sub[1][0]]
-                count = walk.u32() if kind == 4 else np.full(walk.pos.shape[0], int(length), dtype=np.int64)
-                index = int(steps[k + 1])
-                if np.any(count <= index):
-                    return None  # some message is too short: the per-message path names it
-                walk.align(size)
-                walk.pos = walk.pos + index * size
-                return walk.read(dtype, size).astype(np.float64)
+    while k < len(steps):
+        desc = _skip_to(walk, msgtype, steps[k])
+        if desc is None:
             return None
-    except (_DeclineError, KeyError, IndexError, ValueError):
+        kind = int(desc[0])
+        last = k == len(steps) - 1
+        if kind == 2 and not last:
+            msgtype = desc[1]
+            k += 1
+            continue
+        if kind == 1 and last and desc[1][0] in _PRIMITIVES:
+            dtype, size = _PRIMITIVES[desc[1][0]]
+            walk.align(size)
+            return walk.read(dtype, size).astype(np.float64)
+        if kind in (3, 4) and k == len(steps) - 2 and isinstance(steps[k + 1], int):
+            return _array_element(walk, desc, kind, int(steps[k + 1]))
         return None
     return None
+
+
+def _skip_to(walk: _Walk, msgtype: str, name: str | int) -> Any:
+    """Skip the fields of ``msgtype`` before ``name`` -> its field description (None: no such field)."""
+    for fname, fdesc in walk.store.fielddefs[msgtype][1]:
+        if fname == name:
+            return fdesc
+        walk.skip(fdesc)
+    return None
+
+
+def _array_element(walk: _Walk, desc: Any, kind: int, index: int) -> FloatArray | None:
+    """Element ``index`` of a primitive array field (fixed length: kind 3; sequence: kind 4)."""
+    sub, length = desc[1]
+    if int(sub[0]) != 1 or sub[1][0] not in _PRIMITIVES:
+        return None
+    dtype, size = _PRIMITIVES[sub[1][0]]
+    count = walk.u32() if kind == 4 else np.full(walk.pos.shape[0], int(length), dtype=np.int64)
+    if np.any(count <= index):
+        return None  # some message is too short: the per-message path names it
+    walk.align(size)
+    walk.pos = walk.pos + index * size
+    return walk.read(dtype, size).astype(np.float64)
 
 
 def decode_field(raw: RawTopic, ros1: bool, field: str, *, fast: bool | None = None) -> FieldSamples:

@@ -38,7 +38,7 @@ from verify.ingest.quality import NEAR_1970_NS, clean_order, pose_findings, stre
 from verify.ingest.raw import RawLog, check_bag_folder, read_raw, special_file_kind
 from verify.ingest.readerrors import in_words, read_errors
 from verify.ingest.rules import TF_TOPIC, ReadingRules
-from verify.ingest.timebase import JudgedSamples, judged_samples
+from verify.ingest.timebase import JudgedSamples, TimeBase, judged_samples
 
 __all__ = ["LogData", "PoseStream", "file_sha256", "log_digest", "read_log", "wanted_topics"]
 
@@ -229,12 +229,40 @@ def _decode_optional(what: str, topic: str, decode: Callable[[], T], quality: di
         return None
 
 
+@dataclass(slots=True)
+class _Reading:
+    """What the streams of one log add up as they are read: quality findings, per-stream sample counts, the
+    problems that make a stream unusable, and each topic's clock (time base, median offset to log time)."""
+
+    p: Path
+    raw: RawLog
+    rules: ReadingRules
+    quality: dict[str, Any]
+    samples: dict[str, dict[str, int]] = field(default_factory=dict)
+    problems: dict[str, str] = field(default_factory=dict)
+    clock_streams: dict[str, tuple[str, float | None]] = field(default_factory=dict)
+
+    def note_base(self, topic: str, stream: str, note: str | None, usable: bool) -> None:
+        if note:
+            self.quality["notes"].append(f"{topic}: {note}")
+            if not usable:
+                self.problems[stream] = note
+
+
+@dataclass(frozen=True, slots=True)
+class _Pose:
+    topic: str
+    msgtype: str
+    child: str | None
+    base: TimeBase
+    t0: int
+    stream: PoseStream
+    samples: PoseStream
+
+
 def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | None, job: DigestJob | None
               ) -> LogData:
     scenario = rules.scenario
-    time_base = rules.requested
-    clock_streams: dict[str, tuple[str, float | None]] = {}
-    t = scenario.topics
     raw = read_raw(p, wanted_topics(scenario), salvage=salvage)
     rules.check_offset_topics(raw.available, str(p))
     quality: dict[str, Any] = {"notes": list(raw.notes), "missing_definitions": []}
@@ -242,7 +270,34 @@ def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | No
         if not topic.has_definition:
             quality["missing_definitions"].append(
                 f"{topic.topic}: the bag has no definition of {topic.msgtype}; decoded with our own type store")
+    r = _Reading(p, raw, rules, quality)
+    pose = _read_pose(r, time0_ns)
+    nominal = _read_nominal(r, pose)
+    cmd_t, cmd_u = _read_cmd(r, pose)
+    signals = _read_signals(r, pose)
+    clocks = clock_report(pose.topic, r.clock_streams, rules.offsets_s)
+    quality["clocks"] = clocks
+    quality["notes"].extend(clocks["findings"])
+    statuses, metadata = _read_json_topics(r)
+    if raw.partial:
+        quality["partial"] = True
+    try:
+        log_digest = messages_digest(raw) if job is None else job.result()
+    except OSError as err:
+        raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
+    return LogData(path=str(p), format=raw.format, log_digest=log_digest.hex, digest_algorithm=log_digest.algorithm,
+                   time_base=pose.base.name, time0_ns=pose.t0, pose=pose.stream,
+                   pose_source={"topic": pose.topic, "type": pose.msgtype,
+                                **({"child_frame": pose.child} if pose.child else {})},
+                   nominal=nominal, cmd_t_ns=cmd_t, cmd_u=cmd_u, statuses=statuses, metadata=metadata,
+                   data_quality=quality, partial=raw.partial, pose_samples=pose.samples,
+                   time_base_requested=rules.requested, time_base_note=pose.base.note, samples=r.samples,
+                   stream_problems=r.problems, signals=signals)
 
+
+def _read_pose(r: _Reading, time0_ns: int | None) -> _Pose:
+    """The pose stream (required): decoded, its time base chosen, its findings in ``r.quality["pose"]``."""
+    p, raw, rules, scenario = r.p, r.raw, r.rules, r.rules.scenario
     pose_topic = _pose_topic(raw, rules, str(p))
     praw = raw.topics[pose_topic]
     if not praw.payloads:
@@ -258,7 +313,7 @@ def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | No
     if cols.stamp_ns.size == 0:
         raise MissingTopicError(f"no transform with child frame {child!r} on {pose_topic}", path=str(p))
     base, stamps = rules.pose_times(pose_topic, cols.stamp_ns, cols.log_ns)
-    clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
+    r.clock_streams[pose_topic] = (base.name, median_offset_s(stamps, cols.log_ns))
     yaw, bad_q = yaw_from_quaternion(cols.quat_xyzw)
     pose, pose_samples, pjs = _stream(stamps, cols.x_m, cols.y_m, yaw)
     t0 = int(pose.t_ns[0]) if time0_ns is None else int(time0_ns)
@@ -280,74 +335,79 @@ def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | No
                             bad_q[pjs.all_index], max_speed_mps=scenario.max_speed_mps,
                             jump_tolerance_m=jump_tol_m, time0_ns=t0))
     pq["fast_decode"] = cols.fast
-    quality["pose"] = pq
-    samples: dict[str, dict[str, int]] = {"pose": {**pjs.counts(), "retimed": base.retimed}}
-    problems: dict[str, str] = {}
-    if base.note:
-        quality["notes"].append(f"{pose_topic}: {base.note}")
-        if not base.usable:
-            problems["pose"] = base.note
+    r.quality["pose"] = pq
+    r.samples["pose"] = {**pjs.counts(), "retimed": base.retimed}
+    r.note_base(pose_topic, "pose", base.note, base.usable)
+    return _Pose(pose_topic, praw.msgtype, child, base, t0, pose, pose_samples)
 
-    nominal = None
-    nraw = raw.topics.get(t.nominal) if t.nominal is not None else None
+
+def _read_nominal(r: _Reading, pose: _Pose) -> PoseStream | None:
+    """The nominal pose stream (optional: undecodable or absent is a finding)."""
+    raw, quality, scenario = r.raw, r.quality, r.rules.scenario
+    nominal_topic = scenario.topics.nominal
+    nraw = raw.topics.get(nominal_topic) if nominal_topic is not None else None
     ncols = None
-    if nraw is not None and nraw.payloads and t.nominal is not None:
-        nominal_topic = t.nominal
+    if nraw is not None and nraw.payloads and nominal_topic is not None:
         ncols = _decode_optional("nominal", nominal_topic, lambda: decode_pose(nraw, raw.ros1), quality)
-    if ncols is not None:
-        nbase, nst = rules.stream_times(nominal_topic, ncols.stamp_ns, ncols.log_ns, pose_base=base.name)
-        clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
-        nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
-        nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
-        quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
-                                                time0_ns=t0), **njs.counts(), "retimed_stamps": nbase.retimed}
-        samples["nominal"] = {**njs.counts(), "retimed": nbase.retimed}
-        if nbase.note:
-            quality["notes"].append(f"{t.nominal}: {nbase.note}")
-            if not nbase.usable:
-                problems["nominal"] = nbase.note
-    elif "nominal" not in quality:
-        quality["nominal"] = {"count": 0, "missing": True} if t.nominal is not None else {"named": False}
+    if ncols is None or nominal_topic is None:
+        if "nominal" not in quality:
+            quality["nominal"] = {"count": 0, "missing": True} if nominal_topic is not None else {"named": False}
+        return None
+    nbase, nst = r.rules.stream_times(nominal_topic, ncols.stamp_ns, ncols.log_ns, pose_base=pose.base.name)
+    r.clock_streams[nominal_topic] = (nbase.name, median_offset_s(nst, ncols.log_ns))
+    nyaw, _ = yaw_from_quaternion(ncols.quat_xyzw)
+    nominal, _, njs = _stream(nst, ncols.x_m, ncols.y_m, nyaw)
+    quality["nominal"] = {**stream_findings(nst, None, clean_order(nst), expected_rate_hz=scenario.mocap.rate_hz,
+                                            time0_ns=pose.t0), **njs.counts(), "retimed_stamps": nbase.retimed}
+    r.samples["nominal"] = {**njs.counts(), "retimed": nbase.retimed}
+    r.note_base(nominal_topic, "nominal", nbase.note, nbase.usable)
+    return nominal
 
-    cmd_t = cmd_u = None
-    craw = raw.topics.get(t.cmd_vel) if t.cmd_vel is not None else None
+
+def _read_cmd(r: _Reading, pose: _Pose) -> tuple[IntArray | None, FloatArray | None]:
+    """The command stream (optional): every command is judged (worst case), duplicates included."""
+    raw, quality, scenario = r.raw, r.quality, r.rules.scenario
+    cmd_topic = scenario.topics.cmd_vel
+    craw = raw.topics.get(cmd_topic) if cmd_topic is not None else None
     tw = None
-    if craw is not None and craw.payloads and t.cmd_vel is not None:
-        cmd_topic = t.cmd_vel
+    if craw is not None and craw.payloads and cmd_topic is not None:
         tw = _decode_optional("cmd_vel", cmd_topic, lambda: decode_twist(craw, raw.ros1), quality)
-    if tw is not None:
-        cbase, cst = rules.stream_times(cmd_topic, tw.stamp_ns, tw.log_ns, pose_base=base.name)  # TwistStamped/Twist
-        header_cmd = cbase.name == "header"
-        clock_streams[cmd_topic] = (cbase.name, median_offset_s(cst, tw.log_ns))
-        corder = clean_order(cst)
-        cjs = judged_samples(cst, tw.u)
-        cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
-        cq = stream_findings(cst, tw.log_ns if header_cmd else None, corder, expected_rate_hz=scenario.mocap.rate_hz,
-                             time0_ns=t0)
-        cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
-        cq.update(cjs.counts())
-        cq["type"] = craw.msgtype if craw is not None else "?"
-        cq["time_base"] = cbase.name
-        cq["retimed_stamps"] = cbase.retimed
-        quality["cmd_vel"] = cq
-        samples["cmd_vel"] = {**cjs.counts(), "retimed": cbase.retimed}
-        if cbase.note:
-            quality["notes"].append(f"{cmd_topic}: {cbase.note}")
-            if not cbase.usable:
-                problems["cmd_vel"] = cbase.note
-    elif "cmd_vel" not in quality:
-        quality["cmd_vel"] = {"count": 0, "missing": True} if t.cmd_vel is not None else {"named": False}
+    if tw is None or craw is None or cmd_topic is None:
+        if "cmd_vel" not in quality:
+            quality["cmd_vel"] = {"count": 0, "missing": True} if cmd_topic is not None else {"named": False}
+        return None, None
+    cbase, cst = r.rules.stream_times(cmd_topic, tw.stamp_ns, tw.log_ns, pose_base=pose.base.name)  # TwistStamped/Twist
+    header_cmd = cbase.name == "header"
+    r.clock_streams[cmd_topic] = (cbase.name, median_offset_s(cst, tw.log_ns))
+    corder = clean_order(cst)
+    cjs = judged_samples(cst, tw.u)
+    cmd_t, cmd_u = cst[cjs.all_index], tw.u[cjs.all_index]  # every command is judged (worst case)
+    cq = stream_findings(cst, tw.log_ns if header_cmd else None, corder, expected_rate_hz=scenario.mocap.rate_hz,
+                         time0_ns=pose.t0)
+    cq["nan_inputs"] = int(np.count_nonzero(~np.isfinite(cmd_u).all(axis=1)))
+    cq.update(cjs.counts())
+    cq["type"] = craw.msgtype
+    cq["time_base"] = cbase.name
+    cq["retimed_stamps"] = cbase.retimed
+    quality["cmd_vel"] = cq
+    r.samples["cmd_vel"] = {**cjs.counts(), "retimed": cbase.retimed}
+    r.note_base(cmd_topic, "cmd_vel", cbase.note, cbase.usable)
+    return cmd_t, cmd_u
 
-    signals, signal_quality = read_signals(raw, rules, base, str(p), pose_topic=pose_topic)
+
+def _read_signals(r: _Reading, pose: _Pose) -> dict[str, SignalStream]:
+    """The signal atoms' streams (``verify.ingest.fields``), their findings and their samples outside the run."""
+    quality = r.quality
+    signals, signal_quality = read_signals(r.raw, r.rules, pose.base, str(r.p), pose_topic=pose.topic)
     if signal_quality:
         quality["signals"] = signal_quality
         for name, sq in signal_quality.items():
-            clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
+            r.clock_streams.setdefault(sq["topic"], (sq["time_base"], sq["offset_vs_log_s"]))
             if "note" in sq:
                 quality["notes"].append(f"signal {name} ({sq['topic']}): {sq['note']}")
             if "problem" in sq:
-                problems[f"signal {name}"] = sq["problem"]
-    first_ns, last_ns = int(pose.t_ns[0]), int(pose.t_ns[-1])
+                r.problems[f"signal {name}"] = sq["problem"]
+    first_ns, last_ns = int(pose.stream.t_ns[0]), int(pose.stream.t_ns[-1])
     for name, stream in signals.items():
         count, violating, at_ns = outside_span(stream, first_ns, last_ns)
         signal_quality[name]["outside_pose_span"] = count
@@ -356,27 +416,18 @@ def _read_log(p: Path, rules: ReadingRules, *, salvage: bool, time0_ns: int | No
                                     "(the run) are not judged")
         if at_ns is not None:  # judged in verify.certify (the formula's checks cannot pass where it uses the signal)
             signal_quality[name]["outside_pose_span_violating"] = violating
-    clocks = clock_report(pose_topic, clock_streams, rules.offsets_s)
-    quality["clocks"] = clocks
-    quality["notes"].extend(clocks["findings"])
+    return signals
 
-    statuses, bad_status = _json_objects(raw, t.solver)
+
+def _read_json_topics(r: _Reading) -> tuple[tuple[dict[str, Any], ...], dict[str, Any] | None]:
+    """The solver status and run metadata topics (JSON text): statuses, the first metadata document."""
+    t, quality = r.rules.scenario.topics, r.quality
+    statuses, bad_status = _json_objects(r.raw, t.solver)
     failed = [s for s in statuses if s.get("success") is False]
     quality["solver"] = {"count": len(statuses), "failed": len(failed), "backup": sum(1 for s in statuses
                                                                                      if s.get("backup")),
                          "undecodable": bad_status}
-    documents, bad_meta = _json_objects(raw, t.metadata)
-    metadata = documents[0] if documents else None
+    documents, bad_meta = _json_objects(r.raw, t.metadata)
     if bad_meta:
         quality["notes"].append(f"{t.metadata}: {bad_meta} message(s) cannot be decoded as JSON text")
-    if raw.partial:
-        quality["partial"] = True
-    try:
-        log_digest = messages_digest(raw) if job is None else job.result()
-    except OSError as err:
-        raise LogReadError(f"could not read the log to digest it ({err})", path=str(p)) from err
-    return LogData(str(p), raw.format, log_digest.hex, log_digest.algorithm, base.name, t0, pose,
-                   {"topic": pose_topic, "type": praw.msgtype, **({"child_frame": child} if child else {})},
-                   nominal, cmd_t, cmd_u, tuple(statuses), metadata, quality, raw.partial,
-                   pose_samples=pose_samples, time_base_requested=time_base, time_base_note=base.note,
-                   samples=samples, stream_problems=problems, signals=signals)
+    return tuple(statuses), (documents[0] if documents else None)

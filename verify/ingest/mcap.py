@@ -20,12 +20,10 @@ Uncompressed chunks whose records are not all wanted are read message by message
 channels' message index records give each message's offset; only those records are read and each must be a message
 of the channel and log time its index entry names (the chunk CRC, covering bytes not read, is then not checked).
 
-The record walk is vectorized: the message index records after each chunk give candidate record starts; at those
-candidates the opcode and length are read with numpy, and a run of candidates where each record ends exactly where
-the next candidate begins is taken in one step (by induction every candidate in the run is a true record start of
-the sequential walk). Records between runs (e.g. schema and channel records at the start of a chunk, or messages
-missing from the index) are walked one by one. The message index itself is only a hint: nothing is read from it
-that the walk does not confirm.
+The record walk is the record layer's (``verify.ingest.mcaprecords.chunk_records``, the same walk the scan,
+salvage and the follower take), vectorized: the message index records after each chunk give candidate record
+starts; a run of candidates where each record ends exactly where the next candidate begins is taken in one step.
+The message index itself is only a hint: nothing is read from it that the walk does not confirm.
 """
 
 from __future__ import annotations
@@ -52,6 +50,7 @@ from verify.ingest.mcaprecords import (
     MalformedError,
     Op,
     Scan,
+    chunk_records,
     record_messages,
     zstd,
 )
@@ -103,8 +102,9 @@ def read_mcap_storage(storage: McapReader, connections: Collection[Connection]) 
     ``storage.messages(connections)`` yields them; None when unusual."""
     try:
         return _read(storage, connections)
-    except (_UnusualError, SpanError, ReaderError, struct.error, ValueError, IndexError, KeyError, OSError, EOFError,
-            MemoryError, RuntimeError, zstd.ZstdError):  # lz4 / zstd: a damaged chunk; numpy: offsets out of range
+    # lz4 / zstd: a damaged chunk; numpy: offsets out of range
+    except (_UnusualError, SpanError, MalformedError, ReaderError, struct.error, ValueError, IndexError, KeyError,
+            OSError, EOFError, MemoryError, RuntimeError, zstd.ZstdError):
         return None  # (a TypeError or AttributeError is a bug of ours: it is not caught here)
 
 
@@ -184,8 +184,7 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], know
     raw = _decompress(compressed, chunk.compression, usize, crc)
     del compressed
     u8 = np.frombuffer(raw, dtype=np.uint8)
-    hints = _index_hints(fd, size, chunk, usize)
-    pos, op, length = _walk(raw, u8, hints)
+    pos, op, length = chunk_records(raw, _index_hints(fd, size, chunk, usize))
     _parse_others(raw, pos, op, length, known)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]
@@ -302,35 +301,57 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
     start, usize = int(chunk.chunk_start_offset), int(chunk.uncompressed_size)
     if os.pread(fd, 4, start + _CHUNK_CRC_AT) != b"\0\0\0\0":
         return False
+    cand = _indexed_starts(chunk, region, lo)
+    if cand is None or (cand and cand[-1] + RECORD_HEAD > usize):
+        return False
+    heads = _record_heads(fd, base, cand)
+    return heads is not None and _heads_chain(fd, base, usize, heads, known)
+
+
+def _indexed_starts(chunk: ChunkInfo, region: bytes, lo: int) -> list[int] | None:
+    """Every record start the chunk's message index records give (sorted); None when one is not a well-formed
+    message index record (``region``: the file's bytes from ``lo`` holding them)."""
     starts: set[int] = set()
     for off in chunk.message_index_offsets.values():  # small per chunk: struct, not numpy
         rel = int(off) - lo
         if rel < 0 or rel + 15 > len(region) or region[rel] != _OP_MESSAGE_INDEX:
-            return False
+            return None
         (rec_len, _channel, arr_len) = struct.unpack_from("<QHI", region, rel + 1)
         if arr_len % 16 or arr_len + 6 > rec_len or rel + 15 + arr_len > len(region):
-            return False
+            return None
         starts.update(struct.unpack_from(f"<{arr_len // 8}Q", region, rel + 15)[1::2])
-    cand = sorted(starts)
-    if cand and cand[-1] + RECORD_HEAD > usize:
-        return False
-    heads: dict[int, tuple[int, int, int]] = {}  # record position -> opcode, content length, first u16 (channel)
+    return sorted(starts)
+
+
+def _record_heads(fd: int, base: int, cand: list[int]) -> dict[int, tuple[int, int, int]] | None:
+    """The heads of the records at ``cand`` (chunk positions; the chunk's records start at file position ``base``):
+    position -> (opcode, content length, first u16: a message's channel), nearby ones in one read; None when the
+    file ends first."""
+    heads: dict[int, tuple[int, int, int]] = {}
     i = 0
-    while i < len(cand):  # the heads of the indexed records, nearby ones in one read
+    while i < len(cand):
         j = i
         while j + 1 < len(cand) and cand[j + 1] - cand[i] < _HEAD_CLUSTER_B:
             j += 1
         n = cand[j] - cand[i] + RECORD_HEAD + 2
         piece = os.pread(fd, n, base + cand[i])
         if len(piece) != n:
-            return False
+            return None
         for k in range(i, j + 1):
-            r = cand[k] - cand[i]
-            heads[cand[k]] = struct.unpack_from("<BQH", piece, r)
+            heads[cand[k]] = struct.unpack_from("<BQH", piece, cand[k] - cand[i])
         i = j + 1
+    return heads
+
+
+def _heads_chain(fd: int, base: int, usize: int, heads: dict[int, tuple[int, int, int]], known: dict[int, str]
+                 ) -> bool:
+    """The walk of a chunk's ``usize`` bytes of records by their heads (``heads``: those already read; the others
+    read one by one): every record ends where the next begins, the last at the chunk's end, every indexed start is
+    a record of the walk, messages hold their fixed fields on a declared channel, and schema, channel and
+    statistics records parse."""
     pos = 0
     while pos < usize:
-        head = heads.get(pos)
+        head = heads.pop(pos, None)
         if head is None:
             raw = os.pread(fd, RECORD_HEAD + 2, base + pos)
             if len(raw) != RECORD_HEAD + 2:
@@ -345,7 +366,6 @@ def _chunk_chains(fd: int, chunk: ChunkInfo, region: bytes, lo: int, base: int, 
                 return False  # the scan refuses a message on a channel the file never declares
         elif op in _PARSED_OPS and not _parses(op, memoryview(os.pread(fd, n, base + pos + RECORD_HEAD)), known):
             return False
-        heads.pop(pos, None)
         pos = end
     return pos == usize and not heads  # every indexed record was a record of the walk
 
@@ -393,76 +413,6 @@ def _index_hints(fd: int, size: int, chunk: ChunkInfo, usize: int) -> IntArray:
         return np.zeros(0, dtype=np.int64)
     cand = np.unique(np.concatenate(found))
     return cand[(cand >= 0) & (cand + 9 <= usize)]
-
-
-def _walk(raw: bytes, u8: U8Array, cand: IntArray) -> tuple[IntArray, IntArray, IntArray]:
-    """The sequential record walk of a decompressed chunk -> (record start, opcode, content length) of every record,
-    in order. Runs of chained candidates are taken at once; other records are stepped over one by one."""
-    usize = len(raw)
-    k = cand.shape[0]
-    if k:
-        c_op = u8[cand].astype(np.int64)
-        c_len = np.ascontiguousarray(u8[(cand + 1)[:, None] + np.arange(8)]).view("<u8").ravel()
-        ok = c_len <= np.uint64(usize)
-        c_len_i = np.where(ok, c_len, 0).astype(np.int64)
-        c_next = np.where(ok, cand + 9 + c_len_i, -1)
-        # run ends: candidate i whose record does not end at candidate i + 1
-        breaks = [*np.flatnonzero(c_next[:-1] != cand[1:]).tolist(), k - 1]
-    else:
-        c_op = c_len_i = c_next = np.zeros(0, dtype=np.int64)
-        breaks = []
-    cand_l = cand.tolist()
-    seg_pos: list[IntArray] = []
-    seg_op: list[IntArray] = []
-    seg_len: list[IntArray] = []
-    one_pos: list[int] = []
-    one_op: list[int] = []
-    one_len: list[int] = []
-
-    def flush_single() -> None:
-        if one_pos:
-            seg_pos.append(np.array(one_pos, dtype=np.int64))
-            seg_op.append(np.array(one_op, dtype=np.int64))
-            seg_len.append(np.array(one_len, dtype=np.int64))
-            one_pos.clear()
-            one_op.clear()
-            one_len.clear()
-
-    pos = 0
-    i = 0  # next candidate not behind pos
-    b = 0  # index into breaks
-    while pos < usize:
-        while i < k and cand_l[i] < pos:
-            i += 1
-        if i < k and cand_l[i] == pos and c_next[i] >= 0:
-            while breaks[b] < i:
-                b += 1
-            j = breaks[b]  # candidates i..j chain; j's record ends at c_next[j]
-            end = int(c_next[j])
-            if end > usize:
-                raise _UnusualError("record runs past the end of its chunk")
-            flush_single()
-            seg_pos.append(cand[i : j + 1])
-            seg_op.append(c_op[i : j + 1])
-            seg_len.append(c_len_i[i : j + 1])
-            pos = end
-            i = j + 1
-            continue
-        if pos + 9 > usize:
-            raise _UnusualError("cut record header in chunk")
-        op = raw[pos]
-        (rlen,) = struct.unpack_from("<Q", raw, pos + 1)
-        if pos + 9 + rlen > usize:
-            raise _UnusualError("record runs past the end of its chunk")
-        one_pos.append(pos)
-        one_op.append(op)
-        one_len.append(rlen)
-        pos += 9 + rlen
-    flush_single()
-    if not seg_pos:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty, empty
-    return np.concatenate(seg_pos), np.concatenate(seg_op), np.concatenate(seg_len)
 
 
 def _packed_offsets(lengths: IntArray) -> IntArray:

@@ -28,16 +28,17 @@ import os
 import stat
 import struct
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path, PurePath
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import yaml
 from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import read_mcap_storage
@@ -50,6 +51,8 @@ from verify.ingest.mcaprecords import (
     MalformedError,
     Op,
     Scan,
+    chunk_layout,
+    declares_counts,
     record_messages,
     scan,
     zstd,
@@ -130,18 +133,7 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
     rel = info.get("relative_file_paths")
     if not isinstance(rel, list) or not all(isinstance(x, str) for x in rel):
         raise bad("relative_file_paths is not a list of file names")
-    mode = info.get("compression_mode") or None
-    if mode is not None and not isinstance(mode, str):
-        raise bad("compression_mode is not a string")
-    mode = None if mode is None or mode.lower() == "none" else mode.lower()
-    if mode is not None:
-        fmt = info.get("compression_format")
-        if mode not in ("file", "message"):
-            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
-                               f"writes 'file' or 'message'", path=str(folder))
-        if not isinstance(fmt, str) or fmt.lower() != "zstd":
-            raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
-                               f"'zstd' is read", path=str(folder))
+    mode = _compression_mode(info, folder, bad)
     types: dict[str, str] = {}
     counts: dict[str, int] = {}
     entries = info.get("topics_with_message_count", [])
@@ -163,6 +155,24 @@ def read_bag_metadata(folder: Path) -> BagMetadata:
                                path=str(folder))
         regular_file(f, "storage file")
     return BagMetadata(files, mode, types, counts)
+
+
+def _compression_mode(info: dict[str, Any], folder: Path, bad: Callable[[str], LogReadError]) -> str | None:
+    """A metadata.yaml's compression: None, "file" or "message" (rosbag2's modes), in zstd, the one format read."""
+    mode = info.get("compression_mode") or None
+    if mode is not None and not isinstance(mode, str):
+        raise bad("compression_mode is not a string")
+    mode = None if mode is None or mode.lower() == "none" else mode.lower()
+    if mode is None:
+        return None
+    fmt = info.get("compression_format")
+    if mode not in ("file", "message"):
+        raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression mode {mode!r}; rosbag2 "
+                           f"writes 'file' or 'message'", path=str(folder))
+    if not isinstance(fmt, str) or fmt.lower() != "zstd":
+        raise LogReadError(f"unreadable ROS2 bag: metadata.yaml names the compression format {fmt!r}; only "
+                           f"'zstd' is read", path=str(folder))
+    return mode
 
 
 def read_mcap_log(path: Path, wanted: Iterable[str], *, fast: bool) -> McapLog:
@@ -386,21 +396,7 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                     if info is None or int(info.chunk_length) != RECORD_HEAD + length:
                         return False
                     seen += 1
-                    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4 + 64), pos + RECORD_HEAD)
-                    if len(fixed) < CHUNK_FIXED + 4:
-                        return False
-                    (usize,) = struct.unpack_from("<Q", fixed, 16)
-                    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
-                    if CHUNK_FIXED + 4 + name_len + 8 > length:
-                        return False
-                    at = pos + RECORD_HEAD + CHUNK_FIXED + 4 + name_len
-                    name = os.pread(fd, name_len, at - name_len)
-                    (stored,) = struct.unpack("<Q", os.pread(fd, 8, at))
-                    if CHUNK_FIXED + 4 + name_len + 8 + stored > length:
-                        return False
-                    # the chunk as the index describes it (the indexed reader reads it by the index)
-                    if (usize, stored, name) != (int(info.uncompressed_size), int(info.compressed_size),
-                                                 str(info.compression).encode()):
+                    if not _chunk_as_indexed(fd, pos, length, info):
                         return False
                 elif op in _PARSED:
                     content = os.pread(fd, length, pos + RECORD_HEAD)
@@ -410,6 +406,23 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                 pos = nxt
     except (OSError, struct.error, MalformedError, ValueError, MemoryError, OverflowError):
         return False
+
+
+def _chunk_as_indexed(fd: int, pos: int, length: int, info: ChunkInfo) -> bool:
+    """Whether the chunk record at ``pos`` (content ``length`` bytes) passes the record layer's structural check
+    (``chunk_layout``: fields within the record, a compression the format defines) and is the chunk its index
+    entry describes (the indexed reader reads it by the index): only its fixed fields and compression are read."""
+    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4), pos + RECORD_HEAD)
+    if len(fixed) < CHUNK_FIXED + 4:
+        return False
+    (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
+    head = os.pread(fd, min(length, CHUNK_FIXED + 4 + name_len + 8), pos + RECORD_HEAD)
+    try:
+        compression, usize, _crc, _at, stored = chunk_layout(head, length)
+    except MalformedError:
+        return False
+    return (usize, stored, compression) == (int(info.uncompressed_size), int(info.compressed_size),
+                                            str(info.compression))
 
 
 def _same_channels(found: Scan, storage: McapReader) -> bool:
@@ -426,8 +439,33 @@ def _same_channels(found: Scan, storage: McapReader) -> bool:
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:
     """The wanted topics of one storage file by a scan of all its records (module docstring)."""
     where = f"storage file {file.name}: " if named else ""
+    found, kept, channel_ids = _scan_file(file, want, shown, where)
+    _refuse_stop(found, shown, where)
+    for cid in sorted(channel_ids - set(found.channels)):
+        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
+                           f"declares", path=shown)
+    one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
+                        if ch.topic in want and ch.schema_id in found.schemas), path=shown)
+    topics = _scanned_topics(found, kept, want, shown, where)
+    available: dict[str, str] = {}
+    for ch in found.channels.values():
+        schema = found.schemas.get(ch.schema_id)
+        available.setdefault(ch.topic, schema.name if schema is not None else "")
+    counts: dict[str, int] = {}
+    for cid, n in (found.declared or {}).items():
+        declared = found.channels.get(cid)
+        if declared is not None and declared.topic in want:
+            counts[declared.topic] = counts.get(declared.topic, 0) + n
+    return McapLog(topics, available), counts
+
+
+def _scan_file(file: Path, want: set[str], shown: str, where: str
+               ) -> tuple[Scan, list[tuple[int, int, bytes]], set[int]]:
+    """The record layer's scan of one file -> what it found, the wanted messages (channel id, log time, payload;
+    a message of a channel not declared yet is kept: its channel may come later) and every channel id messages
+    refer to."""
     found = Scan({}, {})
-    kept: list[tuple[int, int, bytes]] = []  # channel id, log time, payload
+    kept: list[tuple[int, int, bytes]] = []
     channel_ids: set[int] = set()
     try:
         with file.open("rb") as fh:
@@ -436,7 +474,10 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
                 raise TruncatedLogError(f"truncated mcap log: {where}the file is empty", path=shown)
             # mapped, not read: the scan copies only the wanted payloads (the map is released with its last view)
             buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-            for msg in scan(memoryview(buf), found):
+            view = memoryview(buf)
+            # chunks holding no wanted topic: checked, not read (as indexed reading), where counts are declared
+            skip = frozenset(want) if declares_counts(view) else None
+            for msg in scan(view, found, wanted=skip):
                 channel_ids.add(msg.channel_id)
                 ch = found.channels.get(msg.channel_id)
                 if ch is None or ch.topic in want:
@@ -444,26 +485,32 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
     except OSError as err:
         raise LogReadError(f"unreadable mcap log: {where}it cannot be read from disk ({err.strerror})",
                            path=shown) from err
+    return found, kept, channel_ids
+
+
+def _refuse_stop(found: Scan, shown: str, where: str) -> None:
+    """A scan that stopped before the footer -> the error that says where and why (cut: ``TruncatedLogError``)."""
     stop = found.error
-    if stop is not None or not found.complete:
-        at = f" at byte {found.stopped_at}" if found.stopped_at is not None else ""
-        if isinstance(stop, CutError) or stop is None:
-            raise TruncatedLogError(f"truncated or unindexed mcap log: {where}it ends inside a record{at} (a "
-                                    f"recorder that was killed; --salvage reads its complete records)", path=shown)
-        if isinstance(stop, MalformedError) and str(stop) == "bad magic":
-            raise LogReadError(f"unreadable mcap log: {where}not an MCAP file (its first bytes are not the MCAP "
-                               f"magic)", path=shown)
-        if isinstance(stop, DECOMPRESS_ERRORS):
-            raise LogReadError(f"unreadable mcap log: {where}a compressed chunk{at} cannot be decompressed "
-                               f"({stop.__class__.__name__})", path=shown)
-        raise LogReadError(f"unreadable mcap log: {where}a record{at} is malformed: {in_words(stop)}", path=shown)
-    for cid in sorted(channel_ids - set(found.channels)):
-        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
-                           f"declares", path=shown)
-    one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
-                        if ch.topic in want and ch.schema_id in found.schemas), path=shown)
+    if stop is None and found.complete:
+        return
+    at = f" at byte {found.stopped_at}" if found.stopped_at is not None else ""
+    if isinstance(stop, CutError) or stop is None:
+        raise TruncatedLogError(f"truncated or unindexed mcap log: {where}it ends inside a record{at} (a "
+                                f"recorder that was killed; --salvage reads its complete records)", path=shown)
+    if isinstance(stop, MalformedError) and str(stop) == "bad magic":
+        raise LogReadError(f"unreadable mcap log: {where}not an MCAP file (its first bytes are not the MCAP "
+                           f"magic)", path=shown)
+    if isinstance(stop, DECOMPRESS_ERRORS):
+        raise LogReadError(f"unreadable mcap log: {where}a compressed chunk{at} cannot be decompressed "
+                           f"({stop.__class__.__name__})", path=shown)
+    raise LogReadError(f"unreadable mcap log: {where}a record{at} is malformed: {in_words(stop)}", path=shown)
+
+
+def _scanned_topics(found: Scan, kept: list[tuple[int, int, bytes]], want: set[str], shown: str, where: str
+                    ) -> dict[str, McapTopic]:
+    """The wanted channels' messages per topic, sorted stably by log time: indexed reading's order (log time, then
+    file position); a wanted channel without its schema, or not CDR, is refused naming it."""
     topics: dict[str, McapTopic] = {}
-    columns: dict[str, tuple[list[int], list[bytes]]] = {}
     for cid, ch in sorted(found.channels.items()):
         if ch.topic not in want:
             continue
@@ -478,23 +525,14 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
             topics[ch.topic] = McapTopic(schema.name, schema.has_data, [], [])
         else:
             topics[ch.topic].has_definition &= schema.has_data
-    # stable sort by log time: indexed reading's order (log time, then file position)
     kept.sort(key=itemgetter(1))
-    for topic in topics:
-        columns[topic] = ([], [])
+    columns: dict[str, tuple[list[int], list[bytes]]] = {topic: ([], []) for topic in topics}
     for cid, log_ns, payload in kept:
-        col = columns[found.channels[cid].topic]
+        col = columns.get(found.channels[cid].topic)
+        if col is None:
+            continue  # a message before its channel's record, on a topic not wanted
         col[0].append(log_ns)
         col[1].append(payload)
     for topic, (logs, payloads) in columns.items():
         topics[topic].log_ns, topics[topic].payloads = logs, payloads
-    available: dict[str, str] = {}
-    for ch in found.channels.values():
-        schema = found.schemas.get(ch.schema_id)
-        available.setdefault(ch.topic, schema.name if schema is not None else "")
-    counts: dict[str, int] = {}
-    for cid, n in (found.declared or {}).items():
-        ch = found.channels.get(cid)
-        if ch is not None and ch.topic in want:
-            counts[ch.topic] = counts.get(ch.topic, 0) + n
-    return McapLog(topics, available), counts
+    return topics

@@ -21,6 +21,11 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import IntEnum
 
+import numpy as np
+import numpy.typing as npt
+
+from verify.ingest.records import MCAP, CutError, MalformedError, lz4_decompress, walk_chain
+
 if sys.version_info >= (3, 14):
     from compression import zstd
 else:
@@ -28,6 +33,7 @@ else:
 
 __all__ = [
     "CHUNK_FIXED",
+    "COMPRESSIONS",
     "FOOTER_RECORD",
     "MAGIC",
     "MESSAGE_HEAD",
@@ -40,7 +46,11 @@ __all__ = [
     "Scan",
     "SchemaRecord",
     "chunk_content",
+    "chunk_layout",
+    "chunk_records",
+    "declares_counts",
     "decompress",
+    "indexed_channels",
     "lz4_decompress",
     "parse_channel",
     "parse_message",
@@ -82,14 +92,6 @@ class Op(IntEnum):
     METADATA_INDEX = 0x0D
     SUMMARY_OFFSET = 0x0E
     DATA_END = 0x0F
-
-
-class CutError(Exception):
-    """The bytes end inside a record (a truncated file, or a file still being written)."""
-
-
-class MalformedError(Exception):
-    """A record's fields contradict its length or the format (damaged bytes)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,13 +173,6 @@ def parse_statistics(rec: bytes | memoryview) -> dict[int, int]:
     return {int(c): int(n) for c, n in struct.iter_unpack("<HQ", bytes(rec[fixed + 4 : fixed + 4 + mlen]))}
 
 
-def lz4_decompress(data: bytes | memoryview) -> bytes:
-    from lz4.frame import decompress as lz4_frame  # type: ignore[import-untyped]  # a rosbags dependency
-
-    out: bytes = lz4_frame(bytes(data))
-    return out
-
-
 def decompress(data: bytes | memoryview, compression: str, usize: int) -> bytes:
     """A chunk's records from its stored bytes; raises the decompressor's own error on damaged data, and
     ``MalformedError`` on an unknown compression or a size that disagrees with the chunk's."""
@@ -195,15 +190,79 @@ def decompress(data: bytes | memoryview, compression: str, usize: int) -> bytes:
     return raw
 
 
-def chunk_content(rec: bytes | memoryview) -> tuple[str, int, int, memoryview]:
-    """A chunk record's content -> (compression, uncompressed size, crc, stored records)."""
+#: the chunk compressions the format defines
+COMPRESSIONS = ("", "lz4", "zstd")
+
+
+def chunk_layout(rec: bytes | memoryview, length: int | None = None) -> tuple[str, int, int, int, int]:
+    """A chunk record's content (or its first bytes, up to and with its stored size field; ``length``: the whole
+    content's length) -> (compression, uncompressed size, crc, where its stored records start, their size): the
+    structural check of a chunk, whether it is then read or not. ``MalformedError`` when a field runs past the
+    record or the compression is not one the format defines."""
+    size = len(rec) if length is None else length
     _need(rec, 0, CHUNK_FIXED)
     _start, _end, usize, crc = struct.unpack_from("<QQQI", rec, 0)
     compression, p = _string(rec, CHUNK_FIXED)
     _need(rec, p, 8)
     (clen,) = struct.unpack_from("<Q", rec, p)
-    _need(rec, p + 8, clen)
-    return compression, int(usize), int(crc), memoryview(rec)[p + 8 : p + 8 + clen]
+    if p + 8 + clen > size:
+        raise MalformedError("a chunk's stored records run past the end of its record")
+    if compression not in COMPRESSIONS:
+        raise MalformedError(f"unknown chunk compression {compression!r}")
+    return compression, int(usize), int(crc), p + 8, int(clen)
+
+
+def chunk_content(rec: bytes | memoryview) -> tuple[str, int, int, memoryview]:
+    """A chunk record's content -> (compression, uncompressed size, crc, stored records)."""
+    compression, usize, crc, at, clen = chunk_layout(rec)
+    return compression, usize, crc, memoryview(rec)[at : at + clen]
+
+
+def indexed_channels(buf: bytes | memoryview, pos: int) -> set[int] | None:
+    """The channels the message index records at ``pos`` (right after a chunk) list with at least one message;
+    None when no complete message index record is there (a chunk without message indexes: what it holds is not
+    known without reading it)."""
+    view = memoryview(buf)
+    ids: set[int] = set()
+    seen = False
+    while pos + RECORD_HEAD + 6 <= len(view) and view[pos] == Op.MESSAGE_INDEX:
+        (size,) = struct.unpack_from("<Q", view, pos + 1)
+        if size < 6 or pos + RECORD_HEAD + size > len(view):
+            break
+        cid, entries = struct.unpack_from("<HI", view, pos + RECORD_HEAD)
+        if entries:
+            ids.add(int(cid))
+        seen = True
+        pos += RECORD_HEAD + size
+    return ids if seen else None
+
+
+def declares_counts(buf: bytes | memoryview) -> bool:
+    """Whether the file's summary (found through its footer) holds a Statistics record: per-channel message counts,
+    which a reader checks what it read against."""
+    view = memoryview(buf)
+    footer = len(view) - len(MAGIC) - FOOTER_RECORD
+    if footer < len(MAGIC) or bytes(view[-len(MAGIC) :]) != MAGIC or view[footer] != Op.FOOTER:
+        return False
+    (start,) = struct.unpack_from("<Q", view, footer + RECORD_HEAD)
+    if not len(MAGIC) <= start < footer:
+        return False
+    try:
+        return any(op == Op.STATISTICS for op, _rec, _next in walk(view, int(start), footer))
+    except CutError:
+        return False
+
+
+IntArray = npt.NDArray[np.int64]
+
+
+def chunk_records(buf: bytes | memoryview, hints: IntArray | None = None) -> tuple[IntArray, IntArray, IntArray]:
+    """A chunk's records (``buf``: its decompressed records) -> (start, opcode, content length) of every record, in
+    order, by the vectorised walk (``verify.ingest.records.walk_chain``; ``hints``: record starts its message index
+    gives); ``MalformedError`` when a record runs past the chunk's end."""
+    pos, end = walk_chain(buf, MCAP, hints)
+    u8 = np.frombuffer(buf, dtype=np.uint8)
+    return pos, u8[pos].astype(np.int64), end - pos - RECORD_HEAD
 
 
 def walk(buf: bytes | memoryview, pos: int, end: int) -> Iterator[tuple[int, memoryview, int]]:
@@ -241,11 +300,18 @@ _STOPS: tuple[type[BaseException], ...] = (CutError, MalformedError, struct.erro
                                            zstd.ZstdError, ValueError)
 
 
-def scan(buf: bytes | memoryview, found: Scan, *, check_crc: bool = True) -> Iterator[MessageRecord]:
+def scan(buf: bytes | memoryview, found: Scan, *, check_crc: bool = True, wanted: frozenset[str] | None = None
+         ) -> Iterator[MessageRecord]:
     """Every message of the file in file order (a chunk's in its record order), filling ``found`` as the records
     pass. Stops at the footer, or at the first record that is cut, malformed or does not decompress: then
     ``found.stopped_at``/``reason``/``error`` say where and why (the messages of a cut uncompressed chunk's complete
-    records are yielded first)."""
+    records are yielded first).
+
+    ``wanted`` (topics): a chunk that holds none of them is checked structurally (``chunk_layout``) but neither
+    decompressed nor walked -- the rule of the indexed reader, which reads only the chunks holding a wanted
+    topic. A chunk holds none when the message index records right after it list only channels already declared,
+    on other topics. The caller passes ``wanted`` only for a file whose statistics declare its message counts
+    (``declares_counts``), so that a message index that hides a wanted message is caught by the count check."""
     view = memoryview(buf)
     if bytes(view[: len(MAGIC)]) != MAGIC:
         found.reason, found.stopped_at = "not an MCAP file (bad magic)", 0
@@ -267,12 +333,24 @@ def scan(buf: bytes | memoryview, found: Scan, *, check_crc: bool = True) -> Ite
                 found.complete = True
                 found.reason, found.stopped_at = "reached the end of the file", None
                 return
-            yield from record_messages(op, view[pos + RECORD_HEAD : nxt], found, check_crc=check_crc)
+            if op == Op.CHUNK and wanted is not None and _holds_none_of(view, nxt, found, wanted):
+                chunk_layout(view[pos + RECORD_HEAD : nxt])
+            else:
+                yield from record_messages(op, view[pos + RECORD_HEAD : nxt], found, check_crc=check_crc)
             pos = nxt
     except _STOPS as err:
         found.error = err.with_traceback(None)  # no frames (and their views of the buffer) kept alive
         found.stopped_at = pos
         found.reason = f"stopped at an incomplete record ({err.__class__.__name__})"
+
+
+def _holds_none_of(view: memoryview, after: int, found: Scan, wanted: frozenset[str]) -> bool:
+    """Whether the chunk that ends at ``after`` holds no message of a wanted topic, by its message index records."""
+    ids = indexed_channels(view, after)
+    if ids is None:
+        return False
+    channels = found.channels
+    return all(cid in channels and channels[cid].topic not in wanted for cid in ids)
 
 
 def _cut_chunk(rec: memoryview, found: Scan) -> Iterator[MessageRecord]:
@@ -302,8 +380,10 @@ def record_messages(op: int, rec: memoryview, found: Scan, *, check_crc: bool = 
     if check_crc and crc and zlib.crc32(inner) != crc:
         raise MalformedError("a chunk's records do not match its CRC")
     out: list[MessageRecord] = []
-    for iop, irec, _ in walk(inner, 0, len(inner)):
-        out.extend(_record(iop, irec, found))
+    view = memoryview(inner)
+    pos, ops, lengths = chunk_records(inner)
+    for at, iop, n in zip(pos.tolist(), ops.tolist(), lengths.tolist(), strict=True):
+        out.extend(_record(iop, view[at + RECORD_HEAD : at + RECORD_HEAD + n], found))
     return out
 
 

@@ -20,6 +20,8 @@ MCAP, sqlite3 and salvage readers) is imported when a log of that format is read
 
 from __future__ import annotations
 
+import contextlib
+import mmap
 import os
 import sqlite3
 import stat
@@ -44,6 +46,7 @@ from tubempc.runtime.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic, rosbag2_errors
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
+from verify.ingest.ros1records import BagState, bag_state
 
 if TYPE_CHECKING:
     from rosbags.rosbag2 import Reader as Reader2
@@ -263,8 +266,37 @@ def _read_errors() -> tuple[type[Exception], ...]:
     return (*_BASE_READ_ERRORS, *rosbag2_errors())
 
 
+def _ros1_state(path: Path) -> BagState | None:
+    """The record layer's word on a ROS1 bag rosbags could not read (``verify.ingest.ros1records.bag_state``):
+    the file mapped, not read into memory; None when it cannot be mapped."""
+    try:
+        with path.open("rb") as fh:
+            if os.fstat(fh.fileno()).st_size == 0:
+                return BagState(False)
+            buf = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    except (OSError, ValueError):
+        return None
+    view = memoryview(buf)
+    try:
+        return bag_state(view)
+    finally:
+        view.release()
+        with contextlib.suppress(BufferError):
+            buf.close()
+
+
 def _wrap_error(path: Path, fmt: str, err: Exception) -> LogReadError:
+    """A reader's error on a log -> the error the user reads. For a ROS1 bag the record layer decides, as for
+    salvage and ``watch``: a malformed record is damage (exit 3, never salvaged: ``--salvage`` reads logs that
+    were cut, as for MCAP), bytes that end before the bag is closed by its recorder are a truncated or unindexed
+    log (``--salvage`` reads its complete records)."""
     text = " ".join(str(err).split()) or err.__class__.__name__
+    state = _ros1_state(path) if fmt == "ros1" and path.is_file() else None
+    if state is not None and state.damage is not None:
+        return LogReadError(f"damaged ros1 log: {state.damage} (the record at byte {state.at})", path=str(path))
+    if state is not None and not state.closed:
+        return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]}); --salvage reads its complete "
+                                 f"records", path=str(path))
     hints = _ROS1_TRUNCATION_HINTS if fmt == "ros1" else _MCAP_TRUNCATION_HINTS
     if isinstance(err, struct.error | EOFError) or any(h in text for h in hints):
         return TruncatedLogError(f"truncated or unindexed {fmt} log ({text[:160]}); --salvage reads its complete "

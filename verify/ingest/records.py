@@ -27,8 +27,8 @@ from typing import TypeVar
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["MCAP", "ROS1", "WORKERS", "SpanError", "gather", "in_order", "read_records", "read_scratch",
-           "record_ends", "record_size_at", "retain_freed_memory"]
+__all__ = ["MCAP", "ROS1", "WORKERS", "CutError", "MalformedError", "SpanError", "gather", "in_order", "lz4_decompress",
+           "read_records", "read_scratch", "record_ends", "record_size_at", "retain_freed_memory", "walk_chain"]
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -51,6 +51,22 @@ _GROUP_B = 2 << 20  # clusters read and checked together before their records ar
 
 class SpanError(Exception):
     """The index points at something that is not a well-formed record of the chunk."""
+
+
+class CutError(Exception):
+    """The bytes end inside a record (a truncated file, or one still being written)."""
+
+
+class MalformedError(Exception):
+    """A record's fields contradict its lengths or the format (damaged bytes)."""
+
+
+def lz4_decompress(data: bytes | memoryview) -> bytes:
+    """An lz4 frame (ROS1 and MCAP chunks) -> its bytes; raises lz4's own error (RuntimeError) on damaged data."""
+    from lz4.frame import decompress as lz4_frame  # type: ignore[import-untyped]  # a rosbags dependency
+
+    out: bytes = lz4_frame(bytes(data))
+    return out
 
 
 def _pread(fd: int, pos: int, n: int) -> bytes:
@@ -102,6 +118,89 @@ def record_ends(u8: U8Array, kind: str, rel: IntArray) -> IntArray:
             raise SpanError("record length beyond the file")
         ends[ok] = rel[ok] + 9 + clen.astype(np.int64)
     return ends
+
+
+def walk_chain(buf: bytes | memoryview, kind: str, hints: IntArray | None = None) -> tuple[IntArray, IntArray]:
+    """The sequential walk of a chunk's records (``buf``: its records back to back, from 0 to its end) -> start and
+    end of every record, in order; ``MalformedError`` when a record runs past the end. The format's walk, in one
+    place for every reader of a chunk (indexed reading, the scan, salvage, following a growing file).
+
+    ``hints``: candidate record starts (sorted, unique; e.g. from the chunk's index). Their lengths are read with
+    numpy, and a run of candidates where each record ends exactly where the next candidate begins is taken in one
+    step (by induction every candidate in the run is a true record start of the sequential walk). Records between
+    runs (or every record, without hints) are stepped over one by one. A hint is only a hint: nothing is taken from
+    it that the walk does not confirm."""
+    view = memoryview(buf)
+    size = len(view)
+    u8 = np.frombuffer(view, dtype=np.uint8)
+    cand = np.zeros(0, dtype=np.int64) if hints is None else hints[(hints >= 0) & (hints < size)]
+    k = cand.shape[0]
+    if k:
+        try:
+            c_end = record_ends(u8, kind, cand)
+        except SpanError:
+            c_end = np.full(k, -1, dtype=np.int64)
+        c_end = np.where((c_end > cand) & (c_end <= size), c_end, -1)
+        breaks = [*np.flatnonzero(c_end[:-1] != cand[1:]).tolist(), k - 1]  # runs end where a record misses the next
+    else:
+        c_end = np.zeros(0, dtype=np.int64)
+        breaks = []
+    cand_l = cand.tolist()
+    seg_pos: list[IntArray] = []
+    seg_end: list[IntArray] = []
+    one_pos: list[int] = []
+    one_end: list[int] = []
+    pos = i = b = 0  # i: next candidate not behind pos; b: index into breaks
+    while pos < size:
+        while i < k and cand_l[i] < pos:
+            i += 1
+        if i < k and cand_l[i] == pos and c_end[i] >= 0:
+            while breaks[b] < i:
+                b += 1
+            j = breaks[b]  # candidates i..j chain; j's record ends at c_end[j]
+            if c_end[j] < 0:
+                j -= 1  # j's length runs past the end: the run ends at j's start, where the walk steps on
+            if one_pos:
+                seg_pos.append(np.array(one_pos, dtype=np.int64))
+                seg_end.append(np.array(one_end, dtype=np.int64))
+                one_pos, one_end = [], []
+            seg_pos.append(cand[i : j + 1])
+            seg_end.append(c_end[i : j + 1])
+            pos, i = int(c_end[j]), j + 1
+            continue
+        stop = i if i < k else None  # step up to the next candidate (or the end) without leaving this loop
+        pos = _step(view, kind, pos, size, until=cand_l[stop] if stop is not None else size, starts=one_pos,
+                    ends=one_end)
+    seg_pos.append(np.array(one_pos, dtype=np.int64))
+    seg_end.append(np.array(one_end, dtype=np.int64))
+    return np.concatenate(seg_pos), np.concatenate(seg_end)
+
+
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+
+
+def _step(view: memoryview, kind: str, pos: int, size: int, *, until: int, starts: list[int], ends: list[int]) -> int:
+    """Records stepped over one by one from ``pos`` (appended to ``starts``/``ends``) until one ends at or past
+    ``until`` -> the position after the last; ``MalformedError`` when a record does not end by ``size``."""
+    u32, u64 = _U32.unpack_from, _U64.unpack_from
+    while True:
+        if kind == ROS1:
+            if pos + 8 > size or pos + 8 + u32(view, pos)[0] > size:
+                raise MalformedError(f"a chunk ends inside the record at byte {pos}")
+            hlen = u32(view, pos)[0]
+            nxt = pos + 8 + hlen + u32(view, pos + 4 + hlen)[0]
+        else:
+            if pos + 9 > size:
+                raise MalformedError(f"a chunk ends inside the record at byte {pos}")
+            nxt = pos + 9 + u64(view, pos + 1)[0]
+        if nxt > size:
+            raise MalformedError(f"the record at byte {pos} of a chunk runs past its end")
+        starts.append(pos)
+        ends.append(nxt)
+        pos = nxt
+        if pos >= until:
+            return pos
 
 
 def read_records(fd: int, base: int, limit: int, offsets: IntArray, kind: str, *, gap_b: int = 1 << 16,
@@ -182,7 +281,7 @@ def _group_records(pieces: list[bytes], cuts: list[int], offsets: IntArray, lim:
     return gather(u8, pos, lengths), lengths
 
 
-def record_size_at(piece: bytes, kind: str, rel: int, room: int) -> int | None:
+def record_size_at(piece: bytes | memoryview, kind: str, rel: int, room: int) -> int | None:
     """Size of the record at ``rel`` in ``piece`` when its length fields are inside ``piece`` (else None);
     ``SpanError`` when it would not fit in ``room``."""
     if kind == ROS1:

@@ -47,7 +47,7 @@ from verify.ingest.records import (
     record_size_at,
     retain_freed_memory,
 )
-from verify.ingest.ros1records import MAGIC, MalformedError, Op, header_fields
+from verify.ingest.ros1records import MAGIC, MalformedError, Op, header_fields, index_data
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -58,7 +58,6 @@ _MAGIC = MAGIC
 _OP_MSG, _OP_BAG, _OP_INDEX = int(Op.MESSAGE_DATA), int(Op.BAG_HEADER), int(Op.INDEX_DATA)
 _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = int(Op.CHUNK), int(Op.CHUNK_INFO), int(Op.CONNECTION)
 _PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
-_INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
 
 class PayloadBuffer(Sequence[bytes]):
@@ -409,19 +408,18 @@ def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selec
 
 
 def _index_records(f: _File, pos: int, count: int) -> tuple[dict[int, npt.NDArray[np.void]], int]:
+    """A chunk's index data records (the record layer's ``index_data``) -> per connection its entries."""
     out: dict[int, npt.NDArray[np.void]] = {}
     for _ in range(count):
         header, start, dlen, pos = f.record(pos)
         _op(header, _OP_INDEX)
-        if _u32(header.get("ver", b""), "ver") != 1:
-            raise _UnusualError("index data version")
-        n = _u32(header["count"], "count")
-        if dlen != 12 * n:
-            raise _UnusualError("index data length")
-        cid = _u32(header["conn"], "conn")
+        try:
+            cid, entries = index_data(header, f.read(start, dlen))
+        except MalformedError as err:
+            raise _UnusualError(str(err)) from None
         if cid in out:
             raise _UnusualError("two index records for one connection in a chunk")
-        out[cid] = np.frombuffer(f.read(start, dlen), dtype=_INDEX_DTYPE)
+        out[cid] = entries
     return out, pos
 
 

@@ -20,10 +20,29 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from verify.ingest.mcaprecords import lz4_decompress
+import numpy as np
+import numpy.typing as npt
 
-__all__ = ["MAGIC", "CutError", "MalformedError", "Op", "Record", "Ros1Message", "Ros1Stream", "connection_of",
-           "decompress", "header_fields", "record_at"]
+from verify.ingest.records import ROS1, CutError, MalformedError, lz4_decompress, walk_chain
+
+__all__ = [
+    "DAMAGE",
+    "INDEX_ENTRY",
+    "MAGIC",
+    "BagState",
+    "CutError",
+    "MalformedError",
+    "Op",
+    "Record",
+    "Ros1Message",
+    "Ros1Stream",
+    "bag_state",
+    "connection_of",
+    "decompress",
+    "header_fields",
+    "index_data",
+    "record_at",
+]
 
 #: the first 13 bytes of every ROS1 bag (format 2.0)
 MAGIC = b"#ROSBAG V2.0\n"
@@ -40,12 +59,9 @@ class Op(IntEnum):
     CONNECTION = 0x07
 
 
-class CutError(Exception):
-    """The bytes end inside a record (a truncated bag, or one still being written)."""
-
-
-class MalformedError(Exception):
-    """A record's fields contradict its lengths or the format (damaged bytes)."""
+#: what reading a complete record raises when its bytes are damaged: malformed fields, or a chunk that does not
+#: decompress (bz2: OSError, ValueError, EOFError; lz4: RuntimeError)
+DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, EOFError, OSError, RuntimeError)
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,19 +82,20 @@ class Ros1Message:
 
 def header_fields(raw: bytes | memoryview) -> dict[str, bytes]:
     """A record header -> its ``name=value`` fields."""
+    data = bytes(raw)
     out: dict[str, bytes] = {}
-    pos, size = 0, len(raw)
+    pos, size = 0, len(data)
     while pos < size:
         if pos + 4 > size:
             raise MalformedError("a header field is cut")
-        (flen,) = struct.unpack_from("<I", raw, pos)
-        if pos + 4 + flen > size:
+        stop = pos + 4 + int.from_bytes(data[pos : pos + 4], "little")
+        if stop > size:
             raise MalformedError("a header field runs past its header")
-        name, eq, value = bytes(raw[pos + 4 : pos + 4 + flen]).partition(b"=")
-        if not eq:
+        eq = data.find(b"=", pos + 4, stop)
+        if eq < 0:
             raise MalformedError("a header field without '='")
-        out[name.decode("ascii", "replace")] = value
-        pos += 4 + flen
+        out[data[pos + 4 : eq].decode("ascii", "replace")] = data[eq + 1 : stop]
+        pos = stop
     return out
 
 
@@ -106,6 +123,21 @@ def _u32(header: dict[str, bytes], name: str) -> int:
     if value is None or len(value) != 4:
         raise MalformedError(f"header field {name!r} is not a u32")
     return int(struct.unpack("<I", value)[0])
+
+
+#: an index data record's entries: the log time (sec, nsec) and offset in the chunk's records of each message
+INDEX_ENTRY = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
+
+
+def index_data(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, npt.NDArray[np.void]]:
+    """An index data record (version 1: one per connection after each chunk) -> (connection id, its entries as
+    ``INDEX_ENTRY`` rows); ``MalformedError`` on another version or a length that is not its count's."""
+    if _u32(header, "ver") != 1:
+        raise MalformedError("an index data record that is not version 1")
+    cid, count = _u32(header, "conn"), _u32(header, "count")
+    if len(data) != INDEX_ENTRY.itemsize * count:
+        raise MalformedError(f"an index data record of connection {cid} holds {len(data)} bytes for {count} entries")
+    return cid, np.frombuffer(data, dtype=INDEX_ENTRY)
 
 
 def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, str, str, bool]:
@@ -137,6 +169,38 @@ def decompress(data: bytes | memoryview, compression: str) -> bytes:
 class _Chunk:
     pos: int  # the chunk record
     compression: str
+    #: per connection, the log times and the offsets in the chunk's records of its message records read so far
+    entries: dict[int, tuple[list[int], list[int]]] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class _ChunkIndex:
+    """A closed chunk whose index data records (one per connection in it, right after the chunk) are being read."""
+
+    pos: int
+    entries: dict[int, tuple[list[int], list[int]]]
+    indexed: set[int] = field(default_factory=set)
+
+    def check(self, header: dict[str, bytes], data: bytes | memoryview) -> None:
+        """An index data record -> ``MalformedError`` unless it lists exactly the chunk's message records of its
+        connection (their log times and offsets)."""
+        cid, entries = index_data(header, data)
+        if cid in self.indexed:
+            raise MalformedError(f"the chunk at byte {self.pos} has two index data records for connection {cid}")
+        self.indexed.add(cid)
+        order = np.argsort(entries["offset"], kind="stable")  # the records were read in offset order
+        times = entries["sec"].astype(np.int64)[order] * 10**9 + entries["nsec"].astype(np.int64)[order]
+        read_times, read_offsets = self.entries.get(cid, ([], []))
+        if not (np.array_equal(entries["offset"][order], np.array(read_offsets, dtype=np.int64))
+                and np.array_equal(times, np.array(read_times, dtype=np.int64))):
+            raise MalformedError(f"the index data of the chunk at byte {self.pos} disagrees with its message records "
+                                 f"of connection {cid}")
+
+    def complete(self) -> None:
+        """The chunk's index data records are over: every connection with messages in it must have had one."""
+        missing = sorted(set(self.entries) - self.indexed)
+        if missing:
+            raise MalformedError(f"the chunk at byte {self.pos} has no index data record for connection {missing[0]}")
 
 
 @dataclass(slots=True)
@@ -145,7 +209,13 @@ class Ros1Stream:
     recorder has written so far) and get the messages of the records complete in them, in file order.
 
     ``pos`` is the next record to read (top level, or inside the chunk being read); ``connections`` maps ids to
-    (topic, type, has definition); ``closed`` is set at the bag's index (its header's ``index_pos``)."""
+    (topic, type, has definition); ``closed`` is set at the bag's index (its header's ``index_pos``) once the index
+    is complete: the one rule of "closed by its recorder" for every reader.
+
+    Each closed chunk's index data records (which follow it) must list exactly its message records, connection by
+    connection (log time and offset): an index that disagrees with the records it indexes is damage
+    (``MalformedError`` at the index record), whoever reads the bag -- the indexed reader reads messages through
+    that index, so a bag whose index contradicts its records is never read as whole."""
 
     pos: int = len(MAGIC)
     connections: dict[int, tuple[str, str, bool]] = field(default_factory=dict)
@@ -153,6 +223,7 @@ class Ros1Stream:
     index_records: int = 0  # connection + chunk info records the bag header says its index holds
     closed: bool = False
     chunk: _Chunk | None = None
+    indexing: _ChunkIndex | None = None  # the last closed chunk, while its index data records are read
 
     @property
     def resume_at(self) -> int:
@@ -160,10 +231,11 @@ class Ros1Stream:
         its sizes when it closes the chunk), else ``pos``."""
         return self.chunk.pos if self.chunk is not None else self.pos
 
-    def feed(self, buf: bytes | memoryview, base: int, out: list[Ros1Message]) -> None:
+    def feed(self, buf: bytes | memoryview, base: int, out: list[Ros1Message] | None) -> None:
         """Append to ``out`` the messages of the records complete in ``buf`` (the file's bytes from ``base`` ==
-        ``resume_at``); stops quietly at a record not complete yet (``pos`` stays there); raises ``MalformedError``,
-        ``struct.error`` or a decompressor's error on damaged bytes (``out`` then holds the messages before)."""
+        ``resume_at``); stops quietly at a record not complete yet (``pos`` stays there); raises one of ``DAMAGE``
+        on damaged bytes (``out`` then holds the messages before). ``out`` None: the records are checked, no
+        payload is copied."""
         end = base + len(buf)
         try:
             while not self.closed:
@@ -173,26 +245,55 @@ class Ros1Stream:
                     continue
                 if self.index_pos and self.pos >= self.index_pos:
                     # closed once its whole index is there (an index still being written, or cut, is not a close)
+                    self._chunk_indexed()
                     self.closed = self._index_complete(buf, base)
                     break
                 if self.pos >= end:
                     break
                 head = record_at(buf, self.pos - base, len(buf), head_only=True)
+                if head.op != Op.INDEX_DATA:
+                    self._chunk_indexed()
                 if head.op == Op.CHUNK:
                     self.chunk = _Chunk(self.pos, head.header.get("compression", b"none").decode("ascii", "replace"))
                     continue
                 rec = record_at(buf, self.pos - base, len(buf))
                 if rec.op == Op.BAG_HEADER:
-                    raw = rec.header.get("index_pos", b"")
-                    if len(raw) != 8:
-                        raise MalformedError("bag header without a u64 index_pos")
-                    self.index_pos = int(struct.unpack("<Q", raw)[0])
-                    self.index_records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
+                    self._bag_header(rec)
                 elif rec.op == Op.CONNECTION:
                     self._connection(rec, buf)
+                elif rec.op == Op.INDEX_DATA:
+                    if self.indexing is None:
+                        raise MalformedError(f"an index data record at byte {self.pos} follows no chunk")
+                    self.indexing.check(rec.header, memoryview(buf)[rec.data_start : rec.end])
                 self.pos = base + rec.end
         except CutError:
             pass
+
+    def _bag_header(self, rec: Record) -> None:
+        raw = rec.header.get("index_pos", b"")
+        if len(raw) != 8:
+            raise MalformedError("bag header without a u64 index_pos")
+        records = _u32(rec.header, "conn_count") + _u32(rec.header, "chunk_count")
+        self.index_pos, self.index_records = int(struct.unpack("<Q", raw)[0]), records
+
+    def reread_header(self, head: bytes | memoryview) -> None:
+        """The bag header again (``head``: the file's first bytes): a recorder rewrites its ``index_pos`` when it
+        closes the bag. A header not all there, or not a bag header, changes nothing."""
+        try:
+            rec = record_at(head, len(MAGIC), len(head))
+            if rec.op == Op.BAG_HEADER:
+                self._bag_header(rec)
+        except (CutError, MalformedError, struct.error):
+            return
+
+    def _chunk_indexed(self) -> None:
+        if self.indexing is not None:
+            self.indexing.complete()
+            self.indexing = None
+
+    def _close_chunk(self, chunk: _Chunk, end: int) -> None:
+        self.pos, self.chunk = end, None
+        self.indexing = _ChunkIndex(chunk.pos, chunk.entries)
 
     def _index_complete(self, buf: bytes | memoryview, base: int) -> bool:
         """Whether the index the bag header announces (its connection and chunk info records) is complete in
@@ -211,55 +312,99 @@ class Ros1Stream:
         cid, topic, typ, has_def = connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
         self.connections[cid] = (topic, typ, has_def)
 
-    def _in_chunk(self, chunk: _Chunk, buf: bytes | memoryview, base: int, end: int, out: list[Ros1Message]
-                  ) -> bool:
+    def _in_chunk(self, chunk: _Chunk, buf: bytes | memoryview, base: int, end: int,
+                  out: list[Ros1Message] | None) -> bool:
         """Read on in ``chunk``; True when it is done (``pos`` after it), False to wait for more bytes."""
         head = record_at(buf, chunk.pos - base, len(buf), head_only=True)
         size = head.header.get("size", b"")
         open_chunk = head.data_len == 0 and size in (b"", b"\0\0\0\0")  # rosbag's placeholder while recording
         chunk_end = None if open_chunk else base + head.end
         self.pos = max(self.pos, base + head.data_start)
+        if chunk_end is not None and chunk_end <= end:
+            # closed and all here: its records walked whole (a compressed chunk decompressed first)
+            if chunk.compression != "none":
+                inner = decompress(memoryview(buf)[head.data_start : head.end], chunk.compression)
+                self._walk_whole(chunk, inner, 0, len(inner), out, origin=0)
+            else:
+                self._walk_whole(chunk, buf, self.pos - base, head.end, out, origin=head.data_start)
+            self._close_chunk(chunk, chunk_end)
+            return True
         if chunk.compression != "none":
-            if chunk_end is None or chunk_end > end:
-                return False  # a compressed chunk is read when it is complete
-            inner = decompress(memoryview(buf)[head.data_start : head.end], chunk.compression)
-            self._inner(inner, 0, len(inner), out, strict=True)
-            self.pos, self.chunk = chunk_end, None
-            return True
+            return False  # a compressed chunk is read when it is complete
         limit = end if chunk_end is None else min(end, chunk_end)
-        got, foreign = self._inner(buf, self.pos - base, limit - base, out, strict=False)
+        got, foreign = self._walk_open(chunk, buf, self.pos - base, limit - base, out, origin=head.data_start)
         self.pos = base + got
-        if chunk_end is not None and self.pos >= chunk_end:
-            self.chunk = None
-            return True
         if chunk_end is not None and foreign:
             raise MalformedError("a closed chunk holds a record that is not a message or connection")
         return False  # open (or not all here yet): wait for more bytes, re-reading the chunk's header
 
-    def _inner(self, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message], *, strict: bool
-               ) -> tuple[int, bool]:
-        """Records of a chunk from ``pos`` to ``limit``: connections noted, messages appended to ``out``; returns the
-        position after the last complete record and whether reading stopped at a record that is not a chunk's
-        (``strict``: every record must be complete and a chunk's)."""
+    def _walk_whole(self, chunk: _Chunk, buf: bytes | memoryview, lo: int, hi: int, out: list[Ros1Message] | None,
+                    *, origin: int) -> None:
+        """The records of a complete chunk from ``lo`` to its end ``hi`` in ``buf`` by the format's walk
+        (``verify.ingest.records.walk_chain``): every record must end by the chunk's end and be a message or a
+        connection."""
+        starts, _ends = walk_chain(memoryview(buf)[lo:hi], ROS1)
+        for at in starts.tolist():
+            rec = record_at(buf, lo + at, hi)
+            if not self._chunk_record(chunk, buf, rec, lo + at - origin, out):
+                raise MalformedError("a chunk holds a record that is not a message or connection")
+
+    def _walk_open(self, chunk: _Chunk, buf: bytes | memoryview, pos: int, limit: int, out: list[Ros1Message] | None,
+                   *, origin: int) -> tuple[int, bool]:
+        """The records of an open (or not yet complete) chunk from ``pos`` to ``limit``, as far as they are
+        complete -> the position after the last one, and whether reading stopped at a record that is not a
+        chunk's."""
         while pos < limit:
             try:
                 rec = record_at(buf, pos, limit)
             except CutError:
-                if strict:
-                    raise MalformedError("a chunk ends inside a record") from None
                 return pos, False
-            if rec.op == Op.CONNECTION:
-                self._connection(rec, buf)
-            elif rec.op == Op.MESSAGE_DATA:
-                cid = _u32(rec.header, "conn")
-                raw = rec.header.get("time", b"")
-                if len(raw) != 8:
-                    raise MalformedError("a message record without a u64 time")
-                sec, nsec = struct.unpack("<II", raw)
-                out.append(Ros1Message(cid, sec * 10**9 + nsec, bytes(memoryview(buf)[rec.data_start : rec.end])))
-            else:
-                if strict:
-                    raise MalformedError("a chunk holds a record that is not a message or connection")
+            if not self._chunk_record(chunk, buf, rec, pos - origin, out):
                 return pos, True
             pos = rec.end
         return pos, False
+
+    def _chunk_record(self, chunk: _Chunk, buf: bytes | memoryview, rec: Record, offset: int,
+                      out: list[Ros1Message] | None) -> bool:
+        """A record of ``chunk`` at ``offset`` in its records: a connection noted, a message appended to ``out``
+        and to the chunk's entries; False when it is neither."""
+        if rec.op == Op.CONNECTION:
+            self._connection(rec, buf)
+            return True
+        if rec.op != Op.MESSAGE_DATA:
+            return False
+        cid = _u32(rec.header, "conn")
+        raw = rec.header.get("time", b"")
+        if len(raw) != 8:
+            raise MalformedError("a message record without a u64 time")
+        sec, nsec = struct.unpack("<II", raw)
+        log_ns = sec * 10**9 + nsec
+        times, offsets = chunk.entries.setdefault(cid, ([], []))
+        times.append(log_ns)
+        offsets.append(offset)
+        if out is not None:
+            out.append(Ros1Message(cid, log_ns, bytes(memoryview(buf)[rec.data_start : rec.end])))
+        return True
+
+
+@dataclass(frozen=True, slots=True)
+class BagState:
+    """How a bag's bytes stand by the record layer: ``closed`` by its recorder (its header points to a complete
+    index, every record before it whole and every chunk's index data agreeing with its records); else ``damage``
+    says what is malformed and ``at`` where, or both are None: the bytes end early (cut, or never indexed)."""
+
+    closed: bool
+    damage: str | None = None
+    at: int | None = None
+
+
+def bag_state(buf: bytes | memoryview) -> BagState:
+    """The ``Ros1Stream`` over a whole bag, payloads not kept -> its ``BagState``."""
+    if bytes(buf[: len(MAGIC)]) != MAGIC:
+        return BagState(False, "not a ROS1 bag (bad magic)", 0)
+    stream = Ros1Stream()
+    try:
+        stream.feed(buf, 0, None)
+    except DAMAGE as err:
+        return BagState(False, " ".join(str(err).split()) or err.__class__.__name__, stream.resume_at)
+    return BagState(stream.closed)

@@ -8,19 +8,17 @@ malformed record, or chunk that does not decompress, and says where (``stop_reas
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from verify.ingest.mcaprecords import MessageRecord, Scan, scan
-from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.ros1records import DAMAGE as ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
 from verify.ingest.ros1records import MalformedError as Ros1MalformedError
 from verify.ingest.ros1records import Ros1Message, Ros1Stream
 
 __all__ = ["SalvagedMessage", "Walk", "mcap_message", "ros1_message", "walk_mcap", "walk_ros1"]
-
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,9 +45,6 @@ class Walk:
 
 
 # ---- ROS1 ----------------------------------------------------------------------------------------------------------
-#: what ends a ROS1 walk at a record: malformed, or a chunk that does not decompress
-_ROS1_STOPS: tuple[type[Exception], ...] = (Ros1MalformedError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
-
 
 def ros1_message(stream: Ros1Stream, msg: Ros1Message) -> SalvagedMessage | None:
     """A ROS1 message of a connection read so far, as a salvaged message (None: its connection is not known)."""
@@ -76,7 +71,7 @@ def walk_ros1(path: Path) -> Walk:
         error: Exception | None = None
         try:
             stream.feed(buf, 0, got)
-        except _ROS1_STOPS as err:
+        except ROS1_DAMAGE as err:
             error = err
         for msg in got:
             if (m := ros1_message(stream, msg)) is not None:
@@ -84,8 +79,11 @@ def walk_ros1(path: Path) -> Walk:
         if error is None and (stream.closed or (stream.chunk is None and stream.pos >= len(buf))):
             walk.reason, walk.stopped_at = "reached the end of the file", None
         else:
-            name = error.__class__.__name__ if error is not None else "CutError"
-            walk.reason = f"stopped at an incomplete record ({name})"
+            if isinstance(error, Ros1MalformedError):
+                walk.reason = f"stopped at a damaged record ({error})"
+            else:
+                name = error.__class__.__name__ if error is not None else "CutError"
+                walk.reason = f"stopped at an incomplete record ({name})"
             walk.stopped_at = stream.resume_at
 
     walk.messages = gen()

@@ -25,19 +25,15 @@ from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.raw import check_log_path
 from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
-from verify.ingest.ros1records import CutError as Ros1CutError
-from verify.ingest.ros1records import MalformedError as Ros1MalformedError
-from verify.ingest.ros1records import Op as Ros1Op
-from verify.ingest.ros1records import Ros1Message, Ros1Stream, record_at
+from verify.ingest.ros1records import Ros1Message, Ros1Stream
 from verify.ingest.salvage import SalvagedMessage, mcap_message, ros1_message, walk_mcap, walk_ros1
 
 __all__ = ["Follower", "log_bytes", "open_follower"]
 
 #: what a complete MCAP record raises when its bytes are damaged
 _MCAP_DAMAGE: tuple[type[Exception], ...] = (MalformedError, struct.error, ValueError, ImportError, *DECOMPRESS_ERRORS)
-_ROS1_DAMAGE: tuple[type[Exception], ...] = (Ros1MalformedError, struct.error, ValueError, EOFError, *DECOMPRESS_ERRORS)
-
 
 
 class Follower(Protocol):
@@ -153,16 +149,7 @@ class Ros1Follower:
 
     def _recheck_header(self) -> None:
         """The recorder rewrites the bag header's index_pos when it closes the bag."""
-        head = _read_from(self.path, 0)[:8192]
-        try:
-            rec = record_at(head, len(ROS1_MAGIC), len(head))
-        except (Ros1CutError, Ros1MalformedError, struct.error):
-            return
-        raw = rec.header.get("index_pos", b"")
-        counts = [rec.header.get(name, b"") for name in ("conn_count", "chunk_count")]
-        if rec.op == Ros1Op.BAG_HEADER and len(raw) == 8 and all(len(c) == 4 for c in counts):
-            self.stream.index_pos = int(struct.unpack("<Q", raw)[0])
-            self.stream.index_records = sum(int(struct.unpack("<I", c)[0]) for c in counts)
+        self.stream.reread_header(_read_from(self.path, 0)[:8192])
         if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
             at = self.stream.resume_at  # closed once the whole index is there (the stream checks it)
             try:
