@@ -1,6 +1,7 @@
-"""Run-time pieces both sides use: the executor (``parallel_map``), optional extras (``require``) and output
-folders (``prepare_output_dir`` and friends), and ``gc_paused`` (no cyclic garbage collection during a block).
+"""The run-time kit the planner and the certifier share: the executor (``parallel_map``), optional extras
+(``require``), output folders (``prepare_output_dir`` and friends), ``gc_paused`` (no cyclic garbage collection
+during a block) and their errors (``runkit.errors``).
 
-A bottom layer: it imports nothing of the planner, the controller or the certifier, so that ``tubempc.planning``
-and ``verify`` can both use it without importing each other. Its errors: ``tubempc.runtime.errors``.
+The bottom layer: it imports nothing of ``tubempc`` or ``verify``, so that both can use it without importing each
+other (``tests/test_boundary.py`` holds it to that).
 """

@@ -1,5 +1,5 @@
 """Exceptions of the certifier: raised when a log cannot be judged at all (exit code 3). (A feature whose optional
-dependency is not installed raises ``tubempc.runtime.errors.MissingExtraError``, exit code 4.)
+dependency is not installed raises ``runkit.errors.MissingExtraError``, exit code 4.)
 
 A failed *check* is never an exception; it is a verdict value with its witness.
 """

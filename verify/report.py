@@ -27,7 +27,7 @@ from typing import Any, Protocol
 
 import pandas as pd
 
-from tubempc.runtime.outputs import output_subdir, write_output_file
+from runkit.outputs import output_subdir, write_output_file
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, CheckEntry, ObligationEntry, TimedRunEntry
 from verify.errors import VerifyError

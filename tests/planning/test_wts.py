@@ -56,19 +56,19 @@ def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:
 
 
 def test_the_abstraction_runs_on_the_shared_executor(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """build_wts hands its region pairs to tubempc.runtime.executor.parallel_map (workers, Dask, progress passed
+    """build_wts hands its region pairs to runkit.executor.parallel_map (workers, Dask, progress passed
     through)."""
-    import tubempc.runtime.executor
+    import runkit.executor
     from tubempc.planning import wts as wts_module
 
-    real = tubempc.runtime.executor.parallel_map
+    real = runkit.executor.parallel_map
     seen: list[dict[str, object]] = []
 
     def spy(fn: object, items: list[object], **kwargs: object) -> list[object]:
         seen.append({"fn": fn, "jobs": len(items), **kwargs})
         return real(fn, items, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(tubempc.runtime.executor, "parallel_map", spy)
+    monkeypatch.setattr(runkit.executor, "parallel_map", spy)
     s = builtin_scenario()
     g = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1, progress=False, use_cache=False)
     n = len(s.safe_regions)

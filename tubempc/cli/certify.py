@@ -2,7 +2,7 @@
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
 ``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
-``--force`` (``tubempc.runtime.outputs`` states the policy shared by every command). Unusable input raises
+``--force`` (``runkit.outputs`` states the policy shared by every command). Unusable input raises
 ``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
@@ -109,8 +109,8 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input, 4 a needed optional
     dependency is not installed (the line names the extra).
     """
-    from tubempc.runtime.extras import require
-    from tubempc.runtime.outputs import prepare_output_dir
+    from runkit.extras import require
+    from runkit.outputs import prepare_output_dir
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line
     from verify.selection import parse_check_list
 

@@ -43,7 +43,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 
-from tubempc.runtime.gcpause import gc_paused
+from runkit.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcap import TopicMessages, read_mcap_storage
 from verify.ingest.mcapfile import read_bag_metadata, read_mcap_log
