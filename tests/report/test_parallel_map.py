@@ -55,7 +55,7 @@ def test_the_abstraction_names_a_bad_dask_address(tmp_path: Path) -> None:
     from tubempc.planning.wts import build_wts
     from tubempc.scenario import builtin_scenario
 
-    with pytest.raises(AbstractionError, match="building the WTS .* expected 'local'"):
+    with pytest.raises(AbstractionError, match=r"building the WTS .* expected 'local'"):
         build_wts(builtin_scenario(), oracle=straight_line_oracle, cache_path=tmp_path, dask="my-laptop",
                   progress=False)
 
