@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until
+from verify.errors import UnsupportedFormulaError
 from verify.monitor.engine import bounds_ns
 
 __all__ = [
@@ -46,10 +47,6 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 INF = np.inf
-
-
-class UnsupportedFormulaError(Exception):
-    """The formula has an operator this evaluator does not handle (``Until``)."""
 
 
 @dataclass(frozen=True, slots=True)
