@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tubempc.planning.synthetic import straight_line_oracle
+from tests.planning.synthetic import straight_line_oracle
 from tubempc.planning.wts import build_wts, wts_cache_file, wts_edges, wts_failed, wts_labels
 from tubempc.scenario import builtin_scenario
 
@@ -75,7 +75,7 @@ def test_the_abstraction_runs_on_the_shared_executor(tmp_path: Path, monkeypatch
     (call,) = seen
     assert call["fn"] is wts_module._evaluate and call["jobs"] == n * (n - 1)
     assert (call["workers"], call["dask"], call["progress"], call["unit"]) == (1, None, False, "pair")
-    assert "tubempc.planning.synthetic" in call["preload"]  # type: ignore[operator]
+    assert "tests.planning.synthetic" in call["preload"]  # type: ignore[operator]
     assert g.number_of_edges() + len(wts_failed(g)) == n * (n - 1)
 
 

@@ -50,8 +50,8 @@ def test_the_kits_errors_are_ours_with_their_exit_codes() -> None:
 
 
 def test_the_abstraction_names_a_bad_dask_address(tmp_path: Path) -> None:
+    from tests.planning.synthetic import straight_line_oracle
     from tubempc.errors import AbstractionError
-    from tubempc.planning.synthetic import straight_line_oracle
     from tubempc.planning.wts import build_wts
     from tubempc.scenario import builtin_scenario
 
