@@ -132,3 +132,17 @@ def test_certify_json_imports_no_plotting_or_planning_module() -> None:
     out = subprocess.run([sys.executable, "-c", probe, "certify", str(log), "--scenario", "nexus-sml", "--json"],
                          capture_output=True, text=True, timeout=300, check=False)
     assert out.stderr.strip().splitlines()[-1] == "0 []", out.stderr
+
+
+def test_certify_and_watch_share_their_judging_options() -> None:
+    """``--checks``, ``--clock-offset`` and ``--scenario`` read alike in certify and watch: one definition each."""
+    from tubempc.cli.certify import certify
+    from tubempc.cli.watch import watch
+
+    def declared(command: object) -> dict[str, tuple[object, ...]]:
+        params = command.params  # type: ignore[attr-defined]
+        return {p.name: (p.opts, p.metavar, p.multiple, p.help) for p in params
+                if p.name in ("checks_text", "clock_offsets", "scenario")}
+
+    assert declared(certify) == declared(watch)
+    assert len(declared(certify)) == 3
