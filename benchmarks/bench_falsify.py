@@ -164,7 +164,7 @@ def main() -> None:
     ap.add_argument("--mission-repeat", type=int, default=3)
     args = ap.parse_args()
 
-    from tubempc.runtime.executor import parallel_map
+    from runkit.executor import parallel_map
 
     sim_s, judge_s, file_s, length = mission_cost(args.mission_repeat)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

@@ -12,7 +12,7 @@ built-in scenario <= 2 s each, with the zone search as the first stage; each row
 (event-driven) first stage in the same process (``zones=False``, same exact stage) and prints the ratio, and checks
 that both give the same cost; the last line gives the worst row of each and their ratio.
 Random workspaces use the synthetic straight-line
-oracle (``tubempc.planning.synthetic``). Every row also prints the cost of exactness: the time spent in the exact
+oracle (``tests/planning/synthetic.py``). Every row also prints the cost of exactness: the time spent in the exact
 search (delay transitions, A* below the first attempt's cost: the proof that no cheaper run exists), its share
 of the search, and how the run was established.
 """
@@ -33,9 +33,11 @@ import numpy as np
 from tubempc.mitl import parse
 from tubempc.planning.reference_semantics import holds
 from tubempc.planning.search import find_run
-from tubempc.planning.synthetic import random_scenario, straight_line_oracle
 from tubempc.planning.wts import build_wts, wts_all_labels, wts_failed, wts_oracle, wts_weight
 from tubempc.scenario import builtin_scenario
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: its test kit is not installed
+from tests.planning.synthetic import random_scenario, straight_line_oracle
 
 TARGET_PAPER_S = 0.050
 TARGET_LARGE_S = 2.0

@@ -10,7 +10,7 @@ densely and independently of the certifier. Deterministic. Run ``python3 scripts
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -26,12 +26,11 @@ TIME0_NS = 1_767_225_600 * 10**9  # 2026-01-01T00:00:00Z
 
 
 def _kit() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("any_robot_logs", FsPath(__file__).parent / "make_any_robot_logs.py")
-    assert spec is not None
-    assert spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    """``make_any_robot_logs`` beside this file: a module of the ``scripts`` package when the tests import this one,
+    else the script folder's module (``python3 scripts/make_fleet_logs.py`` puts the folder first on the path)."""
+    if __package__:
+        return importlib.import_module(".make_any_robot_logs", __package__)
+    return importlib.import_module("make_any_robot_logs")
 
 
 @dataclass(frozen=True)

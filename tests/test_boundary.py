@@ -1,10 +1,12 @@
-"""The layers of the two packages (docs/architecture.md), read from the source with ``ast``.
+"""The layers of the three packages (docs/architecture.md), read from the source with ``ast``.
 
-bottom: the language, the scenario, the errors and the run-time pieces (``tubempc.mitl``, ``tubempc.scenario``,
-``tubempc.errors``, ``tubempc.runtime``); middle, side by side: planning and control (``tubempc.planning``,
-``tubempc.control``) and certification (``verify``); tools: falsify, regress, demo, compare, batch, the log writer
-and the scaffold; on top, the CLI. An import may stay in its layer or go down, never up; the two middle sides never
-import each other; and no import cycle joins two subpackages. Every import counts, lazy ones inside functions too.
+under everything: the run-time kit ``runkit`` (executor, optional extras, output folders, gc pause), which imports
+nothing of ``tubempc`` or ``verify``; bottom: the language, the scenario and the errors (``tubempc.mitl``,
+``tubempc.scenario``, ``tubempc.errors``); middle, side by side: planning and control (``tubempc.planning``,
+``tubempc.control``) and certification (``verify``, which uses only ``tubempc.mitl`` and ``tubempc.scenario`` of
+``tubempc``); tools: falsify, regress, demo, compare, batch, the log writer and the scaffold; on top, the CLI. An
+import may stay in its layer or go down, never up; the two middle sides never import each other; and no import cycle
+joins two subpackages. Every import counts, lazy ones inside functions too.
 """
 
 from __future__ import annotations
@@ -19,14 +21,17 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-BOTTOM, MIDDLE, TOOLS, TOP = 0, 1, 2, 3
+KIT, BOTTOM, MIDDLE, TOOLS, TOP = 0, 1, 2, 3, 4
+PACKAGES = ("runkit", "tubempc", "verify")
+#: the packages that are one unit each (their modules are not told apart, ``verify.batch`` aside)
+WHOLE = ("runkit", "verify")
 #: subpackage (or top-level module) -> (layer, side); the side matters in the middle layer only
 UNITS: dict[str, tuple[int, str]] = {
+    "runkit": (KIT, ""),
     "tubempc": (BOTTOM, ""),
     "tubempc.errors": (BOTTOM, ""),
     "tubempc.mitl": (BOTTOM, ""),
     "tubempc.scenario": (BOTTOM, ""),
-    "tubempc.runtime": (BOTTOM, ""),
     "tubempc.control": (MIDDLE, "planning"),
     "tubempc.planning": (MIDDLE, "planning"),
     "verify": (MIDDLE, "certification"),
@@ -44,14 +49,15 @@ UNITS: dict[str, tuple[int, str]] = {
 
 
 def unit_of(module: str) -> str:
-    """The subpackage a module belongs to: its longest ``UNITS`` prefix of two or more parts, else ``verify`` for a
-    module of the certifier (``verify.certify``), else its first two name parts (a subpackage without a layer)."""
+    """The subpackage a module belongs to: its longest ``UNITS`` prefix of two or more parts, else the package for a
+    module of ``verify`` or ``runkit`` (``verify.certify``), else its first two name parts (a subpackage without a
+    layer)."""
     parts = module.split(".")
     for n in range(len(parts), 1, -1):
         name = ".".join(parts[:n])
         if name in UNITS:
             return name
-    return parts[0] if len(parts) == 1 or parts[0] == "verify" else ".".join(parts[:2])
+    return parts[0] if len(parts) == 1 or parts[0] in WHOLE else ".".join(parts[:2])
 
 
 def module_name(path: Path, root: Path = ROOT) -> str:
@@ -77,13 +83,13 @@ def imports(path: Path, root: Path = ROOT) -> list[str]:
                 where = root.joinpath(*base.split("."), alias.name)
                 if where.is_dir() or where.with_suffix(".py").is_file():
                     found.append(f"{base}.{alias.name}")
-    return [name for name in found if name.split(".")[0] in {"tubempc", "verify"}]
+    return [name for name in found if name.split(".")[0] in PACKAGES]
 
 
 def unit_graph(root: Path = ROOT) -> nx.DiGraph:
     """unit -> unit it imports, each edge with one (file, module) that makes it."""
     graph = nx.DiGraph()
-    for package in ("tubempc", "verify"):
+    for package in PACKAGES:
         for path in sorted((root / package).rglob("*.py")):
             source = unit_of(module_name(path, root))
             graph.add_node(source)
@@ -117,12 +123,30 @@ def test_no_import_climbs_a_layer_or_crosses_the_middle() -> None:
     assert layer_problems(graph) == []
 
 
+def verify_reaches_into_tubempc(graph: nx.DiGraph) -> list[str]:
+    """The imports of ``verify`` (``verify.batch`` too) from ``tubempc`` beyond its language and scenario."""
+    return [data["where"] for source, target, data in graph.edges(data=True)
+            if source.split(".")[0] == "verify" and target.split(".")[0] == "tubempc"
+            and target not in ("tubempc.mitl", "tubempc.scenario")]
+
+
+def test_verify_uses_only_the_language_and_the_scenario_of_tubempc() -> None:
+    assert verify_reaches_into_tubempc(unit_graph()) == []
+
+
+def test_the_verify_rule_catches_an_import_of_tubempc_errors(tmp_path: Path) -> None:
+    root = _tree(tmp_path, {"verify/batch/run.py": "from tubempc.errors import TubeMPCError\n",
+                            "verify/certify.py": "from tubempc.scenario import Scenario\n"})
+    assert verify_reaches_into_tubempc(unit_graph(root)) == [
+        "verify/batch/run.py imports tubempc.errors"]
+
+
 def test_no_import_cycle_between_subpackages() -> None:
     assert cycle_problems(unit_graph()) == []
 
 
 def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
-    for name, text in {"tubempc/__init__.py": "", "verify/__init__.py": "", **files}.items():
+    for name, text in {**{f"{package}/__init__.py": "" for package in PACKAGES}, **files}.items():
         path = tmp_path / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")
@@ -136,6 +160,10 @@ def _tree(tmp_path: Path, files: dict[str, str]) -> Path:
      "climbs a layer (tubempc.scenario -> tubempc.control)"),
     ({"verify/certify.py": "from tubempc.cli import main\n"}, "climbs a layer (verify -> tubempc.cli)"),
     ({"tubempc/gadgets/__init__.py": "from tubempc.mitl import parse\n"}, "tubempc.gadgets has no layer"),
+    ({"runkit/outputs.py": "from tubempc.errors import TubeMPCError\n"},
+     "climbs a layer (runkit -> tubempc.errors)"),
+    ({"runkit/executor.py": "def f():\n    from verify.errors import VerifyError\n"},
+     "climbs a layer (runkit -> verify)"),
 ])
 def test_the_layer_rule_catches_an_import_that_breaks_it(tmp_path: Path, files: dict[str, str],
                                                          expected: str) -> None:

@@ -163,3 +163,17 @@ def test_only_a_one_command_process_freezes_its_imports(call: str, frozen: bool)
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=False)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == str(frozen)
+
+
+def test_certify_and_watch_share_their_judging_options() -> None:
+    """``--checks``, ``--clock-offset`` and ``--scenario`` read alike in certify and watch: one definition each."""
+    from tubempc.cli.certify import certify
+    from tubempc.cli.watch import watch
+
+    def declared(command: object) -> dict[str, tuple[object, ...]]:
+        params = command.params  # type: ignore[attr-defined]
+        return {p.name: (p.opts, p.metavar, p.multiple, p.help) for p in params
+                if p.name in ("checks_text", "clock_offsets", "scenario")}
+
+    assert declared(certify) == declared(watch)
+    assert len(declared(certify)) == 3

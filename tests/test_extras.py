@@ -2,7 +2,7 @@
 extra and exit 4 (feature not available), never an ImportError traceback; the base install certifies without them.
 
 A missing module is simulated by ``sys.modules[name] = None`` (what Python does for a blocked import: ``import name``
-raises ImportError); ``tubempc.runtime.extras`` must see it as missing even when the module was imported earlier.
+raises ImportError); ``runkit.extras`` must see it as missing even when the module was imported earlier.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from runkit.errors import MissingExtraError
+from runkit.extras import EXTRAS, missing_modules, require
 from tubempc.cli import main
-from tubempc.runtime.errors import MissingExtraError
-from tubempc.runtime.extras import EXTRAS, missing_modules, require
 from tubempc.scenario import builtin_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,13 +6,11 @@ The log is written here in the style of a field robot's bag (a Clearpath Husky):
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import subprocess
 import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -20,19 +18,11 @@ import pytest
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
+from scripts import make_any_robot_logs
 from tubempc.cli import EXIT_UNUSABLE
 
 SIM_T0_NS = 100 * 10**9  # a simulated clock: near 1970
 ODOM = "/husky_velocity_controller/odom"
-
-
-def _kit() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "scripts" / "make_any_robot_logs.py"
-    spec = importlib.util.spec_from_file_location("any_robot_logs", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _imu_and_clock(t_end_s: float, store: Any) -> list[tuple[str, str, int, Any]]:
@@ -56,7 +46,7 @@ def _imu_and_clock(t_end_s: float, store: Any) -> list[tuple[str, str, int, Any]
 
 def husky_like_bag(path: Path, *, drop_at_s: float = 12.0) -> Path:
     """The bag described in the module docstring; the Odometry message at ``drop_at_s`` is missing (0.2 s gap)."""
-    kit = _kit()
+    kit = make_any_robot_logs
     run = kit.unicycle_run(((0.0, 0.0), (8.0, 0.0), (8.0, 5.0), (2.0, 5.0)), v_mps=0.8, w_radps=0.6, rate_hz=10.0)
     store = get_typestore(Stores.ROS1_NOETIC)
     odom = [m for m in kit.odometry_messages(run, ODOM, ros1=True, time0_ns=SIM_T0_NS)

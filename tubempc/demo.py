@@ -150,7 +150,7 @@ def run_demo(out_dir: str | Path, *, seed: int = 7, disturbance: str = "random",
 
     meta = {"plan": plan.to_json(), "demo": {"seed": seed, "disturbance": disturbance}}
     if replace:
-        from tubempc.runtime.outputs import replace_output_log
+        from runkit.outputs import replace_output_log
 
         for name in ("demo.mcap", "demo.bag"):
             replace_output_log(out / name)

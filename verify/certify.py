@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from runkit.outputs import write_output_file
 from tubempc.mitl import atoms
-from tubempc.runtime.outputs import write_output_file
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
 from verify.certificate import CERTIFICATE_VERSION, Certificate
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace

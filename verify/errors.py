@@ -1,5 +1,8 @@
-"""Exceptions of the certifier: raised when a log cannot be judged at all (exit code 3). (A feature whose optional
-dependency is not installed raises ``tubempc.runtime.errors.MissingExtraError``, exit code 4.)
+"""Exceptions of the certifier, one root (``VerifyError``): raised when a log cannot be judged at all, or its reports
+cannot be written (exit code 3). (A feature whose optional dependency is not installed raises
+``runkit.errors.MissingExtraError``, exit code 4.) Two more are internal and never reach the user: a fast reader
+declines a record (``FastPathError``), the regular-grid monitor declines a formula (``UnsupportedFormulaError``).
+The readers' record-level signals stay private to ``verify.ingest``.
 
 A failed *check* is never an exception; it is a verdict value with its witness.
 """
@@ -11,9 +14,11 @@ __all__ = [
     "LogReadError",
     "MissingTopicError",
     "MonitorClosedError",
+    "ReportWriteError",
     "ScenarioInputError",
     "SpecError",
     "TruncatedLogError",
+    "UnsupportedFormulaError",
     "UnusableInputError",
     "VerifyError",
 ]
@@ -57,6 +62,15 @@ class MonitorClosedError(VerifyError, RuntimeError):
     caller, not bad input)."""
 
 
+class ReportWriteError(VerifyError, OSError):
+    """The report files could not be written (the message names the folder)."""
+
+
 class FastPathError(Exception):
     """Internal to the readers: a fast reader (``verify.ingest.ros1``, ``verify.ingest.mcap``) met a record it does not
     reproduce exactly; the caller falls back to rosbags. Never reaches the user."""
+
+
+class UnsupportedFormulaError(Exception):
+    """Internal to the monitors: the regular-grid evaluator (``verify.monitor.grid``) met an operator it does not
+    handle (``Until``); the caller uses the general engine. Never reaches the user."""

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from tubempc.runtime.gcpause import gc_paused
+from runkit.gcpause import gc_paused
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, ObligationEntry, Verdict
 from verify.decimate import envelope

@@ -296,18 +296,13 @@ def judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
         return _judge_fleet(logs, sc, formula_text=formula_text, checks=checks, selection=selection)
 
 
-def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
-                 checks: Sequence[str] | None, selection: Selection | None) -> Any:
-    from verify.certify import CertifyResult, _check_entry, _jsonable, _judge
+def _judge_robots(logs: Mapping[str, LogData], sc: Scenario, *, checks: Sequence[str] | None,
+                  used: set[str] | frozenset[str]) -> tuple[dict[str, Any], dict[str, RobotTrack], dict[str, str]]:
+    """Each robot's own checks, judged by the one-robot core (the formula aside): per robot its ``CertifyResult``
+    and its track, and the stream problems that keep the run from passing (a signal's only when the formula uses
+    it)."""
+    from verify.certify import _judge
 
-    t0 = min(log.time0_ns for log in logs.values())
-    logs = {k: (v if v.time0_ns == t0 else dataclasses.replace(v, time0_ns=t0)) for k, v in logs.items()}
-    first_sc = sc.robot_scenario(sc.robots[0].name)
-    selection = selection if selection is not None else select_checks(first_sc, checks)
-    formula = parse_spec(formula_text)
-    used = atoms(formula)
-
-    # ---- each robot's own checks, judged by the one-robot core -------------------------------------------------
     per: dict[str, Any] = {}
     tracks: dict[str, RobotTrack] = {}
     problems: dict[str, str] = {}
@@ -329,39 +324,35 @@ def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str
                     problems[f"{r.name}: signal {name}"] = (
                         "messages outside the pose's span violate its predicate: the run is the pose's span, so "
                         "they are not judged and the run cannot pass")
+    return per, tracks, problems
 
-    # ---- the joint run ----------------------------------------------------------------------------------------
-    streams = {f"{r.name}.{k}": v for r in sc.robots for k, v in logs[r.name].signals.items()}
-    joint = judge_joint(sc, formula, tracks, streams, t0, spec="spec" in selection)
-    problems.update(joint.problems)
-    judged, span, joint_t, pairs = joint.judged, joint.span, joint.joint_t, joint.pairs
-    joint_rel = joint_t - t0
-    v_max = max(r.max_speed_mps for r in sc.robots)
-    results = list(joint.checks)
-    end_s = max((float(t.t_ns[-1] - t0) * 1e-9 for t in tracks.values() if t.t_ns.size), default=0.0)
-    entries = [_check_entry(c, t0, end_s) for c in results]
-    robots_out: list[dict[str, Any]] = []
-    timed: list[dict[str, Any]] = []
-    selected = [c for c in ("spec",) if c in selection] + (["separation"] if sc.separation is not None else [])
-    not_checked: list[dict[str, str]] = []
-    warnings = list(sc.certification_warnings())
-    samples: dict[str, Any] = {}
-    clock: list[Any] = []
-    for r in sc.robots:
-        cert = per[r.name].certificate
-        log = logs[r.name]
+
+@dataclasses.dataclass
+class _Merged:
+    """The fleet certificate's lists, the joint run's first, each robot's own added after them, named
+    ``robot/check``."""
+
+    entries: list[dict[str, Any]]
+    selected: list[str]
+    warnings: list[str]
+    not_checked: list[dict[str, str]] = dataclasses.field(default_factory=list)
+    timed: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    samples: dict[str, Any] = dataclasses.field(default_factory=dict)
+    clock: list[Any] = dataclasses.field(default_factory=list)
+    robots: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+
+    def add_robot(self, r: FleetRobot, cert: dict[str, Any], log: LogData, t: RobotTrack, t0: int) -> None:
         own_entries = [{**c, "name": f"{r.name}/{c['name']}"} for c in cert["checks"]]
-        entries += own_entries
-        selected += [f"{r.name}/{c}" for c in cert["checks_selected"] if c != "spec"]
-        not_checked += [{"name": f"{r.name}/{n['name']}", "reason": n["reason"]} for n in cert["not_checked"]
-                        if n["name"] != "spec"]
+        self.entries += own_entries
+        self.selected += [f"{r.name}/{c}" for c in cert["checks_selected"] if c != "spec"]
+        self.not_checked += [{"name": f"{r.name}/{n['name']}", "reason": n["reason"]} for n in cert["not_checked"]
+                             if n["name"] != "spec"]
         run = [{**e, "robot": r.name} for e in cert["timed_run"]]
-        timed += run
-        warnings += [f"{r.name}: {w}" for w in cert["scenario_warnings"] if w not in warnings]
-        samples.update(_prefixed(r.name, cert["samples"]))
-        clock += [f for f in cert.get("clock_findings") or [] if f not in clock]
-        t = tracks[r.name]
-        robots_out.append({
+        self.timed += run
+        self.warnings += [f"{r.name}: {w}" for w in cert["scenario_warnings"] if w not in self.warnings]
+        self.samples.update(_prefixed(r.name, cert["samples"]))
+        self.clock += [f for f in cert.get("clock_findings") or [] if f not in self.clock]
+        self.robots.append({
             "name": r.name, "pose_source": cert["pose_source"], "radius_m": r.radius,
             "speed_bound_mps": r.max_speed_mps, "input_model": r.inputs.model,
             "span_s": None if t.span_ns is None else [_rel_s(t.span_ns[0] - t0), _rel_s(t.span_ns[1] - t0)],
@@ -369,6 +360,56 @@ def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str
             "data_quality": cert["data_quality"], "log_digest": log.log_digest,
             **({"signals": {k: signal_summary(v, t0, int(log.pose.t_ns[-1]) if log.pose.t_ns.size else t0)
                             for k, v in log.signals.items()}} if log.signals else {})})
+
+
+def _tables(sc: Scenario, per: Mapping[str, Any], joint: JointJudgement, t0: int) -> dict[str, Columns | None]:
+    """The report's tables: each robot's trajectory (the first one's also as ``trajectory``), the formula's
+    robustness over the joint run and each separation pair's distance bounds."""
+    tables: dict[str, Columns | None] = {"nominal": None, "inputs": None, "robustness": None}
+    for i, r in enumerate(sc.robots):
+        traj = per[r.name].columns["trajectory"]
+        tables[f"trajectory/{r.name}"] = traj
+        if i == 0:
+            tables["trajectory"] = traj
+    joint_t = joint.joint_t
+    if joint_t.size:
+        tables["robustness"] = {"t_s": joint.judged.signal_t_ns * 1e-9, "rho_m": joint.judged.signal}
+        for p in joint.pairs:
+            tables[f"separation/{p.robots[0]}-{p.robots[1]}"] = {
+                "t_s": (joint_t - t0) * 1e-9, "lo_m": p.bounds.point_lo, "hi_m": p.bounds.point_hi, "min_m":
+                    np.full(joint_t.shape[0], p.min_m)}
+    return tables
+
+
+def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str,
+                 checks: Sequence[str] | None, selection: Selection | None) -> Any:
+    from verify.certify import CertifyResult, _check_entry, _jsonable
+
+    t0 = min(log.time0_ns for log in logs.values())
+    logs = {k: (v if v.time0_ns == t0 else dataclasses.replace(v, time0_ns=t0)) for k, v in logs.items()}
+    first_sc = sc.robot_scenario(sc.robots[0].name)
+    selection = selection if selection is not None else select_checks(first_sc, checks)
+    formula = parse_spec(formula_text)
+    used = atoms(formula)
+
+    per, tracks, problems = _judge_robots(logs, sc, checks=checks, used=used)
+
+    # ---- the joint run ----------------------------------------------------------------------------------------
+    streams = {f"{r.name}.{k}": v for r in sc.robots for k, v in logs[r.name].signals.items()}
+    joint = judge_joint(sc, formula, tracks, streams, t0, spec="spec" in selection)
+    problems.update(joint.problems)
+    judged, span = joint.judged, joint.span
+    v_max = max(r.max_speed_mps for r in sc.robots)
+    results = list(joint.checks)
+    end_s = max((float(t.t_ns[-1] - t0) * 1e-9 for t in tracks.values() if t.t_ns.size), default=0.0)
+    merged = _Merged(
+        entries=[_check_entry(c, t0, end_s) for c in results],
+        selected=[c for c in ("spec",) if c in selection] + (["separation"] if sc.separation is not None else []),
+        warnings=list(sc.certification_warnings()))
+    for r in sc.robots:
+        merged.add_robot(r, per[r.name].certificate, logs[r.name], tracks[r.name], t0)
+    entries, selected, not_checked, timed = merged.entries, merged.selected, merged.not_checked, merged.timed
+    warnings, samples, clock, robots_out = merged.warnings, merged.samples, merged.clock, merged.robots
     if "spec" in selection:
         not_checked.append({"name": "spec_timed_run", "reason": "the timed run (Definition 3) is one robot's: with "
                                                                 "robots: the formula is judged under the trajectory "
@@ -422,18 +463,7 @@ def _judge_fleet(logs: Mapping[str, LogData], sc: Scenario, *, formula_text: str
                   "separation": None if sc.separation is None else sc.separation.model_dump(mode="json"),
                   "proximity": {k: v.model_dump(mode="json") for k, v in sc.proximity.items()}},
     }
-    tables: dict[str, Columns | None] = {"nominal": None, "inputs": None, "robustness": None}
-    for i, r in enumerate(sc.robots):
-        traj = per[r.name].columns["trajectory"]
-        tables[f"trajectory/{r.name}"] = traj
-        if i == 0:
-            tables["trajectory"] = traj
-    if joint_t.size:
-        tables["robustness"] = {"t_s": judged.signal_t_ns * 1e-9, "rho_m": judged.signal}
-        for p in pairs:
-            tables[f"separation/{p.robots[0]}-{p.robots[1]}"] = {
-                "t_s": joint_rel * 1e-9, "lo_m": p.bounds.point_lo, "hi_m": p.bounds.point_hi, "min_m":
-                    np.full(joint_t.shape[0], p.min_m)}
+    tables = _tables(sc, per, joint, t0)
     typed = Certificate.model_validate(_jsonable(cert_out))
     return CertifyResult(typed.to_json_dict(), EXIT_CODES[verdict], tables,
                          formula=judged if "spec" in selection else None)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from tubempc.runtime.outputs import write_output_file
+from runkit.outputs import write_output_file
 from verify.certificate import Certificate, Verdict
 
 __all__ = ["INCONCLUSIVE_AS", "InconclusiveAs", "JUnitCase", "JUnitSuite", "certificate_suite", "suite_element",

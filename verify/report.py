@@ -27,10 +27,10 @@ from typing import Any, Protocol
 
 import pandas as pd
 
-from tubempc.runtime.outputs import output_subdir, write_output_file
+from runkit.outputs import output_subdir, write_output_file
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, CheckEntry, ObligationEntry, TimedRunEntry
-from verify.errors import VerifyError
+from verify.errors import ReportWriteError
 from verify.figures import FigureSpec, render_figures
 from verify.junit import InconclusiveAs, certificate_suite, suite_element, write_junit
 
@@ -67,10 +67,6 @@ class CertifyResultLike(Protocol):
     def inputs(self) -> pd.DataFrame | None: ...
     @property
     def robustness(self) -> pd.DataFrame | None: ...
-
-
-class ReportWriteError(VerifyError, OSError):
-    """The report files could not be written (the message names the folder)."""
 
 
 # ---- value formatting (pure text; escaping happens per output format) -------------------------------------------

@@ -4,35 +4,17 @@ argument first is, a conjunction at its earliest false conjunct, a negation or d
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-from types import ModuleType
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _helpers() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("online_monitor_props", ROOT / "property_tests" /
-                                                  "test_online_monitor.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("online_monitor_props", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-H = _helpers()
+from property_tests.online_runs import SC, T0, offline_certificate, online_run, same_time
 
 
 def _run_in_r1_then_away() -> dict[str, object]:
     """100 Hz: 1 s inside R1 (mission_1), then 5 s drifting to R3 (mission_2) and staying there."""
     n = 600
-    t = H.T0 + np.arange(n, dtype=np.int64) * 10_000_000
-    r1, r3 = H.SC.region("R1").center, H.SC.region("R3").center
+    t = T0 + np.arange(n, dtype=np.int64) * 10_000_000
+    r1, r3 = SC.region("R1").center, SC.region("R3").center
     s = np.clip((np.arange(n) - 100) / 300.0, 0.0, 1.0)
     x = r1[0] + s * (r3[0] - r1[0])
     y = r1[1] + s * (r3[1] - r1[1])
@@ -46,8 +28,8 @@ def _run_in_r1_then_away() -> dict[str, object]:
 @pytest.mark.parametrize("every", [0, 1, 37])
 def test_online_first_violation_is_the_certificates(spec: str, every: int) -> None:
     run = _run_in_r1_then_away()
-    cert = H._offline(run, spec)
-    mon, _ = H._online(run, spec, every)
+    cert = offline_certificate(run, spec)
+    mon, _ = online_run(run, spec, every)
     res = mon.close()
     want = {c["name"]: c for c in cert["checks"]}
     t0 = int(run["t"][0])  # type: ignore[index]
@@ -58,4 +40,4 @@ def test_online_first_violation_is_the_certificates(spec: str, every: int) -> No
     assert got == want["spec_trajectory"]["first_violation_time"], (got, want["spec_trajectory"])
     offline = {o["formula"]: o for o in cert["obligations"]}
     for ob in res.state.obligations:
-        assert H._same(ob.first_violation_s, offline[ob.name]["first_violation_time"]), (ob, offline[ob.name])
+        assert same_time(ob.first_violation_s, offline[ob.name]["first_violation_time"]), (ob, offline[ob.name])

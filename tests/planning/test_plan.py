@@ -12,8 +12,8 @@ import json
 import networkx as nx
 import pytest
 
+from tests.planning.synthetic import straight_line_oracle
 from tubempc.planning import Plan, plan_from_wts
-from tubempc.planning.synthetic import straight_line_oracle
 from tubempc.planning.wts import build_wts, wts_weight
 from tubempc.scenario import builtin_scenario
 

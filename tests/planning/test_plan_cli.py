@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 import tubempc.planning.wts as wts_module
+from tests.planning.synthetic import straight_line_oracle
 from tubempc.cli import main
-from tubempc.planning.synthetic import straight_line_oracle
 
 
 @pytest.fixture(autouse=True)
@@ -81,7 +81,7 @@ def test_state_limit_exits_2_saying_how_to_raise_it(capsys: pytest.CaptureFixtur
 
 def test_no_usable_transition_exits_3_naming_the_design_quantity(monkeypatch: pytest.MonkeyPatch,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
-    from tubempc.planning.synthetic import SyntheticTransition
+    from tests.planning.synthetic import SyntheticTransition
 
     def failing(*args: object, **kwargs: object) -> SyntheticTransition:
         return SyntheticTransition(False, "design check: tube radius 0.31 m exceeds the region radius 0.3 m", None)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tubempc.planning.synthetic import straight_line_oracle
+from tests.planning.synthetic import straight_line_oracle
 from tubempc.planning.wts import build_wts, wts_cache_file, wts_edges, wts_failed, wts_labels
 from tubempc.scenario import builtin_scenario
 
@@ -56,26 +56,26 @@ def test_cache_key_depends_on_the_scenario(tmp_path: Path) -> None:
 
 
 def test_the_abstraction_runs_on_the_shared_executor(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """build_wts hands its region pairs to tubempc.runtime.executor.parallel_map (workers, Dask, progress passed
+    """build_wts hands its region pairs to runkit.executor.parallel_map (workers, Dask, progress passed
     through)."""
-    import tubempc.runtime.executor
+    import runkit.executor
     from tubempc.planning import wts as wts_module
 
-    real = tubempc.runtime.executor.parallel_map
+    real = runkit.executor.parallel_map
     seen: list[dict[str, object]] = []
 
     def spy(fn: object, items: list[object], **kwargs: object) -> list[object]:
         seen.append({"fn": fn, "jobs": len(items), **kwargs})
         return real(fn, items, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(tubempc.runtime.executor, "parallel_map", spy)
+    monkeypatch.setattr(runkit.executor, "parallel_map", spy)
     s = builtin_scenario()
     g = build_wts(s, oracle=straight_line_oracle, cache_path=tmp_path, workers=1, progress=False, use_cache=False)
     n = len(s.safe_regions)
     (call,) = seen
     assert call["fn"] is wts_module._evaluate and call["jobs"] == n * (n - 1)
     assert (call["workers"], call["dask"], call["progress"], call["unit"]) == (1, None, False, "pair")
-    assert "tubempc.planning.synthetic" in call["preload"]  # type: ignore[operator]
+    assert "tests.planning.synthetic" in call["preload"]  # type: ignore[operator]
     assert g.number_of_edges() + len(wts_failed(g)) == n * (n - 1)
 
 

@@ -7,12 +7,13 @@ import functools
 import operator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tubempc.runtime.errors import OutputError
-from tubempc.runtime.executor import parallel_map
+from runkit.errors import OutputError
+from runkit.executor import parallel_map
 
 ITEMS = [3, -1, 4, -1, -5, 9, -2, 6]
 EXPECTED = [abs(x) for x in ITEMS]
@@ -36,6 +37,27 @@ def test_exceptions_propagate() -> None:
 def test_bad_dask_address_is_unusable_input() -> None:
     with pytest.raises(OutputError, match="expected 'local'"):
         parallel_map(abs, ITEMS, dask="my-laptop", progress=False)
+
+
+def test_the_kits_errors_are_ours_with_their_exit_codes() -> None:
+    """``runkit``'s errors have their own root; the CLI still counts them as raised on purpose (one line, not an
+    internal error): an unusable output or address exits 3, a missing extra 4."""
+    from runkit.errors import MissingExtraError
+    from tubempc.cli.exits import EXIT_NOT_AVAILABLE, EXIT_UNUSABLE, exit_code, is_ours
+
+    assert is_ours(OutputError("no", path="out")) and exit_code(OutputError("no", path="out")) == EXIT_UNUSABLE
+    assert is_ours(MissingExtraError("no dask")) and exit_code(MissingExtraError("no dask")) == EXIT_NOT_AVAILABLE
+
+
+def test_the_abstraction_names_a_bad_dask_address(tmp_path: Path) -> None:
+    from tests.planning.synthetic import straight_line_oracle
+    from tubempc.errors import AbstractionError
+    from tubempc.planning.wts import build_wts
+    from tubempc.scenario import builtin_scenario
+
+    with pytest.raises(AbstractionError, match=r"building the WTS .* expected 'local'"):
+        build_wts(builtin_scenario(), oracle=straight_line_oracle, cache_path=tmp_path, dask="my-laptop",
+                  progress=False)
 
 
 def test_progress_bar_on_request(capsys: pytest.CaptureFixture[str]) -> None:
@@ -75,7 +97,7 @@ def test_a_pool_that_breaks_while_items_are_handed_out(monkeypatch: pytest.Monke
 
 def test_dask_chunks_keep_order_and_balance() -> None:
     """Dask gets a few contiguous chunks per worker (one task and one pickled scenario per chunk, not per item)."""
-    from tubempc.runtime.executor import _chunks
+    from runkit.executor import _chunks
 
     items = list(range(203))
     chunks = _chunks(items, 2)

@@ -7,14 +7,12 @@ file, ``dir-mcap``, ``dir-sqlite3``) with the topics of the log contract, in any
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -25,16 +23,6 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from tubempc.scenario import Scenario, builtin_scenario
-
-
-def any_robot_kit() -> ModuleType:
-    """``scripts/make_any_robot_logs.py`` (unicycle runs, Odometry and command messages, writers) as a module."""
-    path = Path(__file__).resolve().parents[2] / "scripts" / "make_any_robot_logs.py"
-    spec = importlib.util.spec_from_file_location("any_robot_logs", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 TIME0_NS = 1_767_225_600 * 10**9
 

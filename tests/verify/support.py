@@ -1,34 +1,15 @@
 """Helpers shared by the tests of damaged and adversarial input (``test_no_false_pass.py``,
-``test_damaged_input.py``): the fuzzer's log kit and the CLI run in this process."""
+``test_damaged_input.py``, the reading rules): the fault campaign's log kit (``benchmarks/fuzz_certify.py``, imported
+as a module of the repository) and the CLI run in this process."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-from types import ModuleType
-
 import pytest
 
+from benchmarks import fuzz_certify as FUZZ  # noqa: N812  (the fault campaign: seed logs, runs, writers)
 from tubempc.cli import main
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _fuzz() -> ModuleType:
-    """``benchmarks/fuzz_certify.py`` (seed logs, runs, writers, the campaign) as a module, loaded once."""
-    loaded = sys.modules.get("fuzz_certify")
-    if loaded is not None:
-        return loaded
-    spec = importlib.util.spec_from_file_location("fuzz_certify", ROOT / "benchmarks" / "fuzz_certify.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["fuzz_certify"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-FUZZ = _fuzz()
+__all__ = ["FUZZ", "one_line_error", "run"]
 
 
 def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

@@ -16,16 +16,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from scripts import make_any_robot_logs
 from tubempc.scenario import Scenario, scenario_from_dict
 from verify import certify_log
 from verify.errors import ScenarioInputError
 
-from .conftest import any_robot_kit
-
 ROOT = Path(__file__).resolve().parents[2]
 
 
-KIT = any_robot_kit()
+KIT = make_any_robot_logs
 TABLE = (2.5, 1.5)  # centre of the obstacle (a disc of radius 0.4)
 
 

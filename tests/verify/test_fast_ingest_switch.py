@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from scripts import make_any_robot_logs
 from tubempc.scenario import Scenario, scenario_from_dict
 from verify import certify_log
 from verify.errors import LogReadError, TruncatedLogError
@@ -23,8 +24,6 @@ from verify.ingest import fields as fields_mod
 from verify.ingest import raw as raw_mod
 from verify.ingest.log import read_log
 from verify.ingest.raw import FAST_INGEST_ENV, detect_format, fast_ingest
-
-from .conftest import any_robot_kit
 
 ROOT = Path(__file__).resolve().parents[2]
 #: every entry point of our own reading: the ROS1 chunk reader, the sqlite3 open + reader, the MCAP/sqlite3 message
@@ -120,7 +119,7 @@ def _lab() -> Scenario:
 @pytest.mark.parametrize("suffix", [".bag", ".mcap"])
 def test_stamped_commands_and_signal_atoms_identical_both_ways(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                                fast_calls: list[str], suffix: str) -> None:
-    kit = any_robot_kit()
+    kit = make_any_robot_logs
     ros1 = suffix == ".bag"
     run = kit.unicycle_run([(0.5, 0.5), (3.4, 0.5), (3.4, 2.5), (4.4, 3.3)], v_mps=0.4, w_radps=0.8, rate_hz=50.0)
     msgs = (kit.odometry_messages(run, "/odom", ros1=ros1)

@@ -7,16 +7,14 @@ time and margin is computed densely (every 0.1 ms) and independently of the cert
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 import pytest
 
+from scripts import make_fleet_logs
 from tubempc.scenario import Scenario, scenario_from_dict
 from verify.certify import certify_log
 from verify.errors import SpecError
@@ -24,16 +22,7 @@ from verify.errors import SpecError
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _kit() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fleet_logs", ROOT / "scripts" / "make_fleet_logs.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["fleet_logs"] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
-
-
-KIT = _kit()
+KIT = make_fleet_logs
 DOOR = ((4.0, 2.0), (6.0, 2.0), (6.0, 4.0), (4.0, 4.0))
 RADII = {"a": 0.35, "b": 0.25, "c": 0.3}
 

@@ -2,7 +2,7 @@
 
 One log file (or one ROS2 bag folder): ``verify.certify_log``; with ``--out DIR``, ``certificate.json``,
 ``report.md``, ``report.html`` and ``junit.xml`` go into DIR: a new or empty folder, or any folder with
-``--force`` (``tubempc.runtime.outputs`` states the policy shared by every command). Unusable input raises
+``--force`` (``runkit.outputs`` states the policy shared by every command). Unusable input raises
 ``UnusableInputError``, which ``tubempc.cli.main`` turns into exit 3 and one line naming the file and the problem.
 
 Several logs, or a folder of logs: ``verify.batch.certify_many`` in parallel (processes; ``--dask local`` or
@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal, NoReturn, cast
 import click
 
 from tubempc.cli.exits import EXIT_UNUSABLE, leave
-from tubempc.cli.options import scenario_option
+from tubempc.cli.options import checks_option, clock_offset_option, scenario_option
 from tubempc.cli.output import verbosity
 from verify.errors import UnusableInputError
 from verify.ingest.digest import DEFAULT_DIGEST, DIGESTS, MESSAGES_DIGEST
@@ -78,12 +78,8 @@ def _write_one(result: CertifyResult, sc: Scenario, log: Path, out_dir: Path, *,
 @click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="auto", show_default=True,
               help="auto: header stamps unless they cannot order the samples (then log time, noted in the "
                    "certificate); header: header stamps (no pass if they cannot order the samples); log: receive time.")
-@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
-              help="Checks to run: spec, obstacle_clearance, workspace, tube, input_box (default: the scenario's "
-                   "checks:, else every check whose data the scenario names).")
-@click.option("--clock-offset", "clock_offsets", multiple=True, metavar="TOPIC=SECONDS",
-              help="Add SECONDS to TOPIC's times (its clock runs behind the pose topic's by that much); repeatable; "
-                   "extends the scenario's clock_offsets.")
+@checks_option()
+@clock_offset_option()
 @click.option("--salvage", is_flag=True, help="Read what complete chunks of a truncated log remain (never a pass).")
 @click.option("--force", is_flag=True, help="Replace the reports in an existing, non-empty --out folder.")
 @click.option("--no-report", is_flag=True, help="Write only certificate.json (no report.md/html, junit.xml).")
@@ -109,8 +105,8 @@ def certify(logs: tuple[Path, ...], scenario: str, spec: str | None, out_dir: Pa
     Exit 0 all checks pass, 1 a violation was found, 2 inconclusive, 3 unusable input, 4 a needed optional
     dependency is not installed (the line names the extra).
     """
-    from tubempc.runtime.extras import require
-    from tubempc.runtime.outputs import prepare_output_dir
+    from runkit.extras import require
+    from runkit.outputs import prepare_output_dir
     from verify.certify import certify_log, check_lines, resolve_scenario, verdict_line
     from verify.selection import parse_check_list
 

@@ -52,7 +52,7 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
     regressed = worse beyond the tolerance and significant at the confidence.
 
     Exit 0 no regression, 1 regression, 2 not enough runs to tell, 3 unusable input."""
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     if out_dir is not None:  # compare.html's plots (scipy, for the tests, is a base dependency)
         require("report", feature="compare.html (compare --out)", alternative="drop --out and use --json")
@@ -74,7 +74,7 @@ def compare(*, before: str, after: str, scenario: str, spec: str | None, pair_pa
     settings = load_settings(tolerances_path if tolerances_path is not None else settings_path_for(scenario),
                              overrides=tol, confidence=confidence)
     if out_dir is not None:
-        from tubempc.runtime.outputs import prepare_output_dir
+        from runkit.outputs import prepare_output_dir
 
         prepare_output_dir(out_dir, force=force, inputs=[before, after])
     sides = [load_side(text, sc, formula=formula, spec=spec, time_base=time_base, workers=workers,

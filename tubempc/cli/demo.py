@@ -26,11 +26,11 @@ def demo(out_dir: Path | None, seed: int, disturbance: str, no_cache: bool, forc
 
     Exit code: the certificate's (0 pass, 1 fail, 2 inconclusive).
     """
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("plan", "report", feature="the demo")
+    from runkit.outputs import prepare_output_dir
     from tubempc.demo import run_demo
-    from tubempc.runtime.outputs import prepare_output_dir
 
     folder = out_dir if out_dir is not None else Path("reports") / time.strftime("demo-%Y%m%d-%H%M%S")
     prepare_output_dir(folder, force=force)

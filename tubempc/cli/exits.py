@@ -4,7 +4,7 @@
 exists (plan, proved); 2 inconclusive (certify, watch, compare) or undecided (plan: the search reached its state
 limit, ``--max-states``); 3 unusable input (unreadable or truncated log, missing topic, malformed formula or
 scenario, impossible controller design, an abstraction without any usable transition); 4 feature not available
-(among others: an optional dependency is not installed; the line names the extra, ``tubempc.runtime.extras``);
+(among others: an optional dependency is not installed; the line names the extra, ``runkit.extras``);
 70 internal error; 130 interrupted.
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 import sys
 from typing import Any, NoReturn
 
+from runkit.errors import MissingExtraError, RunkitError
 from tubempc.errors import NoAcceptingRunError, NotAvailableError, SearchLimitError, TubeMPCError
-from tubempc.runtime.errors import MissingExtraError
 
 __all__ = ["EXIT_FAIL", "EXIT_INCONCLUSIVE", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_NOT_AVAILABLE", "EXIT_OK",
            "EXIT_UNUSABLE", "exit_code", "is_ours", "leave"]
@@ -35,9 +35,9 @@ def _verify_error() -> type[BaseException] | None:
 
 
 def is_ours(err: BaseException) -> bool:
-    """An error raised on purpose by either package (its message is for the user)."""
+    """An error raised on purpose by ``tubempc``, ``verify`` or ``runkit`` (its message is for the user)."""
     ve = _verify_error()
-    return isinstance(err, TubeMPCError) or (ve is not None and isinstance(err, ve))
+    return isinstance(err, TubeMPCError | RunkitError) or (ve is not None and isinstance(err, ve))
 
 
 def exit_code(err: BaseException) -> int:

@@ -96,7 +96,7 @@ def falsify(*, scenario: str, source: str | None, target: str | None, plan: bool
     import os
     import tempfile
 
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     # hypothesis caches what it learns about the code under test in its storage folder (./.hypothesis unless
     # HYPOTHESIS_STORAGE_DIRECTORY says otherwise): a scratch folder removed when the command ends keeps the

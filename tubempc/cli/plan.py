@@ -51,7 +51,7 @@ def plan(*, scenario: str, spec_text: str | None, no_wait: bool, dwell: str, obj
          max_states: int | None, json_out: str | None, no_cache: bool, workers: int | None, dask_address: str | None,
          dot_out: str | None) -> None:
     """Plan a time-optimal timed run of the scenario's WTS that satisfies the MITL formula."""
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("plan", *(("dask",) if dask_address else ()), feature="tubempc plan")
     from tubempc.control.dynamics import model_for

@@ -39,10 +39,11 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
             dask: str | None, out_dir: str | None, reports: bool, force: bool, progress: bool | None,
             controller: str | None) -> None:
     """Run a regression suite with the current controller (or --controller) and compare it with a baseline."""
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("plan", *(("report",) if reports and out_dir else ()), *(("dask",) if dask else ()),
             feature="tubempc regress")
+    from runkit.outputs import write_output_file
     from tubempc.regress import (
         FalsifyCase,
         RunCase,
@@ -58,7 +59,6 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
         write_baseline,
     )
     from tubempc.regress.compare import BaselineError
-    from tubempc.runtime.outputs import write_output_file
     from verify.junit import write_junit
 
     loaded = load_suite(suite_path)
@@ -70,7 +70,7 @@ def regress(*, suite_path: str | None, baseline_path: str | None, update_baselin
     if out_dir is None and reports:
         raise click.UsageError("--reports needs --out DIR")
     if out_dir is not None:
-        from tubempc.runtime.outputs import prepare_output_dir
+        from runkit.outputs import prepare_output_dir
 
         prepare_output_dir(out_dir, force=force)
     cases: list[RunCase | FalsifyCase] = [*expand_suite(loaded), *expand_falsify(loaded)]

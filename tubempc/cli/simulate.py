@@ -44,15 +44,15 @@ EXIT_NOT_REACHED = EXIT_FAIL
 def simulate(*, scenario: str, source: str | None, target: str, disturbance: str, seed: int, mocap_noise_m: float,
              hold_s: float | None, out_path: str, force: bool, controller_spec: str | None) -> None:
     """Simulate the tube MPC (or your --controller) from one region to another and write the robot's log."""
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("plan", feature="tubempc simulate")
     import numpy as np
 
+    from runkit.outputs import prepare_output_log, replace_output_log
     from tubempc.control import Target, run_closed_loop
     from tubempc.errors import DesignError
     from tubempc.rosio import write_log
-    from tubempc.runtime.outputs import prepare_output_log, replace_output_log
 
     prepare_output_log(out_path, force=force)
     sc = load_scenario_ref(scenario)
@@ -95,10 +95,10 @@ def _simulate_controller(scenario: Scenario, spec: str, *, source: str | None, t
     """``--controller``: the user's controller on the kinematic plant of its input model (``tubempc.control.user``)."""
     import numpy as np
 
+    from runkit.outputs import replace_output_log
     from tubempc.control import Target
     from tubempc.control.user import checked_controller, run_controller
     from tubempc.rosio import write_log
-    from tubempc.runtime.outputs import replace_output_log
 
     controller = checked_controller(spec, scenario)
     result = run_controller(scenario, controller, [Target(t.strip()) for t in targets], start_region=source,

@@ -17,7 +17,7 @@ from pathlib import Path
 import click
 
 from tubempc.cli.exits import leave
-from tubempc.cli.options import scenario_option
+from tubempc.cli.options import checks_option, clock_offset_option, scenario_option
 from tubempc.cli.output import verbosity
 
 __all__ = ["watch"]
@@ -44,15 +44,11 @@ def _certified_path(path: Path, finished: bool) -> Path:
 @click.option("--time-base", type=click.Choice(["auto", "header", "log"]), default="header", show_default=True,
               help="Header stamps, log (receive) time, or auto: certify's rule (header stamps unless they cannot "
                    "order the samples) applied to the first pose messages.")
-@click.option("--clock-offset", "clock_offsets", multiple=True, metavar="TOPIC=SECONDS",
-              help="Add SECONDS to TOPIC's times, as certify's --clock-offset; repeatable; extends the scenario's "
-                   "clock_offsets.")
+@clock_offset_option()
 @click.option("--out", "out_dir", default=None, type=click.Path(path_type=Path),
               help="Write certificate.json and reports here at the end, as certify does.")
 @click.option("--no-report", is_flag=True, help="With --out: write only certificate.json.")
-@click.option("--checks", "checks_text", default=None, metavar="NAME,...",
-              help="Checks to run, as certify's --checks (default: the scenario's checks:, else every check whose "
-                   "data the scenario names).")
+@checks_option()
 def watch(log: Path, scenario: str, spec: str | None, follow: bool, idle_timeout: float,  # noqa: PLR0917
           poll_s: float, time_base: str, clock_offsets: tuple[str, ...], out_dir: Path | None, no_report: bool,
           checks_text: str | None) -> None:

@@ -117,6 +117,7 @@ def judge(setup: FalsifySetup, certificate: Certificate) -> tuple[float, str | N
 
 def evaluate(setup: FalsifySetup, z: Sequence[float]) -> Evaluation:
     """Simulate and judge one point of the search space (certifier: ``verify.certify_data``, same as for files)."""
+    from runkit.errors import RunkitError
     from tubempc.rosio.memory import in_memory_log
     from verify import certify_data  # type: ignore[attr-defined,unused-ignore]
     from verify.errors import VerifyError
@@ -128,7 +129,7 @@ def evaluate(setup: FalsifySetup, z: Sequence[float]) -> Evaluation:
         result = simulate(setup, cand)
         sim_s = time.perf_counter() - start
         certified = certify_data(in_memory_log(result, setup.scenario), setup.scenario, spec=setup.spec)
-    except (TubeMPCError, VerifyError, ValueError) as err:
+    except (TubeMPCError, RunkitError, VerifyError, ValueError) as err:
         return Evaluation(key, math.nan, None, False, False, {}, "error", time.perf_counter() - start, 0.0,
                           error=f"{err.__class__.__name__}: {err}")
     judge_s = time.perf_counter() - start - sim_s

@@ -1,7 +1,7 @@
 """Search methods: a setup, a budget and a seed -> the evaluated candidates in the order they were simulated.
 
 input: a ``FalsifySetup``, the method (``random``, ``targeted``, ``optimizer``), the budget (simulations), the seed,
-and where to run (processes or Dask, through ``tubempc.runtime.executor.parallel_map``) -> output: a frozen
+and where to run (processes or Dask, through ``runkit.executor.parallel_map``) -> output: a frozen
 ``SearchResult``.
 
 - ``random``: ``budget`` points drawn uniformly in the cube by ``numpy.random.default_rng(seed)`` (the baseline);
@@ -82,7 +82,7 @@ class _Runner:
         self.order: list[Evaluation] = []
 
     def run(self, points: Sequence[tuple[float, ...]], *, inline: bool = False) -> list[Evaluation]:
-        from tubempc.runtime.executor import parallel_map
+        from runkit.executor import parallel_map
 
         todo = [z for z in dict.fromkeys(points) if z not in self.cache]
         if todo:
@@ -134,7 +134,7 @@ def _random(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first:
 
 
 def _optimizer(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first: bool) -> None:
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("plan", feature="falsify --method optimizer")
     from scipy.optimize import differential_evolution
@@ -180,7 +180,7 @@ class _Counterexample(Exception):  # noqa: N818 (hypothesis needs an exception t
 
 def _targeted(runner: _Runner, dim: int, budget: int, seed: int, *, stop_at_first: bool,
               shrink_budget: int) -> tuple[list[Evaluation], Evaluation | None]:
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("testing", feature="falsify --method targeted")
     from hypothesis import HealthCheck, Phase, Verbosity, given, settings, target

@@ -1,4 +1,3 @@
-# Over 500 lines: MITL -> timed automaton, one construction per operator over one clock and location encoding.
 """MITL -> an on-the-fly alternating timed automaton with clock copies, made nondeterministic state by state.
 
 input: a ``Formula`` (``tubempc.mitl``) and the tick (seconds per integer time unit) -> output: a ``TimedAutomaton``
@@ -9,7 +8,8 @@ after ``delta`` ticks, at a new position whose labels are ``label_class``.
 Construction (documented with its complexity in ``docs/planner.md``):
 
 * the formula is put in negation normal form over ``F_I, G_I, U_I, R_I`` (release, the dual of until), strong
-  ``X_I`` and weak ``Xw_I`` (the dual of next); ``->`` and ``!`` on temporal operators are pushed to the atoms;
+  ``X_I`` and weak ``Xw_I`` (the dual of next); ``->`` and ``!`` on temporal operators are pushed to the atoms
+  (``tubempc.planning.nnf``: the nodes, their kinds and windows in ticks);
 * a temporal node anchored at the current position has age 0 and is *processed* at once (pointwise semantics:
   ``F_I a`` at ``i`` can be met at ``i`` itself when ``0 in I``); at each later position its age grows by the
   elapsed ticks and it is processed again: ``in`` (age in ``I``), ``before`` (age below ``I``), ``future`` (a later
@@ -29,27 +29,42 @@ Times are integers (ticks); the caller scales every weight and interval endpoint
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
 from fractions import Fraction
-from math import gcd, lcm
 
-from tubempc.mitl import (
-    Always,
-    And,
-    Atom,
-    Const,
-    Eventually,
-    Formula,
-    Implies,
-    Interval,
-    Next,
-    Not,
-    Or,
-    Until,
+from tubempc.mitl import Formula
+from tubempc.planning.nnf import (
+    ALW,
+    AND,
+    ATOM,
+    EV,
+    FALSE,
+    KIND_NAMES,
+    NATOM,
+    NXT,
+    OR,
+    REL,
+    TRUE,
+    UNT,
+    WNXT,
+    Node,
+    negation_normal_form,
+    tick_of,
 )
 
-__all__ = [
+__all__ = [  # the node kinds, ``Node`` and ``tick_of`` are ``tubempc.planning.nnf``'s, named here too
+    "ALW",
+    "AND",
+    "ATOM",
+    "EV",
+    "FALSE",
     "KIND_NAMES",
+    "NATOM",
+    "NXT",
+    "OR",
+    "REL",
+    "TRUE",
+    "UNT",
+    "WNXT",
     "Node",
     "Obligation",
     "State",
@@ -58,9 +73,6 @@ __all__ = [
     "tick_of",
 ]
 
-# Node kinds of the negation normal form.
-TRUE, FALSE, ATOM, NATOM, AND, OR, EV, ALW, UNT, REL, NXT, WNXT = range(12)
-KIND_NAMES = ("true", "false", "atom", "!atom", "and", "or", "F", "G", "U", "R", "X", "Xw")
 _TEMPORAL = frozenset({EV, ALW, UNT, REL, NXT, WNXT})
 _EXISTENTIAL = frozenset({EV, UNT})  # in-window copies: the older implies the younger
 _UNIVERSAL = frozenset({ALW, REL})  # in-window copies: the younger implies the older
@@ -69,63 +81,8 @@ _FINAL_OK = frozenset({ALW, REL, WNXT})  # pending obligations that a run ending
 Obligation = tuple[int, int]  # (node id, age in ticks)
 State = tuple[Obligation, ...]  # sorted, canonical; () = nothing pending (accepting, absorbing)
 Dnf = tuple[State, ...]
-
-
-def tick_of(values: Iterable[Fraction], *, refine: int = 1) -> Fraction:
-    """Largest ``q`` such that every value is an integer multiple of ``q``, divided by ``refine``.
-
-    ``refine = 2`` makes every constant even, so that "strictly after a constant" is one tick after it.
-    """
-    nums = [v for v in values if v != 0]
-    if refine < 1:
-        raise ValueError(f"refine={refine} must be a positive integer")
-    if not nums:
-        return Fraction(1, refine)
-    if any(v < 0 for v in nums):
-        raise ValueError("times must not be negative")
-    den = lcm(*(v.denominator for v in nums))
-    g = 0
-    for v in nums:
-        g = gcd(g, int(v * den))
-    return Fraction(g, den) / refine
-
-
-@dataclass(frozen=True, slots=True)
-class Node:
-    """One node of the negation normal form. Interval endpoints in ticks; ``hi is None`` means unbounded."""
-
-    kind: int
-    text: str
-    atom: str = ""
-    children: tuple[int, ...] = ()
-    lo: int = 0
-    hi: int | None = None
-    lo_closed: bool = True
-    hi_closed: bool = False
-
-    def inside(self, age: int) -> bool:
-        if age < self.lo or (age == self.lo and not self.lo_closed):
-            return False
-        return self.hi is None or age < self.hi or (age == self.hi and self.hi_closed)
-
-    def before(self, age: int) -> bool:
-        return age < self.lo or (age == self.lo and not self.lo_closed)
-
-    def reached(self, age: int) -> bool:
-        """At or past the lower end: the copy is 'inside its window' for subsumption and acceptance."""
-        return not self.before(age)
-
-    def future(self, age: int) -> bool:
-        """Whether a later position (at least one tick later) can have an age inside the interval."""
-        if self.hi is None:
-            return True
-        nxt = age + 1
-        return nxt < self.hi or (nxt == self.hi and self.hi_closed)
-
-    @property
-    def cap(self) -> int:
-        """Ages at or above the cap behave alike."""
-        return (self.lo if self.hi is None else self.hi) + 1
+_TRUE: Dnf = ((),)  # one disjunct with no pending obligation
+_FALSE: Dnf = ()  # no disjunct
 
 
 class TimedAutomaton:
@@ -221,49 +178,60 @@ class TimedAutomaton:
 
     def _expand_uncached(self, node_id: int, age: int, cls: int) -> Dnf:
         n = self.nodes[node_id]
+        if n.kind not in _TEMPORAL:  # true, false, an atom or its negation, and, or: decided at this position
+            return self._expand_propositional(n, cls)
+        pending: Dnf = (((node_id, age),),)  # the obligation stays, one tick older at the next position
+        if n.kind in (NXT, WNXT):
+            return self._expand_next(n, age, cls, pending)
+        return self._expand_temporal(n, age, cls, pending)
+
+    def _expand_propositional(self, n: Node, cls: int) -> Dnf:
+        """A boolean node at a position of label class ``cls``: true ``((),)``, false ``()`` or its children's."""
         k = n.kind
-        true: Dnf = ((),)
-        false: Dnf = ()
-        pending: Dnf = (((node_id, age),),)
         if k == TRUE:
-            return true
+            return _TRUE
         if k == FALSE:
-            return false
+            return _FALSE
         if k == ATOM:
-            return true if n.atom in self.label_classes[cls] else false
+            return _TRUE if n.atom in self.label_classes[cls] else _FALSE
         if k == NATOM:
-            return false if n.atom in self.label_classes[cls] else true
+            return _FALSE if n.atom in self.label_classes[cls] else _TRUE
         if k == AND:
-            acc = true
+            acc = _TRUE
             for c in n.children:
                 acc = self._and(acc, self._expand(c, 0, cls))
             return acc
-        if k == OR:
-            return self._or(*(self._expand(c, 0, cls) for c in n.children))
-        if k in (NXT, WNXT):
-            if age == 0:
-                return pending
-            if n.inside(age):
-                return self._expand(n.children[0], 0, cls)
-            return false if k == NXT else true
+        return self._or(*(self._expand(c, 0, cls) for c in n.children))  # OR
+
+    def _expand_next(self, n: Node, age: int, cls: int, pending: Dnf) -> Dnf:
+        """Strong ``X_I`` / weak ``Xw_I``: pending where anchored, decided at the next position by its age."""
+        if age == 0:
+            return pending
+        if n.inside(age):
+            return self._expand(n.children[0], 0, cls)
+        return _FALSE if n.kind == NXT else _TRUE
+
+    def _expand_temporal(self, n: Node, age: int, cls: int, pending: Dnf) -> Dnf:
+        """``F_I``, ``G_I``, ``U_I``, ``R_I`` at ``age``: met, still pending (``later``) or failed, by the window."""
+        k = n.kind
         later = pending if n.future(age) else None
         if k == EV:
-            a = self._expand(n.children[0], 0, cls) if n.inside(age) else false
-            return self._or(a, later or false)
+            a = self._expand(n.children[0], 0, cls) if n.inside(age) else _FALSE
+            return self._or(a, later or _FALSE)
         if k == ALW:
             if n.inside(age):
-                return self._and(self._expand(n.children[0], 0, cls), later or true)
-            return pending if n.before(age) else true
+                return self._and(self._expand(n.children[0], 0, cls), later or _TRUE)
+            return pending if n.before(age) else _TRUE
         left = self._expand(n.children[0], 0, cls)
         right = self._expand(n.children[1], 0, cls)
         if k == UNT:
             if n.inside(age):
-                return self._or(right, self._and(left, later or false))
-            return self._and(left, pending) if n.before(age) else false
+                return self._or(right, self._and(left, later or _FALSE))
+            return self._and(left, pending) if n.before(age) else _FALSE
         # REL: for all j with age in I: right(j) or left(k) for some k in [anchor, j)
         if n.inside(age):
-            return self._and(right, self._or(left, later or true))
-        return self._or(left, pending) if n.before(age) else true
+            return self._and(right, self._or(left, later or _TRUE))
+        return self._or(left, pending) if n.before(age) else _TRUE
 
     # ---- boolean algebra on DNFs --------------------------------------------------------------------------
     @staticmethod
@@ -473,95 +441,9 @@ class TimedAutomaton:
         return "{" + ", ".join(parts) + "}"
 
 
-class _Compiler:
-    def __init__(self, tick: Fraction) -> None:
-        self.tick = tick
-        self.nodes: list[Node] = []
-        self.index: dict[Node, int] = {}
-        self.sources: dict[int, Formula] = {}
-
-    def add(self, node: Node, source: Formula) -> int:
-        nid = self.index.get(node)
-        if nid is None:
-            nid = len(self.nodes)
-            self.nodes.append(node)
-            self.index[node] = nid
-            self.sources[nid] = source
-        return nid
-
-    def ticks(self, value: Fraction, what: Interval) -> int:
-        q = value / self.tick
-        if q.denominator != 1:
-            raise ValueError(f"interval {what}: endpoint {value} is not a multiple of the tick {self.tick} s")
-        return int(q)
-
-    def _temporal(self, kind: int, text: str, kids: tuple[int, ...], f: Next | Eventually | Always | Until) -> int:
-        iv = f.interval
-        hi = None if iv.hi is None else self.ticks(iv.hi, iv)
-        node = Node(kind, text, children=kids, lo=self.ticks(iv.lo, iv), hi=hi, lo_closed=iv.lo_closed,
-                    hi_closed=iv.hi_closed)
-        return self.add(node, f)
-
-    def nnf(self, f: Formula, positive: bool) -> int:
-        if isinstance(f, Const):
-            val = f.value == positive
-            return self.add(Node(TRUE if val else FALSE, "true" if val else "false"), f)
-        if isinstance(f, Atom):
-            if positive:
-                return self.add(Node(ATOM, f.name, atom=f.name), f)
-            return self.add(Node(NATOM, "!" + f.name, atom=f.name), f)
-        if isinstance(f, Not):
-            return self.nnf(f.arg, not positive)
-        if isinstance(f, Implies):
-            return self._junction(OR if positive else AND, (self.nnf(f.left, not positive),
-                                                           self.nnf(f.right, positive)), f)
-        if isinstance(f, And | Or):
-            kind = (AND if isinstance(f, And) else OR) if positive else (OR if isinstance(f, And) else AND)
-            return self._junction(kind, tuple(self.nnf(a, positive) for a in f.args), f)
-        text = str(f) if positive else "!" + _paren(str(f))
-        if isinstance(f, Next):
-            return self._temporal(NXT if positive else WNXT, text, (self.nnf(f.arg, positive),), f)
-        if isinstance(f, Eventually):
-            return self._temporal(EV if positive else ALW, text, (self.nnf(f.arg, positive),), f)
-        if isinstance(f, Always):
-            return self._temporal(ALW if positive else EV, text, (self.nnf(f.arg, positive),), f)
-        if isinstance(f, Until):
-            # !(a U_I b) = (!a) R_I (!b)
-            kids = (self.nnf(f.left, positive), self.nnf(f.right, positive))
-            return self._temporal(UNT if positive else REL, text, kids, f)
-        raise TypeError(f"formula={f!r} is not an MITL formula")
-
-    def _junction(self, kind: int, kids: tuple[int, ...], source: Formula) -> int:
-        neutral, absorbing = (TRUE, FALSE) if kind == AND else (FALSE, TRUE)
-        flat: list[int] = []
-        for k in kids:
-            node = self.nodes[k]
-            if node.kind == absorbing:
-                return k
-            if node.kind == neutral:
-                continue
-            if node.kind == kind:
-                flat.extend(c for c in node.children if c not in flat)
-            elif k not in flat:
-                flat.append(k)
-        if not flat:
-            return self.add(Node(neutral, "true" if neutral == TRUE else "false"), source)
-        if len(flat) == 1:
-            return flat[0]
-        flat.sort()
-        sep = " & " if kind == AND else " | "
-        text = sep.join(_paren(self.nodes[c].text) for c in flat)
-        return self.add(Node(kind, text, children=tuple(flat)), source)
-
-
-def _paren(text: str) -> str:
-    return text if text.replace("_", "").isalnum() else f"({text})"
-
-
 def compile_formula(formula: Formula, tick: Fraction) -> TimedAutomaton:
     """Negation normal form of ``formula`` with every interval endpoint in ticks (they must be exact multiples)."""
     if tick <= 0:
         raise ValueError(f"tick={tick} must be positive")
-    comp = _Compiler(tick)
-    root = comp.nnf(formula, True)
-    return TimedAutomaton(comp.nodes, root, tick, formula, comp.sources)
+    nodes, root, sources = negation_normal_form(formula, tick)
+    return TimedAutomaton(nodes, root, tick, formula, sources)

@@ -21,7 +21,7 @@ stays at or before the search's, so the re-timing never gives up time-optimality
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -105,39 +105,47 @@ def _keeps(formula: Formula, run: LassoRun, labels: Mapping[str, Sequence[str]],
                 if val(f.arg, j):
                     keeps.append(_Keep(i, j, f.interval, f.interval.contains(run.time(j) - run.time(i))))
         elif isinstance(f, Eventually | Always | Until):
-            if isinstance(f, Until):
-                left: Formula | None = f.left
-                right, want = f.right, True
-            else:
-                left, right, want = None, f.arg, isinstance(f, Eventually)
-            iv = f.interval
-            t0 = run.time(i)
-            holds_now = val(f, i) if isinstance(f, Eventually | Until) else not val(f, i)
-            cands: list[int] = []
-            for k in range(i, horizon):
-                if val(right, k) == want:
-                    cands.append(k)
-                if left is not None and not val(left, k):
-                    break
-            if holds_now:
-                inside = [k for k in cands if iv.contains(run.time(k) - t0)]
-                if not inside:
-                    continue  # the witness lies beyond the horizon: differences there are fixed
-                # prefer a witness before the repeating part: its time is the plan's, not a far copy's
-                pool = [k for k in inside if k <= loop] or inside
-                best = max(pool, key=lambda k: _slack(run.time(k) - t0, _Keep(i, k, iv, True), run.time(k) - t0))
-                keeps.append(_Keep(i, best, iv, True))
-                todo.append((right, best))
-                if left is not None:
-                    todo.extend((left, k) for k in range(i, best))
-            else:
-                for k in range(i, horizon):
-                    todo.append((right, k))
-                    if left is not None:
-                        todo.append((left, k))
-                for k in cands:
-                    keeps.append(_Keep(i, k, iv, False))
+            found, used = _window_keeps(f, i, run, val, horizon=horizon, loop=loop)
+            keeps.extend(found)
+            todo.extend(used)
     return keeps
+
+
+def _window_keeps(f: Eventually | Always | Until, i: int, run: LassoRun, val: Callable[[Formula, int], bool], *,
+                  horizon: int, loop: int) -> tuple[list[_Keep], list[tuple[Formula, int]]]:
+    """A window operator anchored at ``i``: the memberships its truth depends on (one witness inside when it holds,
+    every candidate outside when it does not) and the (sub-formula, position) pairs whose truth those choices use."""
+    if isinstance(f, Until):
+        left: Formula | None = f.left
+        right, want = f.right, True
+    else:
+        left, right, want = None, f.arg, isinstance(f, Eventually)
+    iv = f.interval
+    t0 = run.time(i)
+    holds_now = val(f, i) if isinstance(f, Eventually | Until) else not val(f, i)
+    cands: list[int] = []
+    for k in range(i, horizon):
+        if val(right, k) == want:
+            cands.append(k)
+        if left is not None and not val(left, k):
+            break
+    used: list[tuple[Formula, int]] = []
+    if not holds_now:
+        for k in range(i, horizon):
+            used.append((right, k))
+            if left is not None:
+                used.append((left, k))
+        return [_Keep(i, k, iv, False) for k in cands], used
+    inside = [k for k in cands if iv.contains(run.time(k) - t0)]
+    if not inside:
+        return [], []  # the witness lies beyond the horizon: differences there are fixed
+    # prefer a witness before the repeating part: its time is the plan's, not a far copy's
+    pool = [k for k in inside if k <= loop] or inside
+    best = max(pool, key=lambda k: _slack(run.time(k) - t0, _Keep(i, k, iv, True), run.time(k) - t0))
+    used.append((right, best))
+    if left is not None:
+        used.extend((left, k) for k in range(i, best))
+    return [_Keep(i, best, iv, True)], used
 
 
 def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mapping[str, Sequence[str]], *,
@@ -162,26 +170,13 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
         return Retimed(run, math.inf, False)
     originals = [run.time(k.j) - run.time(k.i) for k in keeps]
     margin0 = min(_slack(d, k, d) for d, k in zip(originals, keeps, strict=True))
-    free: dict[int, Fraction] = {}  # position -> minimum duration of the step into it
-    for p in range(1, loop + 1):
-        if kinds[p] == "dwell":
-            free[p] = min_dwell_s
-        elif waits_s is not None and kinds[p] == "move":
-            free[p] = run.times[p] - run.times[p - 1] - waits_s[p]
+    free = _free_steps(run, kinds, loop=loop, min_dwell_s=min_dwell_s, waits_s=waits_s)
     if not free:
         return Retimed(run, margin0, False)
     new = _solve(run, keeps, originals, free, loop=loop, keep_cost=objective == "time")
     if new is None:
         return Retimed(run, margin0, False)
-    durations = {p: max(lo, round(Fraction(x) / _ROUND) * _ROUND) for (p, lo), x in zip(free.items(), new,
-                                                                                          strict=True)}
-    if objective == "time":
-        # millisecond rounding may push the cost a little past the optimum: take the excess off a free step
-        excess = sum(durations.values()) - sum(run.times[p] - run.times[p - 1] for p in free)
-        if excess > 0:
-            slackest = max(free, key=lambda p: durations[p] - free[p])
-            if durations[slackest] - free[slackest] >= excess:
-                durations[slackest] -= excess
+    durations = _rounded(run, free, new, keep_cost=objective == "time")
     times = [Fraction(0)]
     for p in range(1, run.size):
         step = durations.get(p, run.times[p] - run.times[p - 1])
@@ -197,18 +192,52 @@ def retime(run: LassoRun, kinds: Sequence[str], formula: Formula, labels: Mappin
     return Retimed(candidate, margin, True)
 
 
-def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: Mapping[int, Fraction], *,
-           loop: int, keep_cost: bool) -> list[float] | None:
-    import cvxpy as cp
+def _free_steps(run: LassoRun, kinds: Sequence[str], *, loop: int, min_dwell_s: Fraction,
+                waits_s: Sequence[Fraction] | None) -> dict[int, Fraction]:
+    """Position -> minimum duration of the step into it, for the steps of the prefix the re-timing may change: an
+    observed dwell (at least ``min_dwell_s``) and, in silent mode, a move (at least its WTS weight)."""
+    free: dict[int, Fraction] = {}
+    for p in range(1, loop + 1):
+        if kinds[p] == "dwell":
+            free[p] = min_dwell_s
+        elif waits_s is not None and kinds[p] == "move":
+            free[p] = run.times[p] - run.times[p - 1] - waits_s[p]
+    return free
 
-    positions = list(free)
+
+def _rounded(run: LassoRun, free: Mapping[int, Fraction], new: Sequence[float], *,
+             keep_cost: bool) -> dict[int, Fraction]:
+    """The solver's durations rounded to the millisecond (never below their minimum); with ``keep_cost`` the excess
+    rounding adds to the cost is taken off the free step with the most room, when one has enough."""
+    durations = {p: max(lo, round(Fraction(x) / _ROUND) * _ROUND) for (p, lo), x in zip(free.items(), new,
+                                                                                          strict=True)}
+    if keep_cost:
+        excess = sum(durations.values()) - sum(run.times[p] - run.times[p - 1] for p in free)
+        if excess > 0:
+            slackest = max(free, key=lambda p: durations[p] - free[p])
+            if durations[slackest] - free[slackest] >= excess:
+                durations[slackest] -= excess
+    return durations
+
+
+@dataclass(frozen=True, slots=True)
+class _Rows:
+    """The keeps as linear slacks of the free durations ``x``: ``a @ x + b`` (one row per side of a window),
+    ``owner[r]`` the keep of row ``r``, ``half[k]`` the half width of keep ``k``'s two-sided window (0: one-sided)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    owner: list[int]
+    half: list[float]
+
+
+def _rows(keeps: list[_Keep], originals: list[Fraction], positions: list[int], x0: np.ndarray, *,
+          loop: int) -> _Rows:
     col = {p: c for c, p in enumerate(positions)}
-    x0 = np.array([float(run.times[p] - run.times[p - 1]) for p in positions])
-    lower = np.array([float(free[p]) for p in positions])
     rows: list[np.ndarray] = []
     consts: list[float] = []
-    owner: list[int] = []  # keep index of each row
-    half: list[float] = []  # per keep: half width of a two-sided window (0: one-sided)
+    owner: list[int] = []
+    half: list[float] = []
     for idx, (keep, d0) in enumerate(zip(keeps, originals, strict=True)):
         # d = d0 + sum over free steps between i (exclusive) and j (inclusive, capped at the loop start) of (x - x0)
         coeff = np.zeros(len(positions))
@@ -233,8 +262,18 @@ def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: M
             rows.append(sign * coeff)
             consts.append(sign * base + offset)
             owner.append(idx)
-    a = np.array(rows)
-    b = np.array(consts)
+    return _Rows(np.array(rows), np.array(consts), owner, half)
+
+
+def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: Mapping[int, Fraction], *,
+           loop: int, keep_cost: bool) -> list[float] | None:
+    import cvxpy as cp
+
+    positions = list(free)
+    x0 = np.array([float(run.times[p] - run.times[p - 1]) for p in positions])
+    lower = np.array([float(free[p]) for p in positions])
+    lin = _rows(keeps, originals, positions, x0, loop=loop)
+    a, b, owner, half = lin.a, lin.b, lin.owner, lin.half
     x = cp.Variable(len(positions))
     m = cp.Variable()
     base_cons = [x >= lower, m <= _MARGIN_CAP_S]
@@ -259,7 +298,7 @@ def _solve(run: LassoRun, keeps: list[_Keep], originals: list[Fraction], free: M
             # each two-sided window's own slack s_k (<= both sides, <= half width), summed: witnesses move to centres
             s = cp.Variable(len(centred))
             pick = {k: n for n, k in enumerate(centred)}
-            sel = np.zeros((len(rows), len(centred)))
+            sel = np.zeros((len(owner), len(centred)))
             for r, k in enumerate(owner):
                 if k in pick:
                     sel[r, pick[k]] = 1.0

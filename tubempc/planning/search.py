@@ -265,18 +265,7 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
             succs.extend(dwells)
             if settles and stop_at is None:
                 stop_at = t
-        for j, o2, d, moved, kind, waited in succs:
-            v, _ = prod.get(j, o2)
-            prod.edges[sid].append((v, d, kind, waited))
-            if kind == DWELL and d in targeted:
-                aimed.add(v)
-            if kind == STAY:
-                continue
-            cand = (t + d, travel + moved)
-            if cand < prod.best[v] and not prod.settled[v]:
-                prod.best[v] = cand
-                prod.parent[v] = (sid, d, kind, waited)
-                heapq.heappush(heap, (cand[0], cand[1], v))
+        _relax(prod, heap, sid, (t, travel), succs, targeted=targeted, aimed=aimed)
         if len(prod.region) > max_states:
             raise SearchLimitError(f"the search reached its limit of {max_states} product states while searching "
                                    f"for {aut.formula}, before it found a run or proved that none exists; raise the "
@@ -286,6 +275,25 @@ def _search(wts: nx.DiGraph, aut: TimedAutomaton, init: str, *, wait: bool, sile
 
 
 Succ = tuple[int, State, int, int, str, int]  # (region, state, delta, travel, kind, silent wait)
+
+
+def _relax(prod: Product, heap: list[tuple[int, int, int]], sid: int, cost: tuple[int, int], succs: list[Succ], *,
+           targeted: set[int], aimed: set[int]) -> None:
+    """Record the edges from ``sid`` (reached at ``cost`` = (time, travel)) to its successors and push every
+    successor whose (time, travel) improves; a dwell that lasts a targeted duration marks its target ``aimed``."""
+    t, travel = cost
+    for j, o2, d, moved, kind, waited in succs:
+        v, _ = prod.get(j, o2)
+        prod.edges[sid].append((v, d, kind, waited))
+        if kind == DWELL and d in targeted:
+            aimed.add(v)
+        if kind == STAY:
+            continue
+        cand = (t + d, travel + moved)
+        if cand < prod.best[v] and not prod.settled[v]:
+            prod.best[v] = cand
+            prod.parent[v] = (sid, d, kind, waited)
+            heapq.heappush(heap, (cand[0], cand[1], v))
 
 
 def _moves(aut: TimedAutomaton, obl: State, adj: list[list[tuple[int, int]]], r: int, cls: list[int], *,

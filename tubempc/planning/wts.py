@@ -8,7 +8,7 @@ terminal set of ``j`` without violating the tightened constraints. Pairs that fa
 reason (``wts_failed``). The graph's attribute keys are private to this module: everything else reads the graph
 through the typed accessors at its end.
 
-The pairs are evaluated in parallel by ``tubempc.runtime.executor.parallel_map`` (a process pool, or a Dask cluster
+The pairs are evaluated in parallel by ``runkit.executor.parallel_map`` (a process pool, or a Dask cluster
 when a client or address is given; a worker that dies is rerun alone), with a progress bar on a terminal, and the
 result is cached on disk (``$TUBEMPC_CACHE`` or ``~/.cache/tubempc``) under the sha256 of the scenario, the oracle, its
 settings and its code.
@@ -223,7 +223,7 @@ def build_wts(
 
     ``workers``: processes (default: CPU count; 1 evaluates in this process). ``dask``: a
     ``dask.distributed.Client``, a scheduler address or ``"local"``; when given, the pairs run on that cluster
-    instead (``tubempc.runtime.executor.parallel_map``).
+    instead (``runkit.executor.parallel_map``).
     ``cache_path``: a directory (default ``cache_dir()``).
     """
     fn: TransitionOracle = default_oracle() if oracle is None else oracle
@@ -238,14 +238,15 @@ def build_wts(
             return g
     names = [r.name for r in scenario.safe_regions]
     todo = [_Job(fn, scenario, a, b, disturbance, seed) for a in names for b in names if a != b]
-    from tubempc.runtime.executor import parallel_map  # the one executor (processes or Dask) of both packages
+    from runkit.errors import RunkitError
+    from runkit.executor import parallel_map  # the one executor (processes or Dask) of both packages
 
     oracle_module = getattr(fn, "__module__", None)
     preload = ("tubempc.planning.wts", *([oracle_module] if oracle_module and oracle_module != "__main__" else []))
     try:
         results = parallel_map(_evaluate, todo, workers=workers, dask=dask, progress=progress,
                                desc="abstraction (Algorithm 1 per region pair)", unit="pair", preload=preload)
-    except (TubeMPCError, OSError) as err:
+    except (TubeMPCError, RunkitError, OSError) as err:
         raise AbstractionError(f"building the WTS of scenario {scenario.name!r} failed: {err}") from err
     if use_cache:
         with contextlib.suppress(OSError):  # an unwritable cache directory only costs time on the next run

@@ -155,6 +155,7 @@ def falsify_metrics(case: FalsifyCase, out_dir: Path | None, controller: str | N
 
 def run_case(job: RunJob) -> RunOutcome:
     """Execute one case (module level: runs in worker processes and on Dask workers)."""
+    from runkit.errors import RunkitError
     from verify.errors import VerifyError
 
     start = time.perf_counter()
@@ -171,7 +172,7 @@ def run_case(job: RunJob) -> RunOutcome:
                 log_path = None
         else:
             metrics, log_path = _run_in(case, Path(job.out_dir) / case.run_id, job.reports, job.controller)
-    except (TubeMPCError, VerifyError) as err:
+    except (TubeMPCError, RunkitError, VerifyError) as err:
         return RunOutcome(case.run_id, {}, f"{err.__class__.__name__}: {err}", time.perf_counter() - start, None)
     except Exception as err:  # one broken case must not hide the others; the diff reports it
         return RunOutcome(case.run_id, {}, f"internal error: {err.__class__.__name__}: {err}",
@@ -184,7 +185,7 @@ def run_cases(cases: Sequence[RunCase | FalsifyCase], *, out_dir: str | Path | N
               controller: str | None = None) -> list[RunOutcome]:
     """Run every case in parallel (processes by default; ``dask``: ``"local"`` or a scheduler address).
     ``controller``: ``package.module:factory`` runs instead of the tube MPC (``tubempc.control.user``)."""
-    from tubempc.runtime.executor import parallel_map
+    from runkit.executor import parallel_map
 
     jobs = [RunJob(case, None if out_dir is None else str(out_dir), reports, controller) for case in cases]
     preload = ("verify.batch", "verify", "tubempc.regress.runner", "tubempc.control.closed_loop", "tubempc.rosio",

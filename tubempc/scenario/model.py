@@ -1,9 +1,10 @@
-# Over 500 lines: one validated model of the scenario file; field types and their cross-field checks belong together.
 """Scenario model: validated, frozen values for the workspace, regions, robot, limits, controller and spec.
 
 input: a mapping (from YAML) -> output: a ``Scenario`` whose every field has been checked; errors raise
 ``ScenarioError`` naming the source file, the field path (``regions[3].radius``) and what is wrong.
-Geometry helpers here are plain data queries; the certifier keeps its own membership semantics.
+Geometry helpers here are plain data queries; the certifier keeps its own membership semantics. What keeps the
+planner from using a valid scenario, and the geometry the certifier warns about, are judged in
+``tubempc.scenario.review``.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from tubempc.errors import ScenarioError
 from tubempc.mitl import Formula, atoms, parse
-from tubempc.scenario.polygon import disc_within_polygon, polygon_bounds, polygon_problem, polygon_within_polygon
+from tubempc.scenario.polygon import polygon_bounds, polygon_problem
+from tubempc.scenario.review import certification_warnings, planning_problems
 
 __all__ = [
     "CHECK_NAMES",
@@ -633,42 +635,9 @@ class Scenario(_Frozen):
     def planning_problems(self) -> list[tuple[str, str]]:
         """``(field, problem)`` for everything that keeps the planner and controller from using this scenario:
         missing fields, a unicycle input model, polygon shapes, overlapping regions, regions that do not fit inside
-        the workspace or cannot contain the robot. Empty for a scenario the planner can abstract."""
-        out: list[tuple[str, str]] = []
-        if self.robots:
-            out.append(("robots", "the planner and the controller are single-robot: a scenario with robots: is for "
-                                  "certification"))
-        for field, value in (("disturbance", self.disturbance_spec), ("tube", self.tube_spec),
-                             ("mpc", self.mpc_spec), ("initial_region", self.initial_region_name)):
-            if value is None:
-                out.append((field, "required for planning and simulation but missing from the scenario"))
-        if self.inputs.model != "holonomic":
-            out.append(("inputs.model", f"{self.inputs.model}: the paper's tube MPC needs a fully actuated "
-                                        "(holonomic) input model"))
-        used = sorted(atoms(self.formula) & set(self.signals))
-        if used:
-            out.append(("spec", f"signal atom(s) {', '.join(used)} can be certified but not planned for"))
-        if not self.workspace.is_box:
-            out.append(("workspace", "the planner needs a box workspace (x, y), not a polygon"))
-        eta = self.robot.radius
-        discs = [(i, r) for i, r in enumerate(self.regions) if r.disc_center is not None and r.disc_radius is not None]
-        for i, r in enumerate(self.regions):
-            if r.polygon is not None:
-                out.append((f"regions[{i}]", f"{r.name} is a polygon: the planner needs disc regions"))
-        if self.workspace.is_box:
-            for i, r in discs:
-                if not self.workspace.contains_disc(r.center, r.radius):
-                    out.append((f"regions[{i}]", f"{r.name} does not fit inside the workspace"))
-        for i, r in discs:
-            if not r.unsafe and r.radius <= eta:
-                out.append((f"regions[{i}]", f"{r.name}: radius {r.radius} m cannot contain the robot disc of "
-                                             f"radius {eta} m"))
-        for k, (_, a) in enumerate(discs):
-            for _, b in discs[k + 1 :]:
-                d = math.dist(a.center, b.center)
-                if d < a.radius + b.radius:
-                    out.append(("regions", f"{a.name} and {b.name} overlap (centres {d:.3f} m apart)"))
-        return out
+        the workspace or cannot contain the robot. Empty for a scenario the planner can abstract
+        (``tubempc.scenario.review``)."""
+        return planning_problems(self)
 
     def require_planning(self) -> None:
         """Raise ``ScenarioError`` naming the first field that keeps the planner from using this scenario."""
@@ -682,35 +651,9 @@ class Scenario(_Frozen):
 
     def certification_warnings(self) -> list[str]:
         """Geometry the certifier accepts but a user may not mean, one line each naming the field: regions that
-        reach outside the workspace, overlap or nest, or cannot contain the robot disc."""
-        out: list[str] = []
-        ws = self.workspace
-        wx0, wy0, wx1, wy1 = ws.bounds
-        eta = self.robot.radius
-        for i, r in enumerate(self.regions):
-            x0, y0, x1, y1 = r.bounds
-            if ws.polygon is None:
-                if x0 < wx0 or y0 < wy0 or x1 > wx1 or y1 > wy1:
-                    out.append(f"regions[{i}] ({r.name}): reaches outside the workspace box")
-            elif not (polygon_within_polygon(r.polygon, ws.polygon) if r.polygon is not None
-                      else disc_within_polygon(r.center, r.radius, ws.polygon)):
-                out.append(f"regions[{i}] ({r.name}): reaches outside the workspace polygon")
-            if not r.unsafe:
-                w, h = x1 - x0, y1 - y0
-                if min(w, h) <= 2 * eta:
-                    out.append(f"regions[{i}] ({r.name}): too small to contain the robot disc of radius {eta} m "
-                               "(its labels can never hold under Definition 3)")
-        for i, a in enumerate(self.regions):
-            for j in range(i + 1, len(self.regions)):
-                b = self.regions[j]
-                ax0, ay0, ax1, ay1 = a.bounds
-                bx0, by0, bx1, by1 = b.bounds
-                if ax0 < bx1 and bx0 < ax1 and ay0 < by1 and by0 < ay1:
-                    if a.is_disc and b.is_disc and math.dist(a.center, b.center) >= a.radius + b.radius:
-                        continue
-                    out.append(f"regions[{i}] ({a.name}) and regions[{j}] ({b.name}) may overlap: where both "
-                               "contain the robot, both sets of labels hold")
-        return out
+        reach outside the workspace, overlap or nest, or cannot contain the robot disc
+        (``tubempc.scenario.review``)."""
+        return certification_warnings(self)
 
     # ---- derived, read-only views -------------------------------------------------------------------------
     @property
@@ -776,15 +719,7 @@ class Scenario(_Frozen):
             for key in ("robot", "inputs", "topics"):
                 data.pop(key, None)
             for robot in data["robots"]:
-                for key in ("nominal", "cmd_vel"):
-                    if robot["topics"].get(key) is None:
-                        robot["topics"].pop(key, None)
-                if robot.get("max_speed") is None:
-                    robot.pop("max_speed", None)
-                if not robot.get("signals"):
-                    robot.pop("signals", None)
-                if robot.get("rate_hz") is None:
-                    robot.pop("rate_hz", None)
+                _drop_unset_robot_fields(robot)
         for key in ("nominal", "cmd_vel"):
             if "topics" in data and data["topics"].get(key) is None:
                 data["topics"].pop(key, None)
@@ -803,3 +738,15 @@ class Scenario(_Frozen):
         """Hash of the canonical JSON form (key order and YAML formatting do not matter)."""
         blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()
+
+
+def _drop_unset_robot_fields(robot: dict[str, Any]) -> None:
+    """One fleet robot of ``Scenario.to_dict``: its optional fields at their defaults left out."""
+    for key in ("nominal", "cmd_vel"):
+        if robot["topics"].get(key) is None:
+            robot["topics"].pop(key, None)
+    for key in ("max_speed", "rate_hz"):
+        if robot.get(key) is None:
+            robot.pop(key, None)
+    if not robot.get("signals"):
+        robot.pop("signals", None)

@@ -10,8 +10,8 @@ import numpy.typing as npt
 try:
     from hypothesis import strategies as st
 except ImportError:  # hypothesis comes with the 'testing' extra: one error naming it (exit 4)
-    from tubempc.runtime.errors import MissingExtraError
-    from tubempc.runtime.extras import require
+    from runkit.errors import MissingExtraError
+    from runkit.extras import require
 
     try:
         require("testing", feature="tubempc.strategies")

@@ -9,12 +9,12 @@ An unusable log (unreadable, truncated, missing topic) becomes a row with exit c
 "Worst" orders the codes by severity, not by value: 0 pass < 2 inconclusive < 1 violation < 3 unusable < 70
 internal error (an inconclusive log must not hide a violation in another one).
 
-The logs run through ``tubempc.runtime.executor.parallel_map``, the one executor of both packages (the abstraction,
+The logs run through ``runkit.executor.parallel_map``, the one executor of both packages (the abstraction,
 batch certification, regress and the falsifier): inline for one job or ``workers=1``, a process pool by default, or Dask
 distributed with ``dask="local"`` or ``dask="tcp://host:port"``.
 """
 
-from tubempc.runtime.executor import parallel_map  # re-exported: the batch's executor
+from runkit.executor import parallel_map  # re-exported: the batch's executor
 from verify.batch.output import write_batch
 from verify.batch.run import (
     EXIT_INTERNAL,

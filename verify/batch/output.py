@@ -10,8 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tubempc.runtime.executor import parallel_map
-from tubempc.runtime.outputs import output_subdir, write_output_file
+from runkit.executor import parallel_map
+from runkit.outputs import output_subdir, write_output_file
 from tubempc.scenario import Scenario
 from verify.batch.run import _PRELOAD, BatchItem, BatchResult
 from verify.certificate import Certificate
@@ -107,8 +107,8 @@ def write_batch(batch: BatchResult, out_dir: str | Path, *, reports: bool = True
     Returns the top-level files: ``summary.md``, ``summary.html`` (links to each ``report.html``),
     ``summary.csv``, ``junit.xml`` (one suite per log; an unusable log is a suite with one errored test case).
     """
-    from tubempc.runtime.extras import require
-    from tubempc.runtime.outputs import prepare_output_dir
+    from runkit.extras import require
+    from runkit.outputs import prepare_output_dir
 
     if reports:
         require("report", feature="report.html", alternative="write certificates only (reports=False, --no-report)")

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from runkit.executor import parallel_map
 from tubempc.mitl import parse
-from tubempc.runtime.executor import parallel_map
 from tubempc.scenario import Scenario
 from verify.certificate import Certificate, Verdict
 from verify.errors import VerifyError

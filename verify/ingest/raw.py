@@ -42,7 +42,7 @@ from rosbags.rosbag1 import Reader as Reader1
 from rosbags.rosbag1 import ReaderError as ReaderError1
 from rosbags.serde import SerdeError
 
-from tubempc.runtime.gcpause import gc_paused
+from runkit.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic, rosbag2_errors
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast

@@ -69,15 +69,7 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
             else:
                 kids = [(values[g], rec(g), False) for g in f.args]
             settle_true = isinstance(f, Or | Implies)  # or: one true argument settles it; and: one false one
-            settle = np.full(pos.size, INF)
-            last = np.full(pos.size, -INF)
-            with np.errstate(invalid="ignore"):
-                for kv, kd, negated in kids:
-                    k_true, k_false = (kv.hi < 0, kv.lo > 0) if negated else (kv.lo > 0, kv.hi < 0)
-                    decisive = k_true if settle_true else k_false
-                    settle = np.minimum(settle, np.where(decisive, kd, INF))
-                    last = np.maximum(last, np.where(k_true | k_false, kd, INF))
-            d = np.where((true if settle_true else false), settle, last)
+            d = _junction_times(kids, settle_true=settle_true, settled=true if settle_true else false)
         elif isinstance(f, Eventually | Always):
             w = _windows(pos, f.interval)
             a, ad = values[f.arg], rec(f.arg)
@@ -88,16 +80,7 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
             settled_early = true if isinstance(f, Eventually) else false
             d = np.where(settled_early, first, closed)
         elif isinstance(f, Next):
-            a, ad = values[f.arg], rec(f.arg)
-            point_idx = np.flatnonzero(pos.is_point)
-            nxt = np.searchsorted(point_idx, np.arange(pos.size), side="right")
-            has = nxt < point_idx.size
-            j = point_idx[np.minimum(nxt, max(point_idx.size - 1, 0))] if point_idx.size else np.zeros(pos.size,
-                                                                                                      np.int64)
-            lo_ns, hi_ns = bounds_ns(f.interval)
-            dt = pos.start_ns[j] - pos.start_ns
-            inside = (dt >= lo_ns) & (True if hi_ns is None else dt <= hi_ns)
-            d = np.where(has, np.where(inside, np.maximum(start[j], ad[j]), start[j]), float(pos.end_ns))
+            d = _next_times(f, pos, ad=rec(f.arg))
         elif isinstance(f, Until):
             d = _until_times(f, pos, values, da=rec(f.left), db=rec(f.right), window_end=window_end)
         else:
@@ -108,6 +91,39 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
 
     rec(formula)
     return memo
+
+
+def _junction_times(kids: list[tuple[Truth, FloatArray, bool]], *, settle_true: bool,
+                    settled: npt.NDArray[np.bool_]) -> FloatArray:
+    """``and`` / ``or`` (``settle_true``) / ``->`` over ``(values, decided times, negated)`` per argument: where the
+    verdict is ``settled`` (false for ``and``, true for ``or``), the first argument that decides it; elsewhere when
+    the last argument is decided."""
+    n = settled.shape[0]
+    settle = np.full(n, INF)
+    last = np.full(n, -INF)
+    with np.errstate(invalid="ignore"):
+        for kv, kd, negated in kids:
+            k_true, k_false = (kv.hi < 0, kv.lo > 0) if negated else (kv.lo > 0, kv.hi < 0)
+            decisive = k_true if settle_true else k_false
+            settle = np.minimum(settle, np.where(decisive, kd, INF))
+            last = np.maximum(last, np.where(k_true | k_false, kd, INF))
+    result: FloatArray = np.where(settled, settle, last)
+    return result
+
+
+def _next_times(f: Next, pos: Positions, *, ad: FloatArray) -> FloatArray:
+    """``X_I a``: settled when the next sample is seen (and ``a`` is decided there, when the sample is inside the
+    window); the end of the log where there is no next sample."""
+    start = pos.start_ns.astype(np.float64)
+    point_idx = np.flatnonzero(pos.is_point)
+    nxt = np.searchsorted(point_idx, np.arange(pos.size), side="right")
+    has = nxt < point_idx.size
+    j = point_idx[np.minimum(nxt, max(point_idx.size - 1, 0))] if point_idx.size else np.zeros(pos.size, np.int64)
+    lo_ns, hi_ns = bounds_ns(f.interval)
+    dt = pos.start_ns[j] - pos.start_ns
+    inside = (dt >= lo_ns) & (True if hi_ns is None else dt <= hi_ns)
+    result: FloatArray = np.where(has, np.where(inside, np.maximum(start[j], ad[j]), start[j]), float(pos.end_ns))
+    return result
 
 
 def _until_times(f: Until, pos: Positions, values: Mapping[Formula, Truth], *, da: FloatArray, db: FloatArray,

@@ -1,5 +1,9 @@
 """Synthetic inputs for tests and benchmarks: a straight-line transition oracle and random workspaces.
 
+A test fixture, not part of the installed package: tests import it as ``tests.planning.synthetic`` (the repository
+root is on ``sys.path``: ``pythonpath`` in ``pyproject.toml``), and so do the abstraction's worker processes, which
+load the oracle's module by that name (``build_wts`` preloads ``straight_line_oracle.__module__``).
+
 input: a ``Scenario`` (and a ``numpy.random.Generator`` for random workspaces) -> output: ``SyntheticTransition``
 values (time = straight-line length / speed, rounded up to the MPC step h; failing when the segment passes a
 third region) and random ``Scenario`` values. Never used by the CLI: the real WTS comes from Algorithm 1.

@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 from tqdm import tqdm
 
-from tubempc.runtime.errors import OutputError
+from runkit.errors import OutputError
 
 __all__ = ["parallel_map"]
 
@@ -180,7 +180,7 @@ def _local_cluster(dist: Any, workers: int | None, preload: Sequence[str]) -> An
 
 def _dask_map(fn: Callable[[T], R], items: Sequence[T], *, workers: int | None, dask: Any, bar: Any,
               preload: Sequence[str] = ()) -> list[R]:
-    from tubempc.runtime.extras import require
+    from runkit.extras import require
 
     require("dask", feature="--dask")
     # distributed is only partly typed; treat it as untyped at this one boundary

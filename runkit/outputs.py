@@ -29,7 +29,7 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
-from tubempc.runtime.errors import OutputError
+from runkit.errors import OutputError
 
 __all__ = ["LOG_SUFFIXES", "output_subdir", "prepare_output_dir", "prepare_output_log", "replace_output_log",
            "write_output_file"]

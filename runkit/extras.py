@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib.util
 import sys
 
-from tubempc.runtime.errors import MissingExtraError
+from runkit.errors import MissingExtraError
 
 __all__ = ["EXTRAS", "missing_modules", "require"]
 
