@@ -5,8 +5,10 @@ argument; a false conjunction its earliest false conjunct (not an undecided one)
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tubempc.mitl import parse
+from verify.monitor import engine
 from verify.monitor.engine import Positions, Truth, evaluate_at_points, explain
 
 S = 1_000_000_000
@@ -83,3 +85,25 @@ def test_until_is_not_false_when_its_left_side_is_only_undecided_and_the_window_
         v = _until_at_0(_truth([1.0, -1.0, 1.0, 1.0], [1.0, hi, 1.0, 1.0]), _truth([-1.0] * 4, [-1.0] * 4),
                         "p U[0,10] q")
         assert v.hi[0] >= 0, (hi, v.hi[0])
+
+
+def test_until_is_not_false_when_a_witness_is_only_undecided() -> None:
+    for hi in (0.0, 0.5):  # p true throughout; q false except at 1 s, where its upper bound is hi (undecided)
+        v = _until_at_0(TRUE4, _truth([-1.0] * 4, [-1.0, hi, -1.0, -1.0]))
+        assert v.lo[0] < 0 <= v.hi[0], (hi, v.lo[0], v.hi[0])
+
+
+def test_until_counts_an_undecided_witness_at_the_position_where_its_left_side_first_fails() -> None:
+    # p false at 1 s (it blocks every later witness); q undecided exactly there: p U q is undecided, not false
+    v = _until_at_0(_truth([1.0, -1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0]), _truth([-1.0] * 4, [-1.0, 0.5, -1.0, -1.0]))
+    assert v.lo[0] < 0 <= v.hi[0], (v.lo[0], v.hi[0])
+
+
+def test_until_robustness_is_computed_up_to_the_limit_inclusive(monkeypatch: pytest.MonkeyPatch) -> None:
+    p, q = TRUE4, _truth([-1.0, -1.0, 0.5, -1.0], [-1.0, -1.0, 0.5, -1.0])
+    monkeypatch.setattr(engine, "UNTIL_ROBUSTNESS_LIMIT", 4)  # exactly the number of positions
+    v = _until_at_0(p, q)
+    assert (v.lo[0], v.hi[0]) == (0.5, 0.5)
+    monkeypatch.setattr(engine, "UNTIL_ROBUSTNESS_LIMIT", 3)  # above it only the verdict: +-inf
+    v = _until_at_0(p, q)
+    assert (v.lo[0], v.hi[0]) == (np.inf, np.inf)
