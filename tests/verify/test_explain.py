@@ -90,7 +90,7 @@ def test_until_is_not_false_when_its_left_side_is_only_undecided_and_the_window_
 def test_until_is_not_false_when_a_witness_is_only_undecided() -> None:
     for hi in (0.0, 0.5):  # p true throughout; q false except at 1 s, where its upper bound is hi (undecided)
         v = _until_at_0(TRUE4, _truth([-1.0] * 4, [-1.0, hi, -1.0, -1.0]))
-        assert v.lo[0] < 0 <= v.hi[0], (hi, v.lo[0], v.hi[0])
+        assert (v.lo[0], v.hi[0]) == (-1.0, hi)
 
 
 def test_until_counts_an_undecided_witness_at_the_position_where_its_left_side_first_fails() -> None:
@@ -107,3 +107,15 @@ def test_until_robustness_is_computed_up_to_the_limit_inclusive(monkeypatch: pyt
     monkeypatch.setattr(engine, "UNTIL_ROBUSTNESS_LIMIT", 3)  # above it only the verdict: +-inf
     v = _until_at_0(p, q)
     assert (v.lo[0], v.hi[0]) == (np.inf, np.inf)
+    v = _until_at_0(p, _truth([-1.0] * 4, [-1.0] * 4))  # false
+    assert (v.lo[0], v.hi[0]) == (-np.inf, -np.inf)
+    v = _until_at_0(p, _truth([-1.0] * 4, [-1.0, 0.5, -1.0, -1.0]))  # undecided
+    assert (v.lo[0], v.hi[0]) == (-np.inf, np.inf)
+
+
+def test_until_states_the_loops_robustness_when_true_or_false() -> None:
+    # true: the witness's 0.5 (not raised to any floor); false: q's -0.5 (not lowered to any ceiling)
+    v = _until_at_0(TRUE4, _truth([-1.0, -1.0, 0.5, -1.0], [-1.0, -1.0, 0.5, -1.0]))
+    assert (v.lo[0], v.hi[0]) == (0.5, 0.5)
+    v = _until_at_0(TRUE4, _truth([-1.0, -0.5, -1.0, -1.0], [-0.7, -0.5, -0.6, -0.8]))
+    assert (v.lo[0], v.hi[0]) == (-0.5, -0.5)
