@@ -119,3 +119,29 @@ def test_until_states_the_loops_robustness_when_true_or_false() -> None:
     assert (v.lo[0], v.hi[0]) == (0.5, 0.5)
     v = _until_at_0(TRUE4, _truth([-1.0, -0.5, -1.0, -1.0], [-0.7, -0.5, -0.6, -0.8]))
     assert (v.lo[0], v.hi[0]) == (-0.5, -0.5)
+
+
+def test_until_robustness_over_windows_outside_the_samples_and_past_the_end() -> None:
+    p, q = TRUE4, _truth([-1.0] * 4, [-1.0] * 4)
+    # the window lies after the last sample but before the end of observation (10 s): nothing can satisfy it
+    f = parse("p U[5,6] q")
+    t = np.arange(4, dtype=np.int64) * S
+    v = evaluate_at_points(f, Positions(t, t.copy(), np.ones(4, dtype=bool), 10 * S), {"p": p, "q": q})[f]
+    assert (v.lo[0], v.hi[0]) == (-np.inf, -np.inf)
+    assert v.lo.dtype == v.hi.dtype == np.float64
+    # the window reaches past the end: no witness yet (-inf), and at best p's least value so far (1.0)
+    v = _until_at_0(p, q, "p U[10,20] q")
+    assert (v.lo[0], v.hi[0]) == (-np.inf, 1.0)
+    v = _until_at_0(_truth([1.0, 0.5, 0.7, 1.0], [1.0, 0.5, 0.7, 1.0]), q, "p U[0,10] q")
+    assert (v.lo[0], v.hi[0]) == (-1.0, 0.5)
+
+
+def test_until_is_only_proved_by_witnesses_at_samples_but_a_gap_can_keep_it_open() -> None:
+    # sample 0 s, gap (0, 1) s, sample 1 s: q's bound is 0.5 only over the gap (its value at some instant there)
+    start = np.array([0, 1, S], dtype=np.int64)
+    stop = np.array([0, S - 1, S], dtype=np.int64)
+    pos = Positions(start, stop, np.array([True, False, True]), S)
+    f = parse("p U[0,1] q")
+    q = _truth([-1.0, 0.5, -1.0], [-1.0, 0.5, -1.0])
+    v = evaluate_at_points(f, pos, {"p": _truth([1.0] * 3, [1.0] * 3), "q": q})
+    assert (v[f].lo[0], v[f].hi[0]) == (-1.0, 0.5)
