@@ -64,6 +64,38 @@ def test_an_undecided_conjunction_names_its_undecided_argument_not_a_true_one() 
     assert e.subformula == "q" and e.reason.startswith("unknown here"), e
 
 
+def test_a_false_disjunction_is_named_itself_every_alternative_being_false() -> None:
+    pos = _pos(4)
+    f = parse("p | G[0,3] q")
+    atoms = {"p": _truth([-1.0] * 4, [-1.0] * 4), "q": _truth([1.0, -1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0])}
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, atoms))
+    assert (e.subformula, e.time_ns, e.reason, e.node, e.index) == ("p | G[0,3] q", 0, "every alternative is false",
+                                                                    f, 0)
+
+
+def test_a_false_conjunction_names_the_conjunct_violated_first_not_the_first_written() -> None:
+    pos = _pos(4)
+    f = parse("G[0,3] p & G[0,3] q")  # p false at 2 s, q false at 1 s
+    atoms = {"p": _truth([1.0, 1.0, -1.0, 1.0], [1.0, 1.0, -1.0, 1.0]),
+             "q": _truth([1.0, -1.0, 1.0, 1.0], [1.0, -1.0, 1.0, 1.0])}
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, atoms))
+    assert (e.subformula, e.time_ns) == ("q", 1 * S), e
+
+
+def test_an_undecided_implication_names_its_undecided_premise() -> None:
+    pos = _pos(4)
+    atoms = {"p": _truth([-1.0] * 4, [1.0] * 4), "q": _truth([-1.0] * 4, [-1.0] * 4)}  # p unknown, q false
+    for text in ("p -> q", "(p -> q) & G[0,3] !p"):  # whether or not !p is a sub-formula elsewhere
+        f = parse(text)
+        e = explain(f, 0, pos, evaluate_at_points(f, pos, atoms))
+        assert (e.subformula, e.time_ns, e.index) == ("p", 0, 0), (text, e)
+        assert e.reason.startswith("unknown here"), (text, e)
+    f = parse("p -> q")  # p true, q unknown: the conclusion is named
+    atoms = {"p": _truth([1.0] * 4, [1.0] * 4), "q": _truth([-1.0] * 4, [1.0] * 4)}
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, atoms))
+    assert (e.subformula, e.reason) == ("q", "unknown here (missing or ambiguous data)"), e
+
+
 # ---- U: exact-zero values are undecided (``_until``'s counting rule) -------------------------------------------------
 def _until_at_0(p: Truth, q: Truth, text: str = "p U[0,3] q") -> Truth:
     f = parse(text)
