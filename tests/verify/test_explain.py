@@ -96,6 +96,72 @@ def test_an_undecided_implication_names_its_undecided_premise() -> None:
     assert (e.subformula, e.reason) == ("q", "unknown here (missing or ambiguous data)"), e
 
 
+def test_a_negation_says_whether_its_argument_holds_or_is_undecided() -> None:
+    pos = _pos(4)
+    f = parse("!p")
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": TRUE4}))
+    assert (e.subformula, e.time_ns, e.reason, e.node, e.index) == ("!p", 0, "its negation holds", f, 0)
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth([-1.0] * 4, [1.0] * 4)}))
+    assert (e.subformula, e.reason) == ("!p", "its argument is undecided")
+    # an undecided negation of a temporal formula is explained by its argument's undecided instant
+    f = parse("!G[0,3] p")
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth([1.0, 1.0, -1.0, 1.0], [1.0, 1.0, 1.0, 1.0])}))
+    assert (e.subformula, e.time_ns) == ("p", 2 * S), e
+    # a false negation of a temporal formula is not descended into
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": TRUE4}))
+    assert (e.subformula, e.reason) == ("!G[0,3] p", "its negation holds")
+
+
+def test_a_nested_window_is_searched_from_the_position_it_is_explained_at() -> None:
+    pos = _pos(4)
+    f = parse("G[0,3] F[0,1] p")  # F[0,1] p: true at 0, undecided at 1 (p false at 1, undecided at 2)
+    p = _truth([1.0, -1.0, -1.0, -1.0], [1.0, -1.0, 1.0, -1.0])
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": p}))
+    assert (e.subformula, e.time_ns) == ("p", 2 * S), e
+
+
+def test_an_undecided_always_names_its_first_instant_that_is_not_true() -> None:
+    pos = _pos(4)
+    f = parse("G[0,3] p")  # 0.5 is true; a lower bound of exactly 0 is not
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth([0.5, 0.5, 0.0, 1.0], [1.0] * 4)}))
+    assert (e.subformula, e.time_ns) == ("p", 2 * S), e
+
+
+def _with_gaps(times_ns: list[int]) -> Positions:
+    """Samples at ``times_ns`` with the open gaps between them (the trajectory semantics' positions)."""
+    start, stop, point = [], [], []
+    for k, t in enumerate(times_ns):
+        if k:
+            start.append(times_ns[k - 1] + 1)
+            stop.append(t - 1)
+            point.append(False)
+        start.append(t)
+        stop.append(t)
+        point.append(True)
+    return Positions(np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64), np.array(point),
+                     times_ns[-1])
+
+
+def test_a_false_always_at_a_gap_names_a_violation_within_its_window_for_every_instant_of_the_gap() -> None:
+    # samples 0, 1, 2, 4, 5.5 s; p false everywhere but undecided at the sample at 2 s. The inner G is explained at
+    # the gap (1, 2) s: only positions inside [t + 1.5, t + 3.25] for every instant t of that gap count
+    pos = _with_gaps([0, S, 2 * S, 4 * S, 11 * S // 2])
+    f = parse("G[0.5,5] G[1.5,3.25] p")
+    hi = [-1.0] * 9
+    hi[4] = 1.0
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth([-1.0] * 9, hi)}))
+    assert (e.subformula, e.time_ns, e.index) == ("p", 2 * S + 1, 5), e
+
+
+def test_an_undecided_always_at_a_gap_searches_every_position_its_window_can_reach() -> None:
+    # samples 0, 1, 4, 5 s; p false over the gap (1, 4) s, which the window of the gap (0, 1) s partly covers
+    pos = _with_gaps([0, S, 4 * S, 5 * S])
+    f = parse("F[0,5] G[1,2] p")
+    p = _truth([-1.0] * 6 + [1.0], [-1.0, 1.0, 1.0, -1.0, 1.0, 1.0, 1.0])
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": p}))
+    assert (e.subformula, e.time_ns, e.reason) == ("p", S + 1, "false here"), e
+
+
 # ---- U: exact-zero values are undecided (``_until``'s counting rule) -------------------------------------------------
 def _until_at_0(p: Truth, q: Truth, text: str = "p U[0,3] q") -> Truth:
     f = parse(text)
