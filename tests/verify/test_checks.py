@@ -19,7 +19,7 @@ def _t(*s: float) -> np.ndarray:
 
 def test_no_samples_is_inconclusive() -> None:
     r = margin_check("w", _t(), np.zeros(0), np.zeros(0), {"margin_unit": "m"})
-    assert (r.verdict, r.margin, r.first_violation_ns) == ("inconclusive", None, None)
+    assert (r.name, r.verdict, r.margin, r.first_violation_ns) == ("w", "inconclusive", None, None)
     assert r.details == {"margin_unit": "m", "reason": "no samples"}
 
 
@@ -59,6 +59,9 @@ def test_nan_samples_are_counted_and_never_pass() -> None:
                                           "0 ns and 1000000000 ns")
     r = margin_check("w", _t(0, 1), np.array([np.nan, np.nan]), np.zeros(1), {})
     assert (r.verdict, r.margin) == ("inconclusive", None)
+    # one NaN sample and no gap: the reason is the NaN alone
+    r = margin_check("w", _t(0), np.array([np.nan]), np.zeros(0), {})
+    assert r.details["reason"] == "1 NaN sample(s)"
     # a violation elsewhere wins over NaN samples; the fail's margin ignores them
     r = margin_check("w", _t(0, 1, 2), np.array([np.nan, -0.2, 0.1]), np.zeros(2), {})
     assert (r.verdict, r.margin, r.first_violation_ns) == ("fail", -0.2, 1_000_000_000)
@@ -79,6 +82,7 @@ def test_tube_without_a_nominal_state_is_inconclusive() -> None:
         r = check_tube(_t(0, 1), np.zeros(2), np.zeros(2), nominal, radius_m=0.1, tolerance_m=0.01, match_ns=10)
         assert (r.name, r.verdict, r.margin, r.first_violation_ns) == ("tube", "inconclusive", None, None)
         assert r.details["reason"] == "no nominal state logged: tube containment cannot be checked"
+        assert r.details["checked_at"] == "logged samples (pose matched to the nearest nominal sample)"
         assert (r.details["radius_m"], r.details["noise_tolerance_m"], r.details["margin_unit"]) == (0.1, 0.01, "m")
 
 
@@ -87,7 +91,7 @@ def test_tube_matches_each_pose_to_the_nearest_nominal_sample() -> None:
     nominal = _nominal((0.1, 0.0, 0.0), (0.8, 5.0, 0.0), (2.6, 0.05, 0.0))
     x = np.array([0.0, 5.0, 0.0])
     r = check_tube(_t(0, 1, 2), x, np.zeros(3), nominal, radius_m=0.1, tolerance_m=0.0, match_ns=700_000_000)
-    assert r.verdict == "pass"
+    assert (r.name, r.verdict) == ("tube", "pass")
     assert r.margin == pytest.approx(0.05)
     assert r.details["max_deviation_m"] == pytest.approx(0.05)
     assert (r.details["matched_samples"], r.details["unmatched_samples"]) == (3, 0)
@@ -111,11 +115,16 @@ def test_tube_fails_beyond_radius_plus_tolerance_and_not_at_it() -> None:
     nominal = _nominal((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (2.0, 0.0, 0.0))
     y = np.array([0.0, 0.25, 0.5])
     r = check_tube(_t(0, 1, 2), np.zeros(3), y, nominal, radius_m=0.2, tolerance_m=0.05, match_ns=1)
-    assert (r.verdict, r.first_violation_ns) == ("fail", 2_000_000_000)
+    assert (r.name, r.verdict, r.first_violation_ns) == ("tube", "fail", 2_000_000_000)
     assert r.margin == pytest.approx(-0.25)
     assert r.details["max_deviation_m"] == pytest.approx(0.5)
     r = check_tube(_t(0, 1), np.zeros(2), y[:2], nominal, radius_m=0.2, tolerance_m=0.05, match_ns=1)
     assert (r.verdict, r.margin) == ("pass", 0.0)
+    # the deviation is the distance to the nominal position, in y as in x
+    nominal = _nominal((0.0, 0.0, 1.0))
+    r = check_tube(_t(0), np.zeros(1), np.array([1.05]), nominal, radius_m=0.1, tolerance_m=0.0, match_ns=1)
+    assert r.verdict == "pass"
+    assert r.margin == pytest.approx(0.05)
 
 
 def test_tube_poses_without_a_nominal_sample_within_match_are_inconclusive() -> None:
@@ -126,7 +135,7 @@ def test_tube_poses_without_a_nominal_sample_within_match_are_inconclusive() -> 
     assert r.verdict == "pass"  # 0.5 s from the nearest nominal sample: matched (at most match_ns)
     r = check_tube(t, np.zeros(3), np.array([0.01, 0.02, 0.0]), nominal, radius_m=0.1, tolerance_m=0.0,
                    match_ns=499_999_999)
-    assert (r.verdict, r.first_violation_ns) == ("inconclusive", None)
+    assert (r.name, r.verdict, r.first_violation_ns) == ("tube", "inconclusive", None)
     assert r.margin == pytest.approx(0.08)
     assert (r.details["matched_samples"], r.details["unmatched_samples"]) == (2, 1)
     assert r.details["reason"] == "1 pose sample(s) without a usable nominal sample or with NaN positions"
@@ -150,12 +159,13 @@ def test_input_box_without_commands_is_inconclusive() -> None:
         assert r.details["reason"] == "no cmd_vel logged"
         assert r.details["bounds"] == {"linear.x": 0.2, "linear.y": 0.3, "angular.z": 0.4}
         assert (r.details["tolerance"], r.details["margin_unit"]) == (INPUT_TOLERANCE, "m/s or rad/s")
+        assert r.details["frame"] == "body (as logged)"
 
 
 def test_input_box_names_the_tightest_component_and_its_unit() -> None:
     u = np.array([[0.1, -0.22, 0.0], [-0.18, 0.0, 0.36]])
     r = check_input_box(_t(0, 1), u, _box())
-    assert r.verdict == "pass"
+    assert (r.name, r.verdict) == ("input_box", "pass")
     assert r.margin == pytest.approx(0.02 + INPUT_TOLERANCE)
     assert (r.details["margin_component"], r.details["margin_unit"]) == ("linear.x", "m/s")
     assert r.details["component_margins"] == pytest.approx(
@@ -187,6 +197,8 @@ def test_unicycle_box_bounds_sideways_speed_by_the_lateral_tolerance() -> None:
     assert (r.details["component"], r.details["value"]) == ("linear.y", 0.02)
     assert r.margin == pytest.approx(-0.01 + INPUT_TOLERANCE)
     assert r.details["model"] == "unicycle"
+    r = check_input_box(_t(0), np.array([[0.6, 0.0, 0.0]]), _box("unicycle"))
+    assert (r.verdict, r.details["component"]) == ("fail", "linear.x")
     assert r.details["max_abs"] == [0.5, 1.0]
 
 
@@ -197,7 +209,7 @@ def test_a_nan_component_never_hides_a_known_violation_and_alone_is_inconclusive
     assert (r.details["component"], r.details["value"]) == ("angular.z", 0.9)
     u = np.array([[np.nan, 0.0, 0.0], [np.nan, np.nan, np.nan], [0.0, 0.1, 0.0]])
     r = check_input_box(_t(0, 1, 2), u, _box())
-    assert (r.verdict, r.first_violation_ns) == ("inconclusive", None)
+    assert (r.name, r.verdict, r.first_violation_ns) == ("input_box", "inconclusive", None)
     assert r.details["reason"] == "2 command(s) with a NaN component"
     assert r.margin == pytest.approx(0.2 + INPUT_TOLERANCE)
     assert r.details["component_margins"]["linear.x"] == pytest.approx(0.2 + INPUT_TOLERANCE)
@@ -221,7 +233,8 @@ def test_clearance_names_the_obstacle_hit_first() -> None:
     assert r.margin == pytest.approx(0.1 - 0.05 * sc.max_speed_mps)
     free = sc.model_copy(update={"regions": [g for g in sc.regions if not g.unsafe]})
     r = check_clearance(_t(0), x[1:2], y[1:2], free)
-    assert (r.verdict, r.margin, r.details) == ("pass", None, {"reason": "no unsafe regions"})
+    assert (r.name, r.verdict, r.margin, r.details) == ("obstacle_clearance", "pass", None,
+                                                        {"reason": "no unsafe regions"})
 
 
 def test_workspace_is_judged_with_the_scenarios_speed_bound_between_samples() -> None:
@@ -229,7 +242,8 @@ def test_workspace_is_judged_with_the_scenarios_speed_bound_between_samples() ->
     r = check_workspace(_t(0, 1), np.array([0.0, 0.0]), np.array([0.0, 0.0]), sc)
     assert (r.name, r.verdict) == ("workspace", "pass")
     assert r.margin == pytest.approx(2.5 - 0.27 - 0.5 * sc.max_speed_mps)
-    assert r.details["margin_unit"] == "m"
+    assert r.details == {"margin_unit": "m", "between_samples": "bounded by max(v_max * dt, step)",
+                         "sample_margin_m": pytest.approx(2.5 - 0.27)}
     r = check_workspace(_t(0, 1), np.array([2.3, 0.0]), np.array([0.0, 0.0]), sc)
     assert (r.verdict, r.first_violation_ns) == ("fail", 0)
     assert r.margin == pytest.approx(2.5 - 2.3 - 0.27)
