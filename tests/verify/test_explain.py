@@ -162,6 +162,29 @@ def test_an_undecided_always_at_a_gap_searches_every_position_its_window_can_rea
     assert (e.subformula, e.time_ns, e.reason) == ("p", S + 1, "false here"), e
 
 
+@pytest.mark.parametrize(("text", "p", "q", "want"), [
+    ("F[0,2] p", [-1.0] * 4, [-1.0] * 4, ("F[0,2] p", 2 * S, "never satisfied within its window")),
+    ("F[0,10] p", [-1.0] * 4, [-1.0] * 4, ("F[0,10] p", 3 * S, "the window reaches past the end of the log")),
+    ("G[0,10] p", [1.0] * 4, [-1.0] * 4, ("G[0,10] p", 3 * S, "the window reaches past the end of the log")),
+    ("p U[0,2] q", [1.0] * 4, [-1.0] * 4, ("p U[0,2] q", 0, "violated")),
+    ("p U[0,10] q", [1.0] * 4, [-1.0] * 4, ("p U[0,10] q", 3 * S, "undecided at the end of the log")),
+    ("q", [1.0] * 4, [-1.0] * 4, ("q", 0, "false here")),
+])
+def test_each_leaf_of_the_walk_names_itself_its_time_and_its_reason(text: str, p: list[float], q: list[float],
+                                                                     want: tuple[str, int, str]) -> None:
+    pos = _pos(4)
+    f = parse(text)
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth(p, p), "q": _truth(q, q)}))
+    assert (e.subformula, e.time_ns, e.reason, e.node, e.index) == (*want, f, 0), e
+
+
+def test_an_undecided_eventually_names_its_first_instant_that_is_not_false() -> None:
+    pos = _pos(4)
+    f = parse("F[0,10] p")  # p false, but its upper bound is exactly 0 (undecided) at 1 s and 0.5 at 2 s
+    e = explain(f, 0, pos, evaluate_at_points(f, pos, {"p": _truth([-1.0] * 4, [-1.0, 0.0, 0.5, -1.0])}))
+    assert (e.subformula, e.time_ns, e.node, e.index) == ("p", 1 * S, parse("p"), 1), e
+
+
 # ---- U: exact-zero values are undecided (``_until``'s counting rule) -------------------------------------------------
 def _until_at_0(p: Truth, q: Truth, text: str = "p U[0,3] q") -> Truth:
     f = parse(text)
