@@ -9,7 +9,15 @@ import math
 import pytest
 
 from tubempc.scenario import builtin_scenario
-from verify.judging import POSITION_ROUNDING_M, check_explanation, margin_entry, overall_verdict, tube_tolerance_m
+from verify.judging import (
+    POSITION_ROUNDING_M,
+    check_explanation,
+    margin_entry,
+    overall_verdict,
+    timed_run_explanation,
+    tube_tolerance_m,
+)
+from verify.semantics.timed_run import TimedRunVerdict
 
 
 def test_no_check_is_never_a_pass() -> None:
@@ -89,6 +97,14 @@ def test_check_explanation() -> None:
     assert got == "not decided; more or better data would decide it"
 
 
+def test_check_explanation_names_what_was_violated_and_states_a_margin_without_a_unit_as_is() -> None:
+    got = check_explanation({"verdict": "fail", "first_violation_time": 2, "component": "angular.z", "margin": -0.5})
+    assert got == "violated at 2.00 s (component angular.z); margin -0.5"
+    got = check_explanation({"verdict": "fail", "region": "R1", "pair": "a-b", "component": None, "margin": -1.0,
+                             "margin_unit": None})
+    assert got == "violated (region R1, pair a-b); margin -1"
+
+
 @pytest.mark.parametrize(("reason", "decide"), [
     ("no nominal state logged: tube containment cannot be checked", "log the MPC's nominal state on topics.nominal"),
     ("no cmd_vel logged: the input box cannot be checked", "log the applied commands on topics.cmd_vel"),
@@ -100,3 +116,26 @@ def test_check_explanation() -> None:
 ])
 def test_an_undecided_check_says_what_would_decide_it(reason: str, decide: str) -> None:
     assert check_explanation({"verdict": "inconclusive", "reason": reason}) == f"{reason}; {decide}"
+
+
+def test_timed_run_explanation_says_each_verdict_in_one_sentence() -> None:
+    assert timed_run_explanation(TimedRunVerdict("pass", "F[0,5] a"), 9.0) is None
+    fail = TimedRunVerdict("fail", "F[0,5] a", "F[0,5] a", 5.0, "never satisfied within its window", -1.25)
+    assert timed_run_explanation(fail, 9.0) == ("violated at 5.00 s: F[0,5] a (never satisfied within its window); "
+                                                "margin -1.25 s")
+    fail = TimedRunVerdict("fail", "G !b", "b", None, "false here", None)
+    assert timed_run_explanation(fail, 9.0) == "violated: b (false here); no finite margin"
+    empty = TimedRunVerdict("inconclusive", "F a", "F a", None, "the timed run is empty")
+    assert timed_run_explanation(empty, 9.0) == (
+        "the timed run is empty: the robot disc was never fully inside a region; a run that enters a region would "
+        "decide it")
+    window = TimedRunVerdict("inconclusive", "F[0,20] a", "F[0,20] a", 0.0,
+                             "the window reaches past the end of the log")
+    assert timed_run_explanation(window, 9.0) == (
+        "F[0,20] a: its window reaches past the end of the log at 9.00 s; a longer log would decide it")
+    unknown = TimedRunVerdict("inconclusive", "G a", "a", 3.5, "unknown here (missing or ambiguous data)")
+    assert timed_run_explanation(unknown, 9.0) == (
+        "a unknown at 3.50 s: unknown here (missing or ambiguous data); data that decides its atoms there would decide "
+        "it")
+    unknown = TimedRunVerdict("inconclusive", "G a", "a", None, None)
+    assert timed_run_explanation(unknown, 9.0) == "a unknown: None; data that decides its atoms there would decide it"

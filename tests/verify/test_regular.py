@@ -5,6 +5,7 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
+import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
@@ -258,3 +259,9 @@ def test_step_bound_regular_blocks_equal_hypot_everywhere() -> None:
     np.testing.assert_array_equal(got, want)
     assert got[(1 << 15) - 2] > 0.4 and got[39_999] == 0.3 * 0.01  # a jump; the NaN step keeps v dt
     assert step_bound_regular_m(10_000_000, x[:1], y[:1], 0.3).shape == (0,)
+
+
+def test_root_bounds_refuse_a_step_array_of_the_wrong_length() -> None:
+    grid = Grid(0, 10, 3)
+    with pytest.raises(ValueError, match=r"^step_m has shape \(3,\), expected \(2,\)$"):
+        evaluate_root(parse("p"), grid, {"p": np.ones(3)}, np.ones(3))

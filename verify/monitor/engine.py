@@ -418,7 +418,8 @@ def explain(f: Formula, i: int, pos: Positions, values: Mapping[Formula, Truth])
 
     want = "fail" if failing else "unknown"
     if isinstance(f, And | Or | Implies):
-        kids = list(f.args) if isinstance(f, And | Or) else [Not(f.left), f.right]
+        # an implication's premise is undecided exactly when its negation is (and it is always among the values)
+        kids = list(f.args) if isinstance(f, And | Or) else [f.left, f.right]
         if isinstance(f, And) and failing:  # the first violation: the earliest witness among the false conjuncts
             found = [explain(g, i, pos, values) for g in kids if g in values and state(g, i) == "fail"]
             if found:
