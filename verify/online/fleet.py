@@ -33,6 +33,7 @@ from verify.ingest.log import _stream as pose_stream
 from verify.judging import EXIT_CODES, formula_of, overall_verdict
 from verify.online.monitor import Decision, OnlineMonitor
 from verify.online.signalfeed import SignalFeed
+from verify.online.states import final_line
 from verify.selection import select_checks
 
 __all__ = ["FleetMonitor", "FleetResult", "FleetState", "RobotFeed", "feed_fleet_logs"]
@@ -52,15 +53,12 @@ class FleetState:
 
     def final_lines(self) -> list[str]:
         """At the end: one line per check with its final verdict, margin and first violation."""
-        out = []
-        for c in self.checks:
-            margin = "" if c.margin is None or not math.isfinite(c.margin) else f" margin {c.margin:+.4g}"
-            unit = str(c.details.get("margin_unit") or MARGIN_UNITS.get(c.name.rsplit("/", 1)[-1], ""))
-            unit = unit if margin else ""
-            at = ("" if c.first_violation_ns is None or self.t0_ns is None else
-                  f" (violated at {(c.first_violation_ns - self.t0_ns) * 1e-9:.2f} s)")
-            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{' ' + unit if unit else ''}{at}")
-        return out
+        return [final_line(c.name, c.verdict,
+                           c.margin if c.margin is not None and math.isfinite(c.margin) else None,
+                           str(c.details.get("margin_unit") or MARGIN_UNITS.get(c.name.rsplit("/", 1)[-1], "")),
+                           None if c.first_violation_ns is None or self.t0_ns is None else
+                           (c.first_violation_ns - self.t0_ns) * 1e-9)
+                for c in self.checks]
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until
+from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until, subformulas
 from tubempc.mitl import atoms as atoms_of
 from verify.monitor.engine import Truth, bounds_ns, evaluate_at_points, explain
 from verify.online.stream import AtomNode, BoolNode, ConstNode, Node, NotNode, WindowNode
@@ -305,27 +305,11 @@ class OfflineHead(Head):
 
 # ---- building --------------------------------------------------------------------------------------------------------
 def _temporal(f: Formula) -> bool:
-    if isinstance(f, Eventually | Always | Until | Next):
-        return True
-    if isinstance(f, Not):
-        return _temporal(f.arg)
-    if isinstance(f, And | Or):
-        return any(_temporal(g) for g in f.args)
-    if isinstance(f, Implies):
-        return _temporal(f.left) or _temporal(f.right)
-    return False
+    return any(isinstance(g, Eventually | Always | Until | Next) for g in subformulas(f))
 
 
 def _offline_only(f: Formula) -> bool:
-    if isinstance(f, Until | Next):
-        return True
-    if isinstance(f, Not | Eventually | Always):
-        return _offline_only(f.arg)
-    if isinstance(f, And | Or):
-        return any(_offline_only(g) for g in f.args)
-    if isinstance(f, Implies):
-        return _offline_only(f.left) or _offline_only(f.right)
-    return False
+    return any(isinstance(g, Until | Next) for g in subformulas(f))
 
 
 def _new_node(f: Formula, child: Callable[[Formula], Node], atom: Callable[[str], AtomNode]) -> Node:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from verify.checks import CheckResult
 from verify.judging import EXIT_CODES
 
-__all__ = ["CheckState", "Decision", "MonitorState", "OnlineResult", "rel_s"]
+__all__ = ["CheckState", "Decision", "MonitorState", "OnlineResult", "final_line", "rel_s"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,12 +69,16 @@ class MonitorState:
     def final_lines(self) -> list[str]:
         """At the end (``close``): one line per obligation and check with its final verdict, margin and first
         violation, the values the certificate states for the same samples."""
-        out = []
-        for c in (*self.obligations, *self.checks):
-            margin = "" if c.margin is None else f" margin {c.margin:+.4g}" + (f" {c.unit}" if c.unit else "")
-            at = "" if c.first_violation_s is None else f" (violated at {c.first_violation_s:.2f} s)"
-            out.append(f"   final  {c.name} {c.verdict.upper()}{margin}{at}")
-        return out
+        return [final_line(c.name, c.verdict, c.margin, c.unit, c.first_violation_s)
+                for c in (*self.obligations, *self.checks)]
+
+
+def final_line(name: str, verdict: str, margin: float | None, unit: str | None,
+               first_violation_s: float | None) -> str:
+    """The line ``watch`` prints for one obligation or check at the end, one robot's or a fleet's alike."""
+    shown = "" if margin is None else f" margin {margin:+.4g}" + (f" {unit}" if unit else "")
+    at = "" if first_violation_s is None else f" (violated at {first_violation_s:.2f} s)"
+    return f"   final  {name} {verdict.upper()}{shown}{at}"
 
 
 @dataclass(frozen=True, slots=True)
