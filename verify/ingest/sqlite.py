@@ -16,6 +16,7 @@ with C-level ``map``/``b"".join`` (no Python statement per row).
 from __future__ import annotations
 
 from collections.abc import Collection
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -169,17 +170,18 @@ def read_sqlite_storage(storage: Sqlite3Reader, connections: Collection[Connecti
         return None  # rosbags runs the same query and reports the error
     n = len(rows)
     try:
-        tids, stamps, payloads = zip(*rows, strict=True) if n else ((), (), ())
+        stamps = list(map(itemgetter(1), rows))  # (zip(*rows) is five times slower on 200,000 rows)
+        payloads = list(map(itemgetter(2), rows))
         if not all(map(int.__instancecheck__, stamps)) or not all(map(bytes.__instancecheck__, payloads)):
             return None
-        log_ns = np.array(stamps, dtype=np.int64).reshape(n)
+        log_ns = np.fromiter(stamps, dtype=np.int64, count=n)
         lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=n)
         data = np.frombuffer(b"".join(payloads), dtype=np.uint8)
         topics = sorted(set(topic_of.values()))
         if len(topics) == 1:
             return {topics[0]: _packed(log_ns, data, lengths)}
         code = {tid: topics.index(t) for tid, t in topic_of.items()}
-        codes = np.fromiter(map(code.__getitem__, tids), dtype=np.int64, count=n)
+        codes = np.fromiter(map(code.__getitem__, map(itemgetter(0), rows)), dtype=np.int64, count=n)
     except (TypeError, OverflowError, ValueError, KeyError):
         return None
     byte_codes = np.repeat(codes, lengths)  # the topic of every payload byte

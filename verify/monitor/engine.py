@@ -408,56 +408,68 @@ class Explanation:
 
 def explain(f: Formula, i: int, pos: Positions, values: Mapping[Formula, Truth]) -> Explanation:
     """Walk down from ``f`` at position ``i`` (false or unknown there) to the sub-formula that decides it."""
-    v = values[f]
-    failing = bool(v.hi[i] < 0)
+    failing = bool(values[f].hi[i] < 0)
     t_i = int(pos.start_ns[i])
-
-    def state(g: Formula, k: int) -> str:
-        t = values[g]
-        return "fail" if t.hi[k] < 0 else ("pass" if t.lo[k] > 0 else "unknown")
-
-    want = "fail" if failing else "unknown"
     if isinstance(f, And | Or | Implies):
-        # an implication's premise is undecided exactly when its negation is (and it is always among the values)
-        kids = list(f.args) if isinstance(f, And | Or) else [f.left, f.right]
-        if isinstance(f, And) and failing:  # the first violation: the earliest witness among the false conjuncts
-            found = [explain(g, i, pos, values) for g in kids if g in values and state(g, i) == "fail"]
-            if found:
-                return min(found, key=lambda e: e.time_ns)
-        if isinstance(f, And) or not failing:
-            for g in kids:
-                if g in values and state(g, i) == want:
-                    return explain(g, i, pos, values)
-        if isinstance(f, Implies) and failing:
-            return explain(f.right, i, pos, values)
-        return Explanation(str(f), t_i, "every alternative is false" if failing else "no alternative decided", f, i)
+        return _explain_connective(f, i, pos, values, failing=failing)
     if isinstance(f, Not):
         reason = "its negation holds" if failing else "its argument is undecided"
-        if not failing and f.arg in values and state(f.arg, i) == "unknown" and not isinstance(f.arg, Atom):
+        if not failing and f.arg in values and _state(values, f.arg, i) == "unknown" and not isinstance(f.arg, Atom):
             return explain(f.arg, i, pos, values)
         return Explanation(str(f), t_i, reason, f, i)
     if isinstance(f, Always | Eventually):
-        w = _windows(pos, f.interval, np.array([i], dtype=np.int64))
-        arg_v = values[f.arg]
-        if isinstance(f, Always):
-            rng = (int(w.in0[0]), int(w.in1[0])) if failing else (int(w.out0[0]), int(w.out1[0]))
-            seg_state = (arg_v.hi[rng[0] : rng[1]] < 0) if failing else ~(arg_v.lo[rng[0] : rng[1]] > 0)
-            hits = np.flatnonzero(seg_state)
-            if hits.size:
-                return explain(f.arg, rng[0] + int(hits[0]), pos, values)
-            return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
-        rng = (int(w.out0[0]), int(w.out1[0]))
-        if failing:
-            return Explanation(str(f), _window_end(pos, w, i), "never satisfied within its window", f, i)
-        unk = np.flatnonzero(~(arg_v.hi[rng[0] : rng[1]] < 0))
-        if unk.size:
-            return explain(f.arg, rng[0] + int(unk[0]), pos, values)
-        return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
+        return _explain_window(f, i, pos, values, failing=failing)
     if isinstance(f, Until | Next):
         w = _windows(pos, f.interval, np.array([i], dtype=np.int64))
         return Explanation(str(f), _window_end(pos, w, i) if not failing else t_i,
                            "violated" if failing else "undecided at the end of the log", f, i)
     return Explanation(str(f), t_i, "false here" if failing else "unknown here (missing or ambiguous data)", f, i)
+
+
+def _state(values: Mapping[Formula, Truth], g: Formula, k: int) -> str:
+    t = values[g]
+    return "fail" if t.hi[k] < 0 else ("pass" if t.lo[k] > 0 else "unknown")
+
+
+def _explain_connective(f: And | Or | Implies, i: int, pos: Positions, values: Mapping[Formula, Truth], *,
+                        failing: bool) -> Explanation:
+    """``explain`` of a conjunction, disjunction or implication: the operand that decides it."""
+    want = "fail" if failing else "unknown"
+    # an implication's premise is undecided exactly when its negation is (and it is always among the values)
+    kids = list(f.args) if isinstance(f, And | Or) else [f.left, f.right]
+    if isinstance(f, And) and failing:  # the first violation: the earliest witness among the false conjuncts
+        found = [explain(g, i, pos, values) for g in kids if g in values and _state(values, g, i) == "fail"]
+        if found:
+            return min(found, key=lambda e: e.time_ns)
+    if isinstance(f, And) or not failing:
+        for g in kids:
+            if g in values and _state(values, g, i) == want:
+                return explain(g, i, pos, values)
+    if isinstance(f, Implies) and failing:
+        return explain(f.right, i, pos, values)
+    return Explanation(str(f), int(pos.start_ns[i]), "every alternative is false" if failing else
+                       "no alternative decided", f, i)
+
+
+def _explain_window(f: Always | Eventually, i: int, pos: Positions, values: Mapping[Formula, Truth], *,
+                    failing: bool) -> Explanation:
+    """``explain`` of a windowed Always or Eventually: the position in its window that decides it."""
+    w = _windows(pos, f.interval, np.array([i], dtype=np.int64))
+    arg_v = values[f.arg]
+    if isinstance(f, Always):
+        rng = (int(w.in0[0]), int(w.in1[0])) if failing else (int(w.out0[0]), int(w.out1[0]))
+        seg_state = (arg_v.hi[rng[0] : rng[1]] < 0) if failing else ~(arg_v.lo[rng[0] : rng[1]] > 0)
+        hits = np.flatnonzero(seg_state)
+        if hits.size:
+            return explain(f.arg, rng[0] + int(hits[0]), pos, values)
+        return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
+    rng = (int(w.out0[0]), int(w.out1[0]))
+    if failing:
+        return Explanation(str(f), _window_end(pos, w, i), "never satisfied within its window", f, i)
+    unk = np.flatnonzero(~(arg_v.hi[rng[0] : rng[1]] < 0))
+    if unk.size:
+        return explain(f.arg, rng[0] + int(unk[0]), pos, values)
+    return Explanation(str(f), _window_end(pos, w, i), "the window reaches past the end of the log", f, i)
 
 
 def _window_end(pos: Positions, w: _Windows, i: int) -> int:
