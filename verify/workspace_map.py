@@ -428,6 +428,60 @@ def _letter(i: int) -> str:
     return chr(ord("A") + i)
 
 
+def _draw_run(fig: Figure, ax: Axes, cax: Axes, *, certificate: Certificate, trajectory: pd.DataFrame,
+              violations: Sequence[Violation], zooms: Sequence[tuple[Violation, tuple[float, float]]],
+              eta: float, px_per_m: float) -> tuple[list[_Label], list[_Label], list[tuple[float, float]]]:
+    """The path (coloured by time, with its colour bar), its start and end, the timed run's entries and the first
+    violations on the map: their labels (start, end and violations; the run's numbers apart) still to be placed and
+    the points that labels must not cover."""
+    pt_per_px = 72.0 / fig.dpi
+    labels: list[_Label] = []
+    run_labels: list[_Label] = []
+    markers: list[tuple[float, float]] = []
+    t = trajectory["t_s"].to_numpy(dtype=float)
+    norm = Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t)) if t.size > 1 else float(t[0]) + 1.0)
+    lc = _draw_path(ax, trajectory, norm, arrows=8, keep_t_s=[v.t_s for v in violations])
+    fig.colorbar(lc, cax=cax, orientation="horizontal", label="time along the path t [s]")
+    ax.plot([], [], "-", color="#21918c", lw=1.6, label="trajectory (colour: time)")
+    first, last = _position_at(trajectory, float(t[0])), _position_at(trajectory, float(t[-1]))
+    markers += [p for p in (first, last) if p is not None]
+    if first is not None:
+        ax.add_patch(Circle(first, eta, fill=False, ec="black", ls=":", zorder=5))
+        ax.plot(*first, "o", ms=7, mfc="white", mec="black", zorder=6, label="start (robot disc dotted)")
+        labels.append(_Label(ax.annotate(f"start, t = {t[0]:.2f} s", first, xytext=(0, 0),
+                                         textcoords="offset points", fontsize=8),
+                             _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
+    if last is not None:
+        ax.plot(*last, "s", ms=6, mfc="black", mec="black", zorder=6, label="end")
+        # kept off the robot's disc at the end, as the start label is (it covered the disc)
+        labels.append(_Label(ax.annotate(f"end, t = {t[-1]:.2f} s", last, xytext=(0, 0), textcoords="offset points",
+                                         fontsize=8), _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
+    for i, entry in enumerate(certificate.timed_run):
+        pos = _position_at(trajectory, entry.time)
+        if pos is None:
+            continue
+        markers.append(pos)
+        ax.plot(*pos, "o", color=_RUN_COLOUR, ms=5, zorder=6, label="timed run entry (#)" if i == 0 else None)
+        run_labels.append(_Label(ax.annotate(str(i), pos, xytext=(0, 0), textcoords="offset points", fontsize=8,
+                                             color=_RUN_COLOUR, weight="bold"), _ring(4.0 * pt_per_px)))
+    for j, v in enumerate(violations):
+        pos = _position_at(trajectory, v.t_s)
+        if pos is None:
+            continue
+        markers.append(pos)
+        ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=11, mec="white", mew=0.8, zorder=7,
+                label="first violation" if j == 0 else None)
+        zoom_tag = next((f"[{_letter(k)}] " for k, (z, _) in enumerate(zooms) if z is v), "")
+        text = f"{zoom_tag}{v.what}\nt = {v.t_s:.2f} s"
+        labels.insert(j, _Label(ax.annotate(text, pos, xytext=(0, 0), textcoords="offset points", fontsize=8,
+                                            color=_FAIL_COLOUR, weight="bold",
+                                            bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": _FAIL_COLOUR,
+                                                  "alpha": 0.9},
+                                            arrowprops={"arrowstyle": "-", "color": _FAIL_COLOUR, "lw": 0.8}),
+                                _ring(8.0 * pt_per_px, pad_pt=10.0, far=True)))
+    return labels, run_labels, markers
+
+
 def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.DataFrame | None,
                   nominal: pd.DataFrame | None) -> MapFigure:
     """The map (see the module docstring) and the number of labels that found no free place."""
@@ -470,47 +524,8 @@ def workspace_map(certificate: Certificate, scenario: Scenario, trajectory: pd.D
     run_labels: list[_Label] = []
     markers: list[tuple[float, float]] = []  # points that labels must not cover
     if has_path and trajectory is not None:
-        t = trajectory["t_s"].to_numpy(dtype=float)
-        norm = Normalize(vmin=float(np.nanmin(t)), vmax=float(np.nanmax(t)) if t.size > 1 else float(t[0]) + 1.0)
-        lc = _draw_path(ax, trajectory, norm, arrows=8, keep_t_s=[v.t_s for v in violations])
-        fig.colorbar(lc, cax=cax, orientation="horizontal", label="time along the path t [s]")
-        ax.plot([], [], "-", color="#21918c", lw=1.6, label="trajectory (colour: time)")
-        first, last = _position_at(trajectory, float(t[0])), _position_at(trajectory, float(t[-1]))
-        markers += [p for p in (first, last) if p is not None]
-        if first is not None:
-            ax.add_patch(Circle(first, eta, fill=False, ec="black", ls=":", zorder=5))
-            ax.plot(*first, "o", ms=7, mfc="white", mec="black", zorder=6, label="start (robot disc dotted)")
-            labels.append(_Label(ax.annotate(f"start, t = {t[0]:.2f} s", first, xytext=(0, 0),
-                                             textcoords="offset points", fontsize=8),
-                                 _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
-        if last is not None:
-            ax.plot(*last, "s", ms=6, mfc="black", mec="black", zorder=6, label="end")
-            # kept off the robot's disc at the end, as the start label is (it covered the disc)
-            labels.append(_Label(ax.annotate(f"end, t = {t[-1]:.2f} s", last, xytext=(0, 0), textcoords="offset points",
-                                             fontsize=8), _ring(max(eta * px_per_m, 5.0) * pt_per_px)))
-        for i, entry in enumerate(certificate.timed_run):
-            pos = _position_at(trajectory, entry.time)
-            if pos is None:
-                continue
-            markers.append(pos)
-            ax.plot(*pos, "o", color=_RUN_COLOUR, ms=5, zorder=6, label="timed run entry (#)" if i == 0 else None)
-            run_labels.append(_Label(ax.annotate(str(i), pos, xytext=(0, 0), textcoords="offset points", fontsize=8,
-                                                 color=_RUN_COLOUR, weight="bold"), _ring(4.0 * pt_per_px)))
-        for j, v in enumerate(violations):
-            pos = _position_at(trajectory, v.t_s)
-            if pos is None:
-                continue
-            markers.append(pos)
-            ax.plot(*pos, "X", color=_FAIL_COLOUR, ms=11, mec="white", mew=0.8, zorder=7,
-                    label="first violation" if j == 0 else None)
-            zoom_tag = next((f"[{_letter(k)}] " for k, (z, _) in enumerate(zooms) if z is v), "")
-            text = f"{zoom_tag}{v.what}\nt = {v.t_s:.2f} s"
-            labels.insert(j, _Label(ax.annotate(text, pos, xytext=(0, 0), textcoords="offset points", fontsize=8,
-                                                color=_FAIL_COLOUR, weight="bold",
-                                                bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": _FAIL_COLOUR,
-                                                      "alpha": 0.9},
-                                                arrowprops={"arrowstyle": "-", "color": _FAIL_COLOUR, "lw": 0.8}),
-                                    _ring(8.0 * pt_per_px, pad_pt=10.0, far=True)))
+        labels, run_labels, markers = _draw_run(fig, ax, cax, certificate=certificate, trajectory=trajectory,
+                                                violations=violations, zooms=zooms, eta=eta, px_per_m=px_per_m)
     else:
         cax.set_visible(False)
     for region in scenario.regions:
