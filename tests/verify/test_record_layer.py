@@ -290,3 +290,27 @@ def test_the_chunk_walk_takes_nothing_from_its_hints_that_the_walk_does_not_conf
             assert np.array_equal(got[0], plain[0]) and np.array_equal(got[1], plain[1])
         with pytest.raises(WalkError):
             walk_chain(buf[:-1], kind, plain[0])
+
+
+@pytest.mark.parametrize("written", ["//battery//level/", "/battery/level", "battery/level"])
+def test_every_ros1_reader_names_a_topic_as_rosbags_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                         written: str) -> None:
+    """A connection's topic with repeated or trailing slashes is one topic name for the fast indexed reader, the
+    plain path (rosbags) and the record layer's walk (salvage and ``watch``): ``ros1records.topic_name``."""
+    from rosbags.rosbag1 import Writer
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    msg = ts.types["std_msgs/msg/Float64"]
+    path = tmp_path / "odd.bag"
+    with Writer(path) as w:
+        conn = w.add_connection(written, msg.__msgtype__, typestore=ts)
+        for i in range(5):
+            w.write(conn, (i + 1) * 10**9, ts.serialize_ros1(msg(data=float(i)), msg.__msgtype__))
+    want = "/battery/level" if written.startswith("/") else "battery/level"
+    walked = walk_ros1(path)
+    assert {m.topic for m in walked.messages} == {want}
+    for fast in ("1", "0"):
+        monkeypatch.setenv(FAST_INGEST_ENV, fast)
+        raw = read_raw(path, [want])
+        assert list(raw.topics) == [want], fast
+        assert len(raw.topics[want].payloads) == 5, fast

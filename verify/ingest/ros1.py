@@ -22,7 +22,6 @@ is a few chunks plus the wanted records, whatever the file's size.
 
 from __future__ import annotations
 
-import bz2
 import os
 import struct
 from collections.abc import Iterable, Iterator, Sequence
@@ -32,7 +31,6 @@ from typing import overload
 
 import numpy as np
 import numpy.typing as npt
-from lz4.frame import decompress as lz4_decompress  # type: ignore[import-untyped]  # a rosbags dependency
 from rosbags.typesys.msg import normalize_msgtype
 
 from verify.errors import FastPathError as _UnusualError  # the fast path declines: fall back
@@ -47,7 +45,17 @@ from verify.ingest.records import (
     record_size_at,
     retain_freed_memory,
 )
-from verify.ingest.ros1records import MAGIC, MalformedError, Op, header_fields, index_data
+from verify.ingest.ros1records import (
+    MAGIC,
+    CutError,
+    MalformedError,
+    Op,
+    decompress,
+    header_fields,
+    index_data,
+    record_at,
+    topic_name,
+)
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
 
@@ -148,14 +156,18 @@ class _File:
         return data
 
     def record(self, pos: int) -> tuple[dict[str, bytes], int, int, int]:
-        """Record at ``pos`` -> (header fields, data start, data length, next position); data not read."""
+        """Record at ``pos`` -> (header fields, data start, data length, next position); data not read. The record
+        layer's layout (``verify.ingest.ros1records.record_at``) over the header read from the file."""
         (hlen,) = struct.unpack("<I", self.read(pos, 4))
-        head = self.read(pos + 4, hlen + 4)
-        (dlen,) = struct.unpack_from("<I", head, hlen)
-        start = pos + 8 + hlen
-        if start + dlen > self.size:
+        head = self.read(pos, hlen + 8)
+        try:
+            rec = record_at(head, 0, len(head), head_only=True)
+        except (CutError, MalformedError) as err:
+            raise _UnusualError(f"record at byte {pos}: {err}") from None
+        start = pos + rec.data_start
+        if start + rec.data_len > self.size:
             raise _UnusualError("cut record")
-        return _fields(head[:hlen]), start, dlen, start + dlen
+        return rec.header, start, rec.data_len, start + rec.data_len
 
 
 def _u32(value: bytes, name: str) -> int:
@@ -177,10 +189,11 @@ def _op(header: dict[str, bytes], want: int) -> None:
 
 
 def _topic(name: str) -> str:
-    """Topic normalisation as rosbags does it (single slashes, keep a leading one)."""
-    if not name:
-        raise _UnusualError("empty topic name")
-    return f"{'/' * (name[0] == '/')}{'/'.join(x for x in name.split('/') if x)}"
+    """Topic normalisation as rosbags does it (``verify.ingest.ros1records.topic_name``)."""
+    try:
+        return topic_name(name)
+    except MalformedError as err:
+        raise _UnusualError(str(err)) from None
 
 
 def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
@@ -237,8 +250,8 @@ def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) ->
         retain_freed_memory()
         try:
             raw = read_scratch(f.fd, start, dlen)
-            inner = bz2.decompress(raw) if compression == "bz2" else lz4_decompress(raw)
-        except (OSError, ValueError, RuntimeError, EOFError, SpanError) as err:
+            inner = decompress(raw, compression)
+        except (OSError, ValueError, RuntimeError, EOFError, SpanError, MalformedError) as err:
             raise _UnusualError(f"chunk does not decompress ({err})") from err
     if len(inner) != size:
         raise _UnusualError("chunk size differs from its header")

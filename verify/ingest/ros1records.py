@@ -42,6 +42,7 @@ __all__ = [
     "header_fields",
     "index_data",
     "record_at",
+    "topic_name",
 ]
 
 #: the first 13 bytes of every ROS1 bag (format 2.0)
@@ -152,7 +153,15 @@ def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[i
     if typ.count("/") == 1:  # ROS1 names are pkg/Name; rosbags names them pkg/msg/Name
         pkg, name = typ.split("/")
         typ = f"{pkg}/msg/{name}"
-    return cid, topic.decode("utf-8", "replace"), typ, has_def
+    return cid, topic_name(topic.decode("utf-8", "replace")), typ, has_def
+
+
+def topic_name(name: str) -> str:
+    """A connection's topic as rosbags names it: repeated slashes made single, a leading one kept (every reader of
+    a ROS1 bag -- indexed, salvage, follower -- names a topic alike)."""
+    if not name:
+        raise MalformedError("a connection record with an empty topic")
+    return f"{'/' * (name[0] == '/')}{'/'.join(x for x in name.split('/') if x)}"
 
 
 def decompress(data: bytes | memoryview, compression: str) -> bytes:
