@@ -31,7 +31,6 @@ from typing import overload
 
 import numpy as np
 import numpy.typing as npt
-from rosbags.typesys.msg import normalize_msgtype
 
 from verify.errors import FastPathError as _UnusualError  # the fast path declines: fall back
 from verify.ingest.readerrors import one_type_per_topic
@@ -50,11 +49,11 @@ from verify.ingest.ros1records import (
     CutError,
     MalformedError,
     Op,
+    connection_of,
     decompress,
     header_fields,
     index_data,
     record_at,
-    topic_name,
 )
 
 __all__ = ["PayloadBuffer", "Ros1Index", "read_ros1_fast"]
@@ -188,25 +187,20 @@ def _op(header: dict[str, bytes], want: int) -> None:
         raise _UnusualError(f"expected op {want:#x}")
 
 
-def _topic(name: str) -> str:
-    """Topic normalisation as rosbags does it (``verify.ingest.ros1records.topic_name``)."""
-    try:
-        return topic_name(name)
-    except MalformedError as err:
-        raise _UnusualError(str(err)) from None
-
-
 def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
     conns: list[_Conn] = []
     for _ in range(count):
         header, start, dlen, pos = f.record(pos)
         _op(header, _OP_CONN)
-        info = _fields(f.read(start, dlen))
-        typ = info.get("type", b"").decode()
-        if not typ or "md5sum" not in info or "message_definition" not in info:
-            raise _UnusualError("connection without type, md5sum or definition")
-        conns.append(_Conn(_u32(header["conn"], "conn"), _topic(header["topic"].decode()),
-                           normalize_msgtype(typ), bool(info["message_definition"].decode().strip())))
+        data = f.read(start, dlen)
+        info = _fields(data)
+        if not info.get("type") or "md5sum" not in info or "message_definition" not in info:
+            raise _UnusualError("connection without type, md5sum or definition")  # rosbags decides
+        try:
+            cid, topic, typ, has_def = connection_of(header, data)
+        except MalformedError as err:
+            raise _UnusualError(str(err)) from None
+        conns.append(_Conn(cid, topic, typ, has_def))
     return conns, pos
 
 

@@ -22,6 +22,7 @@ from enum import IntEnum
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.typesys.msg import normalize_msgtype
 
 from verify.ingest.records import ROS1, CutError, MalformedError, lz4_decompress, walk_chain
 
@@ -150,10 +151,8 @@ def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[i
     fields = header_fields(data)
     typ = fields.get("type", b"").decode("utf-8", "replace")
     has_def = bool(fields.get("message_definition", b"").strip())
-    if typ.count("/") == 1:  # ROS1 names are pkg/Name; rosbags names them pkg/msg/Name
-        pkg, name = typ.split("/")
-        typ = f"{pkg}/msg/{name}"
-    return cid, topic_name(topic.decode("utf-8", "replace")), typ, has_def
+    # ROS1 names are pkg/Name; rosbags names them pkg/msg/Name (its own rule, so every reader names a type alike)
+    return cid, topic_name(topic.decode("utf-8", "replace")), normalize_msgtype(typ) if typ else typ, has_def
 
 
 def topic_name(name: str) -> str:
