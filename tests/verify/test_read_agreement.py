@@ -327,31 +327,17 @@ def test_compressed_mcap_folders_are_read_by_the_projects_reader(tmp_path: Path,
     assert used  # the plain path went through the project's scan, not rosbags' storage
 
 
-def test_an_mcap_cut_in_its_summary_is_partial_for_certify_and_watch(seeds: dict[str, Path], tmp_path: Path,
-                                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    """A file cut after its data section (DataEnd) but before its footer: certify's scan stops in the summary
-    (truncated: --salvage reads every message, partial); watch took DataEnd as the recorder's close and passed it.
-    The follower now waits for the footer as the scan does: both judge it partial (never a pass)."""
-    buf = seeds["mcap-zstd"].read_bytes()
-    path = tmp_path / "cut.mcap"
-    path.write_bytes(buf[: len(buf) - 100])
-    codes = []
-    for argv in (["certify", str(path), "--salvage"], ["watch", str(path), "--time-base", "auto"]):
-        with pytest.raises(SystemExit) as exc:
-            main([*argv, "--scenario", "nexus-sml", "--spec", SPEC])
-        codes.append(exc.value.code)
-        capsys.readouterr()
-    assert codes == [2, 2]
-
-
-def test_a_ros1_bag_cut_in_its_index_is_partial_for_certify_and_watch(seeds: dict[str, Path], tmp_path: Path,
-                                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """A bag cut inside its index (after the bag header already points to it): certify reads it as truncated
-    (--salvage: partial); the follower took reaching ``index_pos`` as the recorder's close and passed it. It now
-    waits for the whole index the bag header announces: both judge it partial."""
-    buf = seeds["bag-lz4"].read_bytes()
-    path = tmp_path / "cut.bag"
-    path.write_bytes(buf[: len(buf) - 30])
+@pytest.mark.parametrize(("seed", "cut_b"), [("mcap-zstd", 100), ("bag-lz4", 30)])
+def test_a_log_cut_after_its_data_is_partial_for_certify_and_watch(seeds: dict[str, Path], tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str], seed: str,
+                                                                    cut_b: int) -> None:
+    """An MCAP file cut after its data section (DataEnd) but before its footer, a ROS1 bag cut inside its index
+    (after the bag header already points to it): certify reads each as truncated (--salvage: partial); the follower
+    took DataEnd, or reaching ``index_pos``, as the recorder's close and passed them. It now waits for the footer, or
+    the whole index the bag header announces, as the scan does: both judge them partial (never a pass)."""
+    buf = seeds[seed].read_bytes()
+    path = tmp_path / f"cut{seeds[seed].suffix}"
+    path.write_bytes(buf[: len(buf) - cut_b])
     codes = []
     for argv in (["certify", str(path), "--salvage"], ["watch", str(path), "--time-base", "auto"]):
         with pytest.raises(SystemExit) as exc:
