@@ -345,3 +345,28 @@ def test_a_log_cut_after_its_data_is_partial_for_certify_and_watch(seeds: dict[s
         codes.append(exc.value.code)
         capsys.readouterr()
     assert codes == [2, 2]
+
+
+@pytest.mark.parametrize("fast", ["1", "0"])
+def test_a_folder_whose_metadata_names_a_topic_its_storage_lacks_is_damaged_for_certify_and_watch(
+        seeds: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        fast: str) -> None:
+    """One flipped bit in a sqlite3 folder's metadata.yaml renamed /nexus/cmd_vel to /nezus/cmd_vel (the fault
+    campaign, seed 65 case 37): certify took the folder's topics from metadata.yaml (no cmd_vel: inconclusive, exit
+    2), watch the storage's (pass, exit 0). One rule now (``mcapfile.check_declared_topics``): a declared topic with
+    messages that the storage does not hold is damage, exit 3 naming both sides, for both read paths and watch."""
+    import shutil
+
+    folder = tmp_path / "renamed"
+    shutil.copytree(seeds["dir"], folder)
+    meta = folder / "metadata.yaml"
+    text = meta.read_text(encoding="utf-8")
+    assert "/nexus/cmd_vel" in text
+    meta.write_text(text.replace("/nexus/cmd_vel", "/nezus/cmd_vel"), encoding="utf-8")
+    monkeypatch.setenv("TUBEMPC_FAST_INGEST", fast)
+    for command in ("certify", "watch"):
+        with pytest.raises(SystemExit) as exc:
+            main([command, str(folder), "--scenario", "nexus-sml", "--spec", SPEC])
+        err = capsys.readouterr().err
+        assert exc.value.code == 3, (command, err)
+        assert "metadata.yaml declares" in err and "/nezus/cmd_vel" in err and "/nexus/cmd_vel" in err, err

@@ -28,7 +28,7 @@ import os
 import stat
 import struct
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path, PurePath
@@ -60,7 +60,8 @@ from verify.ingest.mcaprecords import (
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
-__all__ = ["BagMetadata", "McapLog", "McapTopic", "read_bag_metadata", "read_mcap_log", "regular_file"]
+__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_topics", "read_bag_metadata", "read_mcap_log",
+           "regular_file"]
 
 IntArray = npt.NDArray[np.int64]
 #: libyaml's safe loader when PyYAML has it, else the pure-Python one
@@ -104,6 +105,19 @@ def regular_file(path: Path, what: str) -> None:
     if not stat.S_ISREG(mode):
         raise LogReadError(f"{what} {path.name} is not a regular file (a FIFO, device, socket or folder)",
                            path=str(path.parent))
+
+
+def check_declared_topics(folder: Path, meta: BagMetadata, stored: Collection[str]) -> None:
+    """One rule for a bag folder whose metadata.yaml and storage disagree (certify's two read paths and ``watch``
+    when the recorder has written metadata.yaml): a topic metadata.yaml declares with messages that the storage does
+    not hold is damage, named with both sides (rosbags takes a folder's topics from metadata.yaml, the storage keys
+    its messages by its own topic names: read either way alone, the run would be judged without that topic)."""
+    missing = sorted(t for t, n in meta.counts.items() if n > 0 and t not in stored)
+    if missing:
+        t = missing[0]
+        held = ", ".join(sorted(stored)) or "no topics"
+        raise LogReadError(f"damaged ROS2 bag: metadata.yaml declares {meta.counts[t]} messages on {t}, a topic its "
+                           f"storage does not hold (the storage holds: {held})", path=str(folder))
 
 
 def read_bag_metadata(folder: Path) -> BagMetadata:

@@ -231,6 +231,8 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                 notes.append(f"un-checkpointed write-ahead log {wal.name} ({wal.stat().st_size} bytes) beside "
                              f"{db.name}: the database is opened read-only and immutable, so messages still in the "
                              f"-wal file are not read")
+        if p.is_dir():
+            _check_folder_topics(p)
     if fmt == "ros1" and fast_ingest() and (fast := read_ros1_fast(p, wanted)) is not None:
         topics_out = {topic: RawTopic(topic, msgtype, has_def, log_ns, payloads)
                       for topic, (msgtype, has_def, log_ns, payloads) in fast.topics.items()}
@@ -250,6 +252,27 @@ def read_raw(path: str | Path, topics: Iterable[str], *, salvage: bool = False) 
                                     ) from err
         with gc_paused():
             return _salvage(p, fmt, wanted, [*notes, f"salvaged after: {err.reason}"])
+
+
+def _check_folder_topics(folder: Path) -> None:
+    """A sqlite3 bag folder: the topics its metadata.yaml declares against those its storage files hold
+    (``verify.ingest.mcapfile.check_declared_topics``, the rule ``watch`` applies too). Where either side cannot be
+    read, the readers below report it as before."""
+    from verify.ingest.mcapfile import check_declared_topics, read_bag_metadata  # ROS2 logs only
+
+    try:
+        meta = read_bag_metadata(folder)
+        stored: set[str] = set()
+        for db in _storage_files(folder, "sqlite3"):
+            con = apsw.Connection(f"file:{db}?mode=ro&immutable=1",
+                                  flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+            try:
+                stored |= {str(name) for (name,) in con.execute("SELECT name FROM topics")}
+            finally:
+                con.close()
+    except (LogReadError, apsw.Error, OSError, ValueError, TypeError):
+        return
+    check_declared_topics(folder, meta, stored)
 
 
 #: What rosbags' readers raise on a damaged file, caught only around their calls (open, messages): rosbags checks

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Protocol
 
 from verify.errors import LogReadError
+from verify.ingest.mcapfile import check_declared_topics, read_bag_metadata
 from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
@@ -171,12 +172,14 @@ class SqliteFollower:
         self.finished = False
         self.delivered = 0
         self.last_id = 0
+        self.topic_names: set[str] = set()
 
     def poll(self) -> list[SalvagedMessage]:
         try:
             con = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=1.0)
             try:
                 topics = {int(i): (str(n), str(t)) for i, n, t in con.execute("SELECT id, name, type FROM topics")}
+                self.topic_names = {n for n, _ in topics.values()}
                 rows = con.execute("SELECT id, topic_id, timestamp, data FROM messages WHERE id > ? ORDER BY id",
                                    (self.last_id,)).fetchall()
             finally:
@@ -231,6 +234,15 @@ class FolderFollower:
                 self.format = self.files[f].format
             out.extend(self.files[f].poll())
         self.finished = done and all(f.finished or f.format == "sqlite3" for f in self.files.values())
+        sqlite = [f for f in self.files.values() if isinstance(f, SqliteFollower)]
+        if self.finished and sqlite and len(sqlite) == len(self.files):
+            try:
+                meta = read_bag_metadata(self.path)
+            except LogReadError:
+                meta = None  # certify's readers report an unreadable metadata.yaml; here the folder is not closed
+                self.finished = False
+            if meta is not None:  # the recorder closed it: certify's rule for its topics
+                check_declared_topics(self.path, meta, {n for f in sqlite for n in f.topic_names})
         self.delivered += len(out)
         return out
 
