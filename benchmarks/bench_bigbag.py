@@ -16,8 +16,17 @@ and ROS2 sqlite3, written by rosbags' writers. Then, per format, in one run on a
   byte read once more: shown for what it costs; ``--no-file-digest`` skips it);
 * the floor: what any reader of the topics certification reads must do, and nothing else: ROS1 and MCAP, the
   index (bag index; MCAP summary), then every chunk that holds a wanted topic read and decompressed (lz4 / zstd a
-  few chunks ahead in the same threads as our reader, ``verify.ingest.records.in_order``); sqlite3, one query
-  fetching the wanted topics' rows in log-time order. No record parsing, no decoding, no judging.
+  few chunks ahead in the same threads as our reader, ``verify.ingest.records.in_order``); sqlite3, the bag
+  folder's metadata.yaml (libyaml) and one query fetching the wanted topics' rows in log-time order. No record
+  parsing, no decoding, no judging.
+
+Library imports are outside every side's clock: each child imports rosbags' readers (``rosbags.highlevel``, ROS1
+and ROS2) before its clock starts, as the rosbags loop always did; ours would otherwise pay ``rosbags.rosbag2``'s
+import (~35 ms, mostly ``ruamel.yaml``) inside its first ROS2 log. Its cost is printed (ours' column). What ours
+still pays on its first call is kept in "first call": its own modules for the format (imported on the first log
+of that format), the certificate model's pydantic schema (built on first use), the MITL parser's tables. Ours'
+child then certifies the same log a second time: "second call" is the per-log cost of a process that has
+certified a log before (a batch worker, a user's script); both are printed, with ours/floor for each.
 
 Each side runs ``--repeat`` times (default 3), the two sides alternating, and its fastest run is kept (the machine
 is shared: the fastest run is the least disturbed one); the CPU time (user + system, every thread, from the start
@@ -29,9 +38,11 @@ so the logs are written by children too and this process stays at ~30 MB.) Print
 s / MB, ours s / MB, ratio = rosbags time / ours, and the same for ours + file digest), and last
 ``worst_ratio_vs_rosbags=<min ratio of ours> max_rss_mb=<max over ours> formats=<n>
 worst_ratio_file_digest=<min ratio of ours + file digest> worst_cpu_per_wall_uncompressed=<max CPU / wall of ours
-on ros1-none, mcap-none, sqlite3> worst_ratio_vs_floor=<max of ours' wall / the floor's>``, after a second table
-(floor wall / CPU, ours wall / CPU, ours/floor, ours' CPU per wall). Targets: ratio >= 2 everywhere, ours' RSS <=
-250 MB and within 10 % between --size-gb 1 and 3; ours <= 1.25x the floor; CPU <= 1.2x wall uncompressed.
+on ros1-none, mcap-none, sqlite3> worst_ratio_vs_floor=<max of ours' wall / the floor's>
+worst_ratio_vs_floor_second_call=<the same for ours' second call>``, after a second table (floor wall / CPU, ours
+wall / CPU and ours/floor for the first and the second call, ours' CPU per wall, ours' library import time).
+Targets: ratio >= 2 everywhere, ours' RSS <= 250 MB and within 10 % between --size-gb 1 and 3; ours <= 1.25x the
+floor; CPU <= 1.2x wall uncompressed.
 """
 
 from __future__ import annotations
@@ -218,22 +229,43 @@ def _child_rosbags(path: Path) -> dict[str, Any]:
             "work_cpu_s": work_cpu_s}
 
 
+def _import_readers() -> float:
+    """Import rosbags' readers (ROS1 and ROS2: ``rosbags.highlevel``, as the rosbags loop's child does before its
+    clock starts) and return the seconds it took: library imports are no part of any side's measured work (ours
+    imports ``rosbags.rosbag2`` on its first ROS2 log; ~35 ms here, most of it ``ruamel.yaml``, which rosbags'
+    ``rosbag2`` package imports)."""
+    t0 = time.perf_counter()
+    import rosbags.highlevel  # noqa: F401
+
+    return time.perf_counter() - t0
+
+
 def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
     from tubempc.scenario import builtin_scenario
     from verify.certify import certify_log
 
+    import_s = _import_readers()
     sc = builtin_scenario()
+
+    def once() -> tuple[Any, float, float]:
+        cpu0 = _cpu_s()
+        t0 = time.perf_counter()
+        result = certify_log(path, sc) if digest is None else certify_log(path, sc, digest=digest)
+        return result, time.perf_counter() - t0, _cpu_s() - cpu0
+
     setup_cpu_s = _cpu_s()
-    t0 = time.perf_counter()
-    result = certify_log(path, sc) if digest is None else certify_log(path, sc, digest=digest)
-    wall = time.perf_counter() - t0
-    work_cpu_s = _cpu_s() - setup_cpu_s
+    result, wall, work_cpu_s = once()  # the first call in the process: what one `tubempc certify` pays
+    # the same log again: the per-log cost once the process has certified a log (a batch worker, a second log)
+    second, wall2, cpu2 = once()
     cert = result.certificate
     dq = cert["data_quality"]
     counts = {POSE: dq["pose"].get("count"), NOMINAL: dq["nominal"].get("count"), CMD: dq["cmd_vel"].get("count")}
     digest = cert.get("log_digest") or cert.get("log_sha256")
+    if second.certificate != cert:
+        raise SystemExit(f"{path}: a second certify_log of the same log gave another certificate")
     return {"wall_s": wall, "counts": counts, "verdict": cert["verdict"], "digest": digest,
-            "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s}
+            "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s, "wall2_s": wall2, "work2_cpu_s": cpu2,
+            "import_s": import_s}
 
 
 def _wanted() -> set[str]:
@@ -289,7 +321,7 @@ def _floor_ros1(path: Path, wanted: set[str]) -> int:
 def _floor_mcap(path: Path, wanted: set[str]) -> int:
     """MCAP: the summary (chunk indexes), then every chunk that holds a wanted channel, read and decompressed (zstd
     a few ahead in threads, as the certifier's reader does)."""
-    from rosbags.rosbag2.storage_mcap import McapReader
+    from rosbags.rosbag2.storage_mcap import McapReader  # imported before the clock (_child_floor)
 
     from verify.ingest.mcaprecords import decompress
     from verify.ingest.records import WORKERS, in_order, read_scratch, retain_freed_memory
@@ -319,10 +351,15 @@ def _floor_mcap(path: Path, wanted: set[str]) -> int:
 
 
 def _floor_sqlite(path: Path, wanted: set[str]) -> int:
-    """sqlite3: the wanted topics' rows (topic, log time, payload) in log-time order, one query."""
+    """sqlite3: the bag folder's metadata.yaml (its storage files: what a reader of a bag folder reads first), then
+    the wanted topics' rows (topic, log time, payload) in log-time order, one query."""
     import sqlite3
 
-    (db,) = sorted(path.glob("*.db3"))
+    import yaml
+
+    meta = yaml.load((path / "metadata.yaml").read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    (name,) = meta["rosbag2_bagfile_information"]["relative_file_paths"]
+    db = path / name
     con = sqlite3.connect(f"file:{db}?immutable=1", uri=True)
     try:
         ids = [r[0] for r in con.execute("SELECT id, name FROM topics") if r[1] in wanted]
@@ -338,13 +375,23 @@ def _child_floor(path: Path, fmt: str) -> dict[str, Any]:
     """The floor: what any reader of the wanted topics must do (read and decompress the chunks that hold them;
     sqlite3: fetch their rows), nothing else: no parsing of records, no decoding, no judging."""
     wanted = _wanted()
+    import sqlite3  # noqa: F401  # library imports before the clock, as for ours and the rosbags loop
+
+    import yaml  # noqa: F401
+
+    import verify.ingest.mcaprecords
+    import verify.ingest.records
+    import verify.ingest.ros1records  # noqa: F401
+
+    import_s = _import_readers()
     setup_cpu_s = _cpu_s()
     t0 = time.perf_counter()
     fn = _floor_ros1 if fmt.startswith("ros1") else _floor_sqlite if fmt == "sqlite3" else _floor_mcap
     n_bytes = fn(path, wanted)
     wall = time.perf_counter() - t0
     work_cpu_s = _cpu_s() - setup_cpu_s
-    return {"wall_s": wall, "bytes": n_bytes, "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s}
+    return {"wall_s": wall, "bytes": n_bytes, "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s,
+            "import_s": import_s}
 
 
 def measure(kind: str, path: Path) -> dict[str, Any]:
@@ -362,15 +409,21 @@ def measure(kind: str, path: Path) -> dict[str, Any]:
     # the measured work's CPU, all threads, as the child measured it (RUSAGE_SELF: every thread of the process);
     # what the child spent after it (freeing, interpreter exit) is kept apart: it is no part of the work
     got["cpu_s"] = got.pop("work_cpu_s")
-    got["exit_cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s") - got["cpu_s"]
+    if "work2_cpu_s" in got:  # ours: the second call of certify_log (per log, once the process has certified one)
+        got["cpu2_s"] = got.pop("work2_cpu_s")
+    got["exit_cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s") - got["cpu_s"] - got.get("cpu2_s", 0.0)
     return got
 
 
 def best_of(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The fastest run, with the largest peak RSS and the smallest CPU time seen."""
     best = min(runs, key=lambda r: r["wall_s"])
-    return {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
-            "exit_cpu_s": min(r["exit_cpu_s"] for r in runs)}
+    out = {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
+           "exit_cpu_s": min(r["exit_cpu_s"] for r in runs)}
+    for key in ("wall2_s", "cpu2_s", "import_s"):
+        if key in best:
+            out[key] = min(r[key] for r in runs)
+    return out
 
 
 def main() -> None:
@@ -432,22 +485,25 @@ def main() -> None:
               f"{base['wall_s'] / ours['wall_s']:.2f}x | {base['cpu_s'] / ours['cpu_s']:.2f}x | {extra} | "
               f"{ours['verdict']} |")
     print()
-    print("| log | floor: wall s / CPU s | certify_log: wall s / CPU s | ours/floor (wall) | ours CPU/wall | "
-          "ours: CPU s after the work (exit, not counted) |")
-    print("|---|---|---|---|---|---|")
+    print("| log | floor: wall s / CPU s | certify_log, first call: wall s / CPU s | ours/floor (wall) | "
+          "ours CPU/wall | certify_log, second call: wall s / CPU s | ours/floor (wall), second call | "
+          "library imports before the clock: ours s | ours: CPU s after the work (exit, not counted) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for fmt, _size, _base, ours, _whole in rows:
         fl = floors[fmt]
-        print(f"| {fmt} | {fl['wall_s']:.2f} / {fl['cpu_s']:.2f} | {ours['wall_s']:.2f} / {ours['cpu_s']:.2f} | "
+        print(f"| {fmt} | {fl['wall_s']:.3f} / {fl['cpu_s']:.3f} | {ours['wall_s']:.3f} / {ours['cpu_s']:.3f} | "
               f"{ours['wall_s'] / fl['wall_s']:.2f}x | {ours['cpu_s'] / ours['wall_s']:.2f} | "
-              f"{ours['exit_cpu_s']:.2f} |")
+              f"{ours['wall2_s']:.3f} / {ours['cpu2_s']:.3f} | {ours['wall2_s'] / fl['wall_s']:.2f}x | "
+              f"{ours['import_s']:.3f} | {ours['exit_cpu_s']:.2f} |")
     worst_floor = max(o["wall_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
+    worst_floor2 = max(o["wall2_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
     plain = [o["cpu_s"] / o["wall_s"] for f, _s, _b, o, _w in rows if f in UNCOMPRESSED]
     worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o, _w in rows)
     wholes = [b["wall_s"] / w["wall_s"] for _f, _s, b, _o, w in rows if w is not None]
     print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o, _w in rows):.0f} "
           f"formats={len(rows)}" + (f" worst_ratio_file_digest={min(wholes):.2f}" if wholes else "") +
           (f" worst_cpu_per_wall_uncompressed={max(plain):.2f}" if plain else "") +
-          f" worst_ratio_vs_floor={worst_floor:.2f}")
+          f" worst_ratio_vs_floor={worst_floor:.2f} worst_ratio_vs_floor_second_call={worst_floor2:.2f}")
 
 
 if __name__ == "__main__":
