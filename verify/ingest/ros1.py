@@ -45,6 +45,7 @@ from verify.ingest.records import (
     retain_freed_memory,
 )
 from verify.ingest.ros1records import (
+    INDEX_ENTRY,
     MAGIC,
     CutError,
     MalformedError,
@@ -414,20 +415,49 @@ def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selec
     return mine, sum(len(x) for x in indexes.values())
 
 
+#: index data record header bytes -> (connection id, entry count), for headers that passed ``_index_record``'s
+#: checks: a bag repeats a handful of them (one per connection and per-chunk message count) in every chunk
+_INDEX_HEADS: dict[bytes, tuple[int, int]] = {}
+_INDEX_HEADS_MAX = 4096
+
+
 def _index_records(f: _File, pos: int, count: int) -> tuple[dict[int, npt.NDArray[np.void]], int]:
     """A chunk's index data records (the record layer's ``index_data``) -> per connection its entries."""
     out: dict[int, npt.NDArray[np.void]] = {}
     for _ in range(count):
-        header, start, dlen, pos = f.record(pos)
+        cid, entries, pos = _index_record(f, pos)
+        if cid in out:
+            raise _UnusualError("two index records for one connection in a chunk")
+        out[cid] = entries
+    return out, pos
+
+
+def _index_record(f: _File, pos: int) -> tuple[int, npt.NDArray[np.void], int]:
+    """The index data record at ``pos`` -> (connection id, its entries, next position). A header seen before (the
+    same bytes) is not parsed again: what its fields decide (op, version, connection, count) is known; the data
+    length, the record's end and the entries are checked and read for every record, as ``index_data`` does."""
+    (hlen,) = struct.unpack("<I", f.read(pos, 4))
+    head = f.read(pos, hlen + 8)
+    known = _INDEX_HEADS.get(head[4 : 4 + hlen])
+    if known is None:
+        header, start, dlen, nxt = f.record(pos)
         _op(header, _OP_INDEX)
         try:
             cid, entries = index_data(header, f.read(start, dlen))
         except MalformedError as err:
             raise _UnusualError(str(err)) from None
-        if cid in out:
-            raise _UnusualError("two index records for one connection in a chunk")
-        out[cid] = entries
-    return out, pos
+        if len(_INDEX_HEADS) >= _INDEX_HEADS_MAX:
+            _INDEX_HEADS.clear()
+        _INDEX_HEADS[head[4 : 4 + hlen]] = (cid, entries.shape[0])
+        return cid, entries, nxt
+    cid, n = known
+    (dlen,) = struct.unpack("<I", head[4 + hlen :])
+    start = pos + 8 + hlen
+    if start + dlen > f.size:
+        raise _UnusualError("cut record")
+    if dlen != INDEX_ENTRY.itemsize * n:
+        raise _UnusualError(f"an index data record of connection {cid} holds {dlen} bytes for {n} entries")
+    return cid, np.frombuffer(f.read(start, dlen), dtype=INDEX_ENTRY), start + dlen
 
 
 def read_ros1_fast(path: Path, topics: Iterable[str]) -> Ros1Index | None:
