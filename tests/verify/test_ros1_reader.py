@@ -17,7 +17,8 @@ from tubempc.scenario import Scenario
 from verify.errors import TruncatedLogError
 from verify.ingest.decode import decode_pose
 from verify.ingest.raw import _read_indexed, read_raw
-from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
+from verify.ingest.ros1 import _INDEX_HEADS, PayloadBuffer, read_ros1_fast
+from verify.ingest.ros1records import MAGIC, Op, record_at
 
 STORE = get_typestore(Stores.ROS1_NOETIC)
 T = STORE.types
@@ -209,3 +210,49 @@ def test_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, monkeyp
     else:
         assert read_b[0] > size_b // 2
     _same_as_rosbags(path, {"/pose"})
+
+
+def _last_index_records(data: bytes) -> list[tuple[int, int, int]]:
+    """(record position, header length, data length) of each chunk's last index data record, in file order."""
+    out: list[tuple[int, int, int]] = []
+    pos, last = len(MAGIC), None
+    while pos < len(data):
+        rec = record_at(data, pos, len(data))
+        if rec.op == Op.INDEX_DATA:
+            last = (pos, rec.data_start - pos - 8, rec.data_len)
+        elif last is not None:
+            out.append(last)
+            last = None
+        pos = rec.end
+    return out
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_index_headers_seen_before_are_still_checked(tmp_path: Path, compression: str | None) -> None:
+    """Index data record headers repeat from chunk to chunk, and a header seen before is not parsed again; what
+    lies outside the header is checked for every record: the same bag read with the headers known (from a
+    previous read) gives the same messages, and a record whose data length disagrees with its (known) header's
+    count is declined as before."""
+    path = _write(tmp_path / "run.bag", compression)
+    _INDEX_HEADS.clear()
+    cold = read_ros1_fast(path, {"/pose", "/status"})
+    assert cold is not None and _INDEX_HEADS  # the headers are known now
+    warm = read_ros1_fast(path, {"/pose", "/status"})
+    assert warm is not None
+    for topic, (msgtype, has_def, log_ns, payloads) in cold.topics.items():
+        assert (msgtype, has_def) == warm.topics[topic][:2]
+        assert log_ns.tolist() == warm.topics[topic][2].tolist() and list(payloads) == list(warm.topics[topic][3])
+    data = path.read_bytes()
+    records = _last_index_records(data)
+    headers = [data[p + 4 : p + 4 + h] for p, h, _n in records]
+    # a chunk's last index record whose header an earlier chunk's repeats: its data length field says one entry
+    # fewer than its count (nothing after it is read from that length: the next chunk's place is in the index)
+    k = next(i for i in range(len(records)) if headers[i] in headers[:i])
+    pos, hlen, dlen = records[k]
+    at = pos + 4 + hlen
+    damaged = bytearray(data)
+    damaged[at : at + 4] = (dlen - 12).to_bytes(4, "little")
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(damaged))
+    assert bytes(damaged[pos + 4 : pos + 4 + hlen]) in _INDEX_HEADS  # known: its data length is checked all the same
+    assert read_ros1_fast(bad, {"/pose", "/status"}) is None
