@@ -389,6 +389,8 @@ def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
         return rows.ravel()
     out_off = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(lengths, out=out_off[1:])
+    if (kept := _gather_in_order(u8, starts, lengths, int(out_off[-1]))) is not None:
+        return kept
     out = np.empty(int(out_off[-1]), dtype=np.uint8)
     block = 1 << 22
     i = 0
@@ -400,3 +402,19 @@ def gather(u8: U8Array, starts: IntArray, lengths: IntArray) -> U8Array:
         out[o0:o1] = u8[idx]
         i = j
     return out
+
+
+def _gather_in_order(u8: U8Array, starts: IntArray, lengths: IntArray, total: int) -> U8Array | None:
+    """``gather`` of non-empty pieces in increasing order that do not overlap and cover most of their span (records
+    read back to back with little between them): a mask of the span's bytes to keep (one byte per byte of the span,
+    where the index arrays of the general path take 24 per byte copied). None when the pieces are not so."""
+    lo, hi = int(starts[0]), int(starts[-1] + lengths[-1])
+    if lo < 0 or hi > u8.shape[0] or hi - lo > 4 * total or not bool(np.all(lengths > 0)) or \
+            not bool(np.all(starts[1:] >= starts[:-1] + lengths[:-1])):
+        return None
+    edge = np.zeros(hi - lo + 1, dtype=np.int8)  # +1 where a piece starts, -1 where it ends (distinct positions)
+    edge[starts - lo] += 1
+    edge[starts + lengths - lo] -= 1
+    keep = np.cumsum(edge[:-1], dtype=np.int8).view(bool)  # 1 inside a piece, 0 between pieces
+    kept: U8Array = u8[lo:hi][keep]
+    return kept
