@@ -5,6 +5,7 @@ topic is checked structurally but not decompressed, by both read paths."""
 
 from __future__ import annotations
 
+import os
 import random
 import string
 import struct
@@ -314,3 +315,32 @@ def test_every_ros1_reader_names_a_topic_as_rosbags_does(tmp_path: Path, monkeyp
         raw = read_raw(path, [want])
         assert list(raw.topics) == [want], fast
         assert len(raw.topics[want].payloads) == 5, fast
+
+
+def test_the_mcap_record_walk_reads_each_chunks_neighbourhood_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                                                   ) -> None:
+    """The indexed MCAP reader's check that the top-level records chain (``mcapfile._records_chain``) reads a
+    chunk's head, its fixed fields and the message index records after it in one read, not one read each; and
+    still accepts the file."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    from verify.ingest import mcapfile
+
+    path, _camera = _mcap_with_camera_chunks(tmp_path / "run.mcap")
+    storage = McapReader(path)
+    storage.open()
+    try:
+        n_chunks = len(storage.chunks)
+        real = os.pread
+        reads = [0]
+
+        def counting(fd: int, n: int, pos: int) -> bytes:
+            reads[0] += 1
+            return real(fd, n, pos)
+
+        monkeypatch.setattr(os, "pread", counting)
+        assert mcapfile._records_chain(path, storage)
+    finally:
+        storage.close()
+    assert n_chunks >= 5
+    assert reads[0] <= n_chunks + 2, f"{reads[0]} reads for {n_chunks} chunks"

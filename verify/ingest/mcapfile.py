@@ -393,9 +393,10 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
         with file.open("rb") as fh:
             fd = fh.fileno()
             size = os.fstat(fd).st_size
+            pread = _Ahead(fd).pread
             pos = len(MAGIC)
             while True:
-                head = os.pread(fd, RECORD_HEAD + CHUNK_FIXED + 4, pos)
+                head = pread(RECORD_HEAD + CHUNK_FIXED + 4, pos)
                 if len(head) < RECORD_HEAD:
                     return False
                 op = head[0]
@@ -410,10 +411,10 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
                     if info is None or int(info.chunk_length) != RECORD_HEAD + length:
                         return False
                     seen += 1
-                    if not _chunk_as_indexed(fd, pos, length, info):
+                    if not _chunk_as_indexed(pread, pos, length, info):
                         return False
                 elif op in _PARSED:
-                    content = os.pread(fd, length, pos + RECORD_HEAD)
+                    content = pread(length, pos + RECORD_HEAD)
                     if len(content) != length:
                         return False
                     record_messages(op, memoryview(content), found)
@@ -422,15 +423,38 @@ def _records_chain(file: Path, storage: McapReader) -> bool:
         return False
 
 
-def _chunk_as_indexed(fd: int, pos: int, length: int, info: ChunkInfo) -> bool:
+class _Ahead:
+    """``os.pread`` of one file, small reads served from a block read ahead (a chunk's head, the message index
+    records after it and the next chunk's head come in one read): the same bytes as ``os.pread``, a short read
+    included where the file ends."""
+
+    BLOCK_B = 8192
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.block = b""
+        self.at = 0
+
+    def pread(self, n: int, pos: int) -> bytes:
+        rel = pos - self.at
+        if rel >= 0 and rel + n <= len(self.block):
+            return self.block[rel : rel + n]
+        if n >= self.BLOCK_B:
+            return os.pread(self.fd, n, pos)
+        self.block, self.at = os.pread(self.fd, self.BLOCK_B, pos), pos
+        return self.block[:n]
+
+
+def _chunk_as_indexed(pread: Callable[[int, int], bytes], pos: int, length: int, info: ChunkInfo) -> bool:
     """Whether the chunk record at ``pos`` (content ``length`` bytes) passes the record layer's structural check
     (``chunk_layout``: fields within the record, a compression the format defines) and is the chunk its index
-    entry describes (the indexed reader reads it by the index): only its fixed fields and compression are read."""
-    fixed = os.pread(fd, min(length, CHUNK_FIXED + 4), pos + RECORD_HEAD)
+    entry describes (the indexed reader reads it by the index): only its fixed fields and compression are read
+    (``pread(n, pos)``: the file's bytes, as ``os.pread``)."""
+    fixed = pread(min(length, CHUNK_FIXED + 4), pos + RECORD_HEAD)
     if len(fixed) < CHUNK_FIXED + 4:
         return False
     (name_len,) = struct.unpack_from("<I", fixed, CHUNK_FIXED)
-    head = os.pread(fd, min(length, CHUNK_FIXED + 4 + name_len + 8), pos + RECORD_HEAD)
+    head = pread(min(length, CHUNK_FIXED + 4 + name_len + 8), pos + RECORD_HEAD)
     try:
         compression, usize, _crc, _at, stored = chunk_layout(head, length)
     except MalformedError:
