@@ -23,15 +23,17 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tubempc.mitl import Formula
-from tubempc.scenario import load_scenario
+from tubempc.mitl import Always, Eventually, Formula, Next, Until, parse, subformulas
+from tubempc.scenario import Scenario, load_scenario
 from tubempc.strategies import formulas, intervals
 from verify import certify_data
-from verify.certificate import Certificate, Verdict
+from verify.certificate import Certificate, CheckEntry, ObligationEntry, Verdict
 from verify.certify import check_lines
 from verify.ingest import LogData, PoseStream
 from verify.ingest.fields import SignalStream
 from verify.junit import certificate_suite, suite_element
+from verify.online import Decision, OnlineMonitor
+from verify.online.states import final_line
 from verify.report import check_row, fmt_margin, fmt_time, html_report, markdown_report, obligation_row
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +53,7 @@ def formula_strategy() -> st.SearchStrategy[Formula]:
 
 
 @st.composite
-def logs(draw: st.DrawFn) -> LogData:
+def logs(draw: st.DrawFn, sc: Scenario = SC) -> LogData:
     n = draw(st.integers(1, 25))
     steps = draw(st.lists(st.sampled_from((1, 2, 50_000_000, 100_000_000, 100_000_000, 700_000_000)),
                           min_size=n - 1, max_size=n - 1))
@@ -64,7 +66,8 @@ def logs(draw: st.DrawFn) -> LogData:
     if dups:  # disagreeing duplicates: unknown to the formula, judged by the per-sample checks
         k = np.sort(np.array(dups, dtype=np.int64))
         et = np.insert(t, k + 1, t[k])
-        ex = np.insert(x, k + 1, x[k] + 0.3)
+        moved = x[k] + 0.3
+        ex = np.insert(x, k + 1, np.where(moved != x[k], moved, 0.5))  # 1e308 + 0.3 == 1e308: another value
         ey = np.insert(y, k + 1, y[k])
         every = PoseStream(et, ex, ey, np.zeros(et.size))
         xx = x.copy()
@@ -77,7 +80,7 @@ def logs(draw: st.DrawFn) -> LogData:
                                         dtype=np.int64) * 1_000_000)
         vals = np.array(draw(st.lists(st.sampled_from(VALUES), min_size=st_ns.size, max_size=st_ns.size)))
         for name in ("slow", "crawl"):
-            signals[name] = SignalStream(name, SC.signals[name], st_ns, vals.copy(), 100_000_000, "header")
+            signals[name] = SignalStream(name, sc.signals[name], st_ns, vals.copy(), 100_000_000, "header")
     cmd_t = cmd_u = None
     if draw(st.booleans()):
         cmd_t = t.copy()
@@ -173,3 +176,117 @@ def test_every_front_end_shows_the_certificates_values(log: LogData, formula: Fo
         if entry.first_violation_time is not None:
             assert f"first violation at t={entry.first_violation_time:.2f} s" in lines
     ET.fromstring(ET.tostring(suite))  # well-formed
+
+
+#: the room scenario with its signals on their own 10 Hz topic (a fixed hold: the online monitor and the certificate
+#: then hold every message alike, without the online re-estimate of a median spacing)
+SC_RATE = SC.model_copy(update={"signals": {n: s.model_copy(update={"topic": "/speed", "rate_hz": 10.0})
+                                            for n, s in SC.signals.items()}})
+
+
+def _online(log: LogData, formula: Formula, update_every: int, pending: int) -> tuple[OnlineMonitor, list[Decision]]:
+    """The log's samples pushed in time order (each signal's messages before the pose sample of their instant), with
+    an ``update()`` after every ``update_every``-th pose sample and at the end."""
+    checks = ["spec", "workspace", "obstacle_clearance"] + (["input_box"] if log.cmd_t_ns is not None else [])
+    mon = OnlineMonitor(SC_RATE, spec=str(formula), checks=checks, max_pending=pending)
+    every = log.pose_samples if log.pose_samples is not None else log.pose
+    events: list[tuple[int, int, str, tuple[float, ...]]] = []
+    for name, s in log.signals.items():
+        events += [(int(t), 0, name, (float(v),)) for t, v in zip(s.t_ns, s.value, strict=True)]
+    events += [(int(t), 1, "pose", (float(x), float(y)))
+               for t, x, y in zip(every.t_ns, every.x_m, every.y_m, strict=True)]
+    if log.cmd_t_ns is not None and log.cmd_u is not None:
+        events += [(int(t), 2, "cmd", tuple(float(c) for c in u)) for t, u in zip(log.cmd_t_ns, log.cmd_u, strict=True)]
+    decisions: list[Decision] = []
+    poses = 0
+    for t, kind, stream, args in sorted(events, key=lambda e: (e[0], e[1])):
+        if kind == 0:
+            mon.push_signal(stream, t, *args)
+        elif kind == 1:
+            mon.push_pose(t, *args)
+            poses += 1
+            if poses % update_every == 0:
+                decisions += mon.update()
+        else:
+            mon.push_cmd(t, *args)
+    decisions += mon.update()
+    mon.close()
+    return mon, decisions + mon.final_decisions
+
+
+def _same(a: float | None, b: float | None) -> bool:
+    a = None if a is None or not math.isfinite(a) else a
+    b = None if b is None or not math.isfinite(b) else b
+    return (a is None and b is None) or (a is not None and b is not None and math.isclose(a, b, rel_tol=1e-9,
+                                                                                            abs_tol=2e-9))
+
+
+@settings(deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(log=logs(SC_RATE), formula=formula_strategy(), update_every=st.sampled_from((1, 3, 1000)),
+       pending=st.sampled_from((1, 4, 100)))
+def test_watch_and_the_online_decisions_say_what_the_certificate_says(log: LogData, formula: Formula,
+                                                                       update_every: int, pending: int) -> None:
+    """The online monitor fed the same samples (any batching): ``close()`` gives the certificate's checks; the
+    lines ``watch`` prints at the end (``final_lines``) are the certificate's obligations and checks formatted by
+    the same function; every decision made on the way states the certificate's verdict and first violation, its
+    decision time is the certificate's ``decided_at`` (obligations), and a margin it states is the certificate's."""
+    checks = ["spec", "workspace", "obstacle_clearance"] + (["input_box"] if log.cmd_t_ns is not None else [])
+    cert = Certificate.model_validate(certify_data(log, SC_RATE, spec=str(formula), checks=checks).certificate)
+    mon, decisions = _online(log, formula, update_every, pending)
+    result = mon.close()
+    t0 = mon.t0_ns
+    assert t0 == log.time0_ns
+    by_name: dict[str, ObligationEntry | CheckEntry] = {**{o.formula: o for o in cert.panels},
+                                                        **{c.name: c for c in cert.checks}}
+    online = {c.name: c for c in result.checks}
+    assert sorted(online) == sorted(c.name for c in cert.checks)
+    # a duplicate stamp with other values that arrives after its sample was judged (an update between the two):
+    # the formula judged it known, the certificate unknown; the formula then never passes online (documented)
+    late = mon._formula_late_conflicts > 0
+    formula_names = {"spec_trajectory", "spec_timed_run", *(o.formula for o in cert.panels)}
+    if late:
+        assert all(online[n].verdict != "pass" for n in ("spec_trajectory", "spec_timed_run"))
+        assert all(" PASS" not in line for line in mon.state().final_lines()[:len(cert.panels)])
+    for c in cert.checks:
+        o = online[c.name]
+        if late and c.name in formula_names:
+            continue
+        fv = None if o.first_violation_ns is None else (o.first_violation_ns - t0) * 1e-9
+        assert (o.verdict, c.name) == (c.verdict.value, c.name)
+        assert _same(o.margin, c.margin), (c.name, o.margin, c.margin)
+        assert _same(fv, c.first_violation_time), (c.name, fv, c.first_violation_time)
+    # a formula mixing metres and a signal's unit states its margin's unit online only where every atom has it
+    # (the certificate names the atom that gave the margin); the numbers and verdicts are the same
+    state = mon.state()
+    units = {c.name: c.unit for c in (*state.obligations, *state.checks)}
+    want_lines = sorted([final_line(o.formula, o.verdict.value, o.margin, units[o.formula] and o.margin_unit,
+                                    o.first_violation_time) for o in cert.panels]
+                        + [final_line(c.name, c.verdict.value, c.margin, units[c.name] and c.margin_unit,
+                                      c.first_violation_time) for c in cert.checks])
+    for name, unit in units.items():
+        if unit is not None and by_name[name].margin is not None:
+            assert unit == by_name[name].margin_unit, (name, unit, by_name[name].margin_unit)
+    if not late:
+        assert sorted(state.final_lines()) == want_lines
+    for d in decisions:
+        entry = by_name[d.name]
+        if late and d.name in formula_names:
+            continue
+        assert d.verdict == entry.verdict.value, (d, entry.verdict)
+        assert _same(d.first_violation_s, entry.first_violation_time), (d, entry.first_violation_time)
+        if d.margin is not None:
+            assert _same(d.margin, entry.margin), (d, entry.margin)
+        if isinstance(entry, ObligationEntry) and entry.decided_at is not None and d.verdict != "inconclusive":
+            # a nested window is reported once its inner window's values are final: later, never earlier
+            # (docs/online.md, "Decision times"); otherwise when the data decided it
+            if _nested(parse(d.name)):
+                assert d.time_s >= entry.decided_at - 2e-9, (d, entry.decided_at)
+            else:
+                assert _same(d.time_s, entry.decided_at), (d, entry.decided_at)
+
+
+def _nested(f: Formula) -> bool:
+    """A window or ``U``/``X`` under another temporal operator."""
+    temporal = (Always, Eventually, Until, Next)
+    return any(isinstance(g, temporal) and any(isinstance(h, temporal) for h in subformulas(g) if h is not g)
+               for g in subformulas(f))

@@ -267,6 +267,10 @@ def _judge_streams(log: LogData, sc: Scenario, *, formula_text: str, selection: 
 
     used = atoms(formula)
     streams = {k: v for k, v in log.signals.items() if k in used}
+    # a signal atom given no stream (samples handed over in memory without it; a log without the topic is exit 3
+    # before this): no message, so unknown everywhere, as the online monitor holds a signal before its first message
+    streams.update({k: SignalStream(k, sc.signals[k], np.zeros(0, dtype=np.int64), np.zeros(0), 0, log.time_base)
+                    for k in sorted(used & set(sc.signals) - set(streams))})
     judged = judge_formula(formula, t_rel, pose.x_m, pose.y_m, sc, time0_ns=t0, max_speed_mps=v_max,
                            streams=streams)
     end_s = float(t_rel[-1]) * 1e-9 if t_rel.size else 0.0

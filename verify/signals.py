@@ -38,6 +38,8 @@ class SignalBounds:
 
 def values_at(stream: SignalStream, t_ns: IntArray) -> tuple[FloatArray, FloatArray]:
     """Margin bounds at instants ``t_ns`` (absolute ns): the held value's margin, or ``[-inf, inf]`` if unknown."""
+    if stream.t_ns.size == 0:  # no message: unknown everywhere
+        return np.full(t_ns.shape[0], -np.inf), np.full(t_ns.shape[0], np.inf)
     m = signal_margin(stream.spec, stream.value)
     j = np.searchsorted(stream.t_ns, t_ns, side="right") - 1
     known = (j >= 0) & (t_ns - stream.t_ns[np.maximum(j, 0)] <= stream.hold_ns)

@@ -21,6 +21,7 @@ from tubempc.mitl import atoms as atoms_of
 from verify.monitor.engine import Truth, bounds_ns, evaluate_at_points, explain
 from verify.online.stream import AtomNode, BoolNode, ConstNode, Node, NotNode, WindowNode
 from verify.online.track import NEVER_NS, Track, floats, ints
+from verify.semantics.analysis import decided_times
 
 __all__ = ["BoolHead", "Evaluation", "Head", "OfflineHead", "StreamHead", "WindowHead", "build_head"]
 
@@ -297,7 +298,9 @@ class OfflineHead(Head):
         values = evaluate_at_points(self.formula, pos, atoms)
         root = values[self.formula]
         self.lo, self.hi = float(root.lo[0]), float(root.hi[0])
-        self.decided_ns = track.end_ns
+        # when the data decided it, as the certificate's decided_at (verify.semantics.analysis), not when judged
+        d = float(decided_times(self.formula, pos, values)[self.formula][0])
+        self.decided_ns = int(d) if math.isfinite(d) and (self.lo > 0 or self.hi < 0) else track.end_ns
         if self.hi < 0:  # where the certificate shows the violation
             self.witness_ns = explain(self.formula, 0, pos, values).time_ns
         self.closed = True

@@ -22,20 +22,21 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from tubempc.mitl import And, Formula, atoms
+from tubempc.mitl import Formula, atoms
 from tubempc.scenario import Scenario
 from verify.certify import resolve_scenario
 from verify.checks import CheckResult
 from verify.errors import MonitorClosedError
 from verify.geometry import step_bound_m
 from verify.ingest import LogData
-from verify.judging import formula_of, overall_verdict
+from verify.judging import formula_of, overall_verdict, split_obligations
 from verify.online.accumulate import SampleChecks
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.inputs import StreamInput
@@ -64,10 +65,19 @@ class _Semantics:
     def __init__(self, formula: Formula) -> None:
         self.track = Track()
         self.atoms: dict[str, AtomNode] = {}
-        self.head = build_head(formula, lambda name: self.atoms.setdefault(name, AtomNode()))
-        is_conj = isinstance(self.head, BoolHead) and self.head.kind == "and" and isinstance(formula, And)
-        self.obligations: list[Head] = list(self.head.children()) if is_conj else [self.head]
-        self.evaluation = Evaluation(self.track, [self.head])
+        atom = lambda name: self.atoms.setdefault(name, AtomNode())  # noqa: E731
+        self.head = build_head(formula, atom)
+        # the obligations are the certificate's (verify.judging.split_obligations): one per top-level conjunct
+        conjuncts = split_obligations(formula)
+        own: list[Head] = []
+        if len(conjuncts) == 1:
+            self.obligations: list[Head] = [self.head]
+        elif isinstance(self.head, BoolHead) and self.head.kind == "and":
+            self.obligations = list(self.head.children())
+        else:  # a conjunction judged as one stream node or at close (no window, or U / X): a head per conjunct
+            own = [build_head(c, atom) for c in conjuncts]
+            self.obligations = own
+        self.evaluation = Evaluation(self.track, [self.head, *own])
         for name in atoms(formula):
             self.atoms.setdefault(name, AtomNode())
 
@@ -494,8 +504,15 @@ class OnlineMonitor:
                                c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
+    @property
+    def _time0_ns(self) -> int | None:
+        """Time 0: the first pose sample, judged or still buffered (None before any)."""
+        if self.t0_ns is not None:
+            return self.t0_ns
+        return self._pose.t[0] if self._pose.t else None
+
     def _running_states(self) -> list[CheckState]:
-        t0 = self.t0_ns
+        t0 = self._time0_ns
         out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
                self._head_state("spec_timed_run", self._run.head, margin=False)]
         for name, failed, when, m in self._checks.running():
@@ -519,11 +536,16 @@ class OnlineMonitor:
         obligations = [self._head_state(name, h, margin=True)
                        for name, h in zip(self._obligation_names, self._traj.obligations, strict=True)
                        if "spec" in self.selection]
+        if closed and obligations and self._formula_doubt():  # as spec_trajectory: what passed cannot pass
+            obligations = [replace(o, verdict="inconclusive", margin=None, margin_final=True) if o.verdict == "pass"
+                           else o for o in obligations]
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
     def _new_decisions(self) -> list[Decision]:
         out: list[Decision] = []
+        if self._time0_ns is None:  # a command decided before any pose sample: its time is told once time 0 is
+            return out
         st = self._state(closed=self._closed)
         for c in (*st.obligations, *st.checks):
             if c.decided and c.name not in self._reported:

@@ -113,7 +113,9 @@ class ConstNode(Node):
         k = track.count - self.final
         if k > 0:
             v = np.full(k, self.value)
-            known = ints(track.start, self.final, track.count)
+            # as an atom's (and verify.semantics.analysis): a gap exists once the sample after it arrives
+            p, c = self.final, track.count
+            known = np.where(track.is_point.view(p, c), ints(track.start, p, c), ints(track.stop_ns, p, c) + 1)
             self.emit(v, v, known)
 
 

@@ -41,7 +41,6 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
     memo: dict[Formula, FloatArray] = {}
     ticks = pos.start_ns[pos.is_point]
     known = np.where(pos.is_point, pos.start_ns, pos.stop_ns + 1).astype(np.float64)
-    start = pos.start_ns.astype(np.float64)
 
     def window_end(hi_ns: int | None) -> FloatArray:
         """The first sample at or after each position's window end (the end of the log for unbounded windows)."""
@@ -60,7 +59,7 @@ def decided_times(formula: Formula, pos: Positions, values: Mapping[Formula, Tru
         if isinstance(f, Atom):
             d = known.copy()
         elif isinstance(f, Const):
-            d = start.copy()
+            d = known.copy()  # a gap exists (and a constant holds over it) once the sample after it arrives
         elif isinstance(f, Not):
             d = rec(f.arg).copy()
         elif isinstance(f, And | Or | Implies):
