@@ -1,0 +1,193 @@
+"""``verify.semantics`` on hand-made inputs, at the edges each rule draws (written against its surviving mutants).
+
+The joint run of several robots (``joint``): the joint axis and span, where each joint instant and gap lies in a
+robot's own samples, a robot's margin bounds and two robots' distance bounds on that axis. The timed run
+(``timed_run``), the trajectory semantics (``trajectory``) and the reading of a judged formula (``analysis``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from verify.semantics import joint
+from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
+from verify.semantics.timed_run import UNKNOWN_ENTRY, entry_exits, timed_run_of, timed_run_of_sets
+
+INF = math.inf
+
+
+def _track(name: str, t: list[int], xy: list[tuple[float, float]], step: list[float],
+           radius_m: float = 0.5) -> RobotTrack:
+    return RobotTrack(name, np.array(t, dtype=np.int64), np.array([p[0] for p in xy], dtype=np.float64),
+                      np.array([p[1] for p in xy], dtype=np.float64), radius_m, np.array(step, dtype=np.float64))
+
+
+def _eq(actual: np.ndarray, expected: list[float]) -> None:
+    np.testing.assert_allclose(actual, np.array(expected, dtype=np.float64), rtol=1e-12, atol=0.0)
+
+
+# --- joint: the axis ---------------------------------------------------------------------------------------------
+
+
+def test_a_robot_track_spans_its_first_to_its_last_sample_and_an_empty_one_spans_nothing() -> None:
+    assert _track("a", [3, 7, 12], [(0, 0)] * 3, [0, 0]).span_ns == (3, 12)
+    assert _track("a", [], [], []).span_ns is None
+
+
+def test_the_joint_axis_is_every_robots_samples_inside_the_span_all_robots_were_observed_in() -> None:
+    a = _track("a", [0, 10, 20, 30], [(0, 0)] * 4, [0, 0, 0])
+    b = _track("b", [5, 15, 25, 40], [(0, 0)] * 4, [0, 0, 0])
+    axis, span = joint_axis([a, b])
+    assert span == (5, 30)
+    assert axis.dtype == np.int64
+    assert axis.tolist() == [5, 10, 15, 20, 25, 30]
+    # a shared sample appears once
+    axis, span = joint_axis([a, _track("c", [10, 20], [(0, 0)] * 2, [0])])
+    assert (axis.tolist(), span) == ([10, 20], (10, 20))
+
+
+def test_spans_that_meet_at_one_instant_give_that_instant_and_disjoint_ones_give_nothing() -> None:
+    a = _track("a", [0, 10], [(0, 0)] * 2, [0])
+    axis, span = joint_axis([a, _track("b", [10, 20], [(0, 0)] * 2, [0])])
+    assert (axis.tolist(), span) == ([10], (10, 10))
+    for tracks in ([a, _track("b", [11, 20], [(0, 0)] * 2, [0])], [a, _track("b", [], [], [])], []):
+        axis, span = joint_axis(tracks)
+        assert (axis.tolist(), span) == ([], None)
+        assert axis.dtype == np.int64
+
+
+def test_each_joint_instant_and_gap_is_placed_at_the_robots_sample_or_in_its_gap() -> None:
+    track_t = np.array([10, 20, 30], dtype=np.int64)
+    joint_t = np.array([5, 10, 15, 20, 25, 30, 35], dtype=np.int64)
+    sample, point_gap, gap = joint._where(track_t, joint_t)
+    assert sample.tolist() == [-1, 0, -1, 1, -1, 2, -1]
+    assert point_gap.tolist() == [-1, -1, 0, -1, 1, -1, -1]
+    assert gap.tolist() == [-1, 0, 0, 1, 1, -1]  # the axis gap (30, 35) lies after the robot's last sample
+    sample, point_gap, gap = joint._where(np.zeros(0, dtype=np.int64), joint_t[:3])
+    assert (sample.tolist(), point_gap.tolist(), gap.tolist()) == ([-1] * 3, [-1] * 3, [-1] * 2)
+
+
+# --- joint: one robot's margin -----------------------------------------------------------------------------------
+
+
+def test_a_robots_margin_is_exact_at_its_samples_bounded_in_its_gaps_and_unknown_outside() -> None:
+    # gap bounds: (1 + 2 -+ 1) / 2 = [1, 2] and (2 + 4 -+ 2) / 2 = [2, 4]
+    track = _track("a", [10, 20, 30], [(0, 0)] * 3, [1.0, 2.0])
+    b = margin_bounds(track, np.array([1.0, 2.0, 4.0]), np.array([5, 10, 15, 20, 25, 30, 35], dtype=np.int64))
+    _eq(b.point_lo, [-INF, 1.0, 1.0, 2.0, 2.0, 4.0, -INF])
+    _eq(b.point_hi, [INF, 1.0, 2.0, 2.0, 4.0, 4.0, INF])
+    _eq(b.gap_lo, [-INF, 1.0, 1.0, 2.0, 2.0, -INF])
+    _eq(b.gap_hi, [INF, 2.0, 2.0, 4.0, 4.0, INF])
+
+
+def test_a_nan_sample_margin_is_unknown_at_the_sample_and_in_its_gaps() -> None:
+    track = _track("a", [10, 20, 30], [(0, 0)] * 3, [1.0, 1.0])
+    b = margin_bounds(track, np.array([1.0, np.nan, 3.0]), np.array([10, 15, 20, 30], dtype=np.int64))
+    _eq(b.point_lo, [1.0, -INF, -INF, 3.0])
+    _eq(b.point_hi, [1.0, INF, INF, 3.0])
+    _eq(b.gap_lo, [-INF, -INF, -INF])
+    _eq(b.gap_hi, [INF, INF, INF])
+
+
+def test_a_robot_with_one_sample_is_known_only_at_it() -> None:
+    track = _track("a", [10], [(0, 0)], [])
+    b = margin_bounds(track, np.array([0.5]), np.array([5, 10, 15], dtype=np.int64))
+    _eq(b.point_lo, [-INF, 0.5, -INF])
+    _eq(b.point_hi, [INF, 0.5, INF])
+    _eq(b.gap_lo, [-INF, -INF])
+    _eq(b.gap_hi, [INF, INF])
+    b = margin_bounds(track, np.array([0.5]), np.array([10], dtype=np.int64))
+    assert (b.gap_lo.shape, b.gap_hi.shape) == ((0,), (0,))
+
+
+# --- joint: two robots' distance ---------------------------------------------------------------------------------
+
+
+def _mean_distance(a_ends: tuple[tuple[float, float], tuple[float, float]],
+                   b_ends: tuple[tuple[float, float], tuple[float, float]]) -> float:
+    return sum(math.dist(p, q) for p in a_ends for q in b_ends) / 4
+
+
+def test_two_robots_distance_is_exact_at_shared_samples_and_bounded_by_both_paths_elsewhere() -> None:
+    # a: (1, 1) at 0, (7, 2) at 10, path length <= 8; b: (2, 5) at 0, (8, 9) at 5, (4, 3) at 10, paths <= 9 and 7
+    a = _track("a", [0, 10], [(1.0, 1.0), (7.0, 2.0)], [8.0], radius_m=0.5)
+    b = _track("b", [0, 5, 10], [(2.0, 5.0), (8.0, 9.0), (4.0, 3.0)], [9.0, 7.0], radius_m=0.25)
+    axis = np.array([0, 5, 10], dtype=np.int64)
+    d = pair_distance_bounds(a, b, axis)
+    radii = 0.75
+    a0, a1 = (1.0, 1.0), (7.0, 2.0)
+    b0, b1, b2 = (2.0, 5.0), (8.0, 9.0), (4.0, 3.0)
+    at0 = math.dist(a0, b0) - radii
+    at5 = _mean_distance((a0, a1), (b1, b1)) - radii  # a in its gap (length 8), b at its sample
+    at10 = math.dist(a1, b2) - radii
+    _eq(d.point_lo, [at0, at5 - 4.0, at10])
+    _eq(d.point_hi, [at0, at5 + 4.0, at10])
+    g0 = _mean_distance((a0, a1), (b0, b1)) - radii  # half of 8 + 9
+    g1 = _mean_distance((a0, a1), (b1, b2)) - radii  # half of 8 + 7
+    _eq(d.gap_lo, [g0 - 8.5, g1 - 7.5])
+    _eq(d.gap_hi, [g0 + 8.5, g1 + 7.5])
+
+
+def test_two_robots_distance_is_unknown_where_either_is_not_observed() -> None:
+    a = _track("a", [0, 10], [(1.0, 1.0), (7.0, 2.0)], [8.0])
+    b = _track("b", [5, 10], [(2.0, 5.0), (4.0, 3.0)], [3.0])
+    d = pair_distance_bounds(a, b, np.array([0, 5, 10, 15], dtype=np.int64))
+    _eq(d.point_lo, [-INF, _mean_distance(((1.0, 1.0), (7.0, 2.0)), ((2.0, 5.0), (2.0, 5.0))) - 1.0 - 4.0,
+                     math.dist((7.0, 2.0), (4.0, 3.0)) - 1.0, -INF])
+    _eq(d.point_hi[[0, 3]], [INF, INF])
+    _eq(d.gap_lo[[0, 2]], [-INF, -INF])
+    _eq(d.gap_hi[[0, 2]], [INF, INF])
+    g1 = _mean_distance(((1.0, 1.0), (7.0, 2.0)), ((2.0, 5.0), (4.0, 3.0))) - 1.0
+    _eq(d.gap_lo[[1]], [g1 - 5.5])
+    _eq(d.gap_hi[[1]], [g1 + 5.5])
+
+
+def test_path_ends_of_a_robot_at_its_samples_and_in_its_gaps() -> None:
+    track = _track("a", [0, 10, 20], [(1.0, 2.0), (3.0, 4.0), (5.0, 6.0)], [3.0, 4.0])
+    x0, y0, x1, y1, d = joint._segments(track, np.array([0, -1, 2, -1]), np.array([-1, 1, -1, -1]))
+    _eq(x0, [1.0, 3.0, 5.0, np.nan])
+    _eq(y0, [2.0, 4.0, 6.0, np.nan])
+    _eq(x1, [1.0, 5.0, 5.0, np.nan])
+    _eq(y1, [2.0, 6.0, 6.0, np.nan])
+    _eq(d, [0.0, 4.0, 0.0, np.nan])
+
+
+# --- timed_run: the run of region sets -------------------------------------------------------------------------
+
+
+def _regions_ab() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Regions A and B over six samples 1 s apart: A, A+B, unknown, unknown, none, B."""
+    contains = np.array([[True, True, False, False, False, False],
+                         [False, True, False, False, False, True]])
+    known = np.array([True, True, False, False, True, True])
+    return contains, np.arange(6, dtype=np.float64), known
+
+
+def test_the_run_of_region_sets_names_each_stretch_and_one_entry_per_unknown_stretch() -> None:
+    contains, times, known = _regions_ab()
+    run, labels = timed_run_of_sets(contains, times, ["A", "B"], {"A": ["a"], "B": ["c", "b"]}, known)
+    assert run == [("A", 0.0), ("A+B", 1.0), (UNKNOWN_ENTRY, 2.0), ("B", 5.0)]
+    assert labels == {"A": ["a"], "A+B": ["a", "b", "c"], UNKNOWN_ENTRY: [], "B": ["b", "c"]}
+    # each entry is left where the set of regions, or whether it is known, changes; the last at the last sample
+    assert entry_exits(contains, times, known) == [1.0, 2.0, 4.0, 5.0]
+    # without ``known`` every sample is known: the unknown samples are outside both regions
+    assert timed_run_of_sets(contains, times, ["A", "B"], {}, None)[0] == [("A", 0.0), ("A+B", 1.0), ("B", 5.0)]
+    assert entry_exits(contains, times) == [1.0, 2.0, 5.0]
+
+
+def test_a_run_of_one_sample_has_its_entry_and_no_samples_have_none() -> None:
+    one = np.array([[False], [True]])
+    assert timed_run_of_sets(one, np.array([3.0]), ["A", "B"], {"B": ["b"]}) == ([("B", 3.0)], {"B": ["b"]})
+    assert entry_exits(one, np.array([3.0])) == [3.0]
+    for contains in (np.zeros((2, 0), dtype=bool), np.zeros(0, dtype=bool)):
+        assert timed_run_of_sets(contains, np.zeros(0), ["A", "B"], {}) == ([], {})
+        assert entry_exits(contains, np.zeros(0)) == []
+
+
+def test_the_run_of_single_regions_starts_an_entry_at_each_stretch_and_skips_samples_outside_every_region() -> None:
+    idx = np.array([-1, 0, 0, -1, 1, 1, 0], dtype=np.int64)
+    assert timed_run_of(idx, np.arange(7, dtype=np.float64), ["A", "B"]) == [("A", 1.0), ("B", 4.0), ("A", 6.0)]
+    assert timed_run_of(np.array([0], dtype=np.int64), np.array([2.5]), ["A"]) == [("A", 2.5)]
+    assert timed_run_of(np.zeros(0, dtype=np.int64), np.zeros(0), ["A"]) == []
