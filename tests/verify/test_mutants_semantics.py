@@ -13,7 +13,7 @@ import pytest
 
 from verify.semantics import joint
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
-from verify.semantics.timed_run import UNKNOWN_ENTRY, entry_exits, timed_run_of, timed_run_of_sets
+from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run, entry_exits, timed_run_of, timed_run_of_sets
 
 INF = math.inf
 
@@ -191,3 +191,59 @@ def test_the_run_of_single_regions_starts_an_entry_at_each_stretch_and_skips_sam
     assert timed_run_of(idx, np.arange(7, dtype=np.float64), ["A", "B"]) == [("A", 1.0), ("B", 4.0), ("A", 6.0)]
     assert timed_run_of(np.array([0], dtype=np.int64), np.array([2.5]), ["A"]) == [("A", 2.5)]
     assert timed_run_of(np.zeros(0, dtype=np.int64), np.zeros(0), ["A"]) == []
+
+
+# --- timed_run: the margin of a fail in seconds ------------------------------------------------------------------
+
+B = {"B": ["b"]}
+
+
+@pytest.mark.parametrize(("spec", "run", "end", "margin_s"), [
+    ("F[0,2] b", [("A", 0.0), ("B", 5.0)], 6.0, -3.0),  # b holds 3 s after the window closes
+    ("F[3,4] b", [("A", 0.0), ("B", 1.0), ("A", 2.0)], 10.0, -2.0),  # b held 2 s before the window opened
+    ("F[3,4] b", [("A", 0.0), ("B", 1.0), ("A", 2.0), ("B", 9.0)], 10.0, -2.0),  # the nearer of before (2 s), after
+    ("F[3,4] b", [("A", 0.0), ("B", 0.5), ("A", 2.0), ("B", 5.0)], 10.0, -1.0),  # (2.5 s, 1 s)
+    ("F[0,2] b", [("A", 0.0)], 10.0, -8.0),  # never: at least until the log's end
+])
+def test_a_missed_eventually_is_off_by_the_time_from_its_window_to_the_nearest_entry_where_it_held(
+        spec: str, run: list[tuple[str, float]], end: float, margin_s: float) -> None:
+    r = check_timed_run(spec, run, B, end=end)
+    assert (r.verdict, r.subformula, r.margin_s, r.margin_reason) == ("fail", spec, margin_s, None)
+
+
+def test_a_missed_eventually_whose_window_closes_at_the_logs_end_has_no_margin_and_says_why() -> None:
+    r = check_timed_run("F[0,2] b", [("A", 0.0)], B, end=2.0)
+    assert (r.verdict, r.margin_s) == ("fail", None)
+    assert r.margin_reason is not None and r.margin_reason.startswith("no time stretch to measure")
+
+
+def test_an_undecided_signal_at_an_entry_is_not_where_a_missed_eventually_held() -> None:
+    # s is exactly 0 (undecided) at 2 s, outside the window [3, 4]; it holds at 6 s: 2 s after the window
+    values = {"s": (np.array([-1.0, 0.0, 1.0]), np.array([-1.0, 0.0, 1.0]))}
+    r = check_timed_run("F[3,4] s", [("A", 0.0), ("A", 2.0), ("A", 6.0)], {}, end=10.0, atom_values=values)
+    assert (r.verdict, r.margin_s) == ("fail", -2.0)
+
+
+def test_an_eventually_missed_only_at_its_open_window_end_has_no_negative_margin() -> None:
+    # b holds at 3 s, exactly where the window (3, 4] is open: the distance to the window is 0, not a margin < 0
+    r = check_timed_run("F(3,4] b", [("A", 0.0), ("B", 3.0), ("A", 3.5)], B, end=10.0)
+    assert (r.verdict, r.margin_s) == ("fail", None)
+
+
+def test_a_false_atom_stays_false_until_the_first_entry_where_it_is_not_false() -> None:
+    # s false at 0 s, exactly 0 (undecided, not false) at 2 s: false for 2 s
+    values = {"s": (np.array([-1.0, 0.0, 0.5, 1.0]), np.array([-1.0, 0.0, 0.5, 1.0]))}
+    r = check_timed_run("G[0,10] s", [("A", 0.0), ("A", 2.0), ("A", 3.0), ("A", 5.0)], {}, end=10.0,
+                        atom_values=values)
+    assert (r.verdict, r.subformula, r.time_s, r.margin_s) == ("fail", "s", 0.0, -2.0)
+
+
+@pytest.mark.parametrize(("run", "exits", "margin_s"), [
+    ([("A", 0.0), ("C", 1.0)], [1.0, 4.0], -4.0),  # A left at 1 s into C, C (the last entry) left at 4 s
+    ([("A", 0.0), ("C", 1.0), ("P", 3.0)], [1.0, 3.0, 5.0], -3.0),  # ... until P, where p holds, at 3 s
+    ([("A", 0.0), ("C", 2.0), ("P", 3.0)], [1.0, 3.0, 5.0], -1.0),  # A left at 1 s: C starts a new stretch
+])
+def test_a_false_atom_stays_false_across_the_entries_it_is_false_in_while_each_starts_where_the_last_was_left(
+        run: list[tuple[str, float]], exits: list[float], margin_s: float) -> None:
+    r = check_timed_run("G[0,10] p", run, {"P": ["p"]}, end=5.0, exits=exits)
+    assert (r.verdict, r.subformula, r.margin_s) == ("fail", "p", margin_s)
