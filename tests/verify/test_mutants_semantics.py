@@ -7,13 +7,14 @@ robot's own samples, a robot's margin bounds and two robots' distance bounds on 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
 
 from verify.semantics import joint
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
-from verify.semantics.timed_run import UNKNOWN_ENTRY, check_timed_run, entry_exits, timed_run_of, timed_run_of_sets
+from verify.semantics.timed_run import UNKNOWN_ENTRY, TimedRunVerdict, check_timed_run, entry_exits, timed_run_of, timed_run_of_sets
 
 INF = math.inf
 
@@ -247,3 +248,32 @@ def test_a_false_atom_stays_false_across_the_entries_it_is_false_in_while_each_s
         run: list[tuple[str, float]], exits: list[float], margin_s: float) -> None:
     r = check_timed_run("G[0,10] p", run, {"P": ["p"]}, end=5.0, exits=exits)
     assert (r.verdict, r.subformula, r.margin_s) == ("fail", "p", margin_s)
+
+
+def test_a_false_atom_seen_only_at_the_logs_last_instant_has_no_negative_margin() -> None:
+    for exits in (None, [5.0, 5.0]):
+        r = check_timed_run("G[0,10] p", [("P", 0.0), ("C", 5.0)], {"P": ["p"]}, end=5.0, exits=exits)
+        assert (r.verdict, r.subformula, r.time_s, r.margin_s) == ("fail", "p", 5.0, None), exits
+
+
+def test_without_exits_a_false_atom_stays_false_until_the_next_entry_where_it_holds() -> None:
+    run = [("P", 0.0), ("A", 1.0), ("A", 2.0), ("P", 4.0), ("P", 6.0)]
+    r = check_timed_run("G[0,10] p", run, {"P": ["p"]}, end=7.0)
+    assert (r.verdict, r.subformula, r.time_s, r.margin_s) == ("fail", "p", 1.0, -3.0)
+
+
+def test_an_empty_run_is_inconclusive_and_says_so() -> None:
+    r = check_timed_run("F[0,1]  p", [], {})
+    assert r == TimedRunVerdict("inconclusive", "F[0,1] p", "F[0,1] p", None, "the timed run is empty")
+
+
+def test_a_run_with_decreasing_times_an_end_before_its_last_entry_or_a_time_not_finite_is_refused() -> None:
+    with pytest.raises(ValueError, match=re.escape("run times must be non-decreasing, got [1.0, 0.5]")):
+        check_timed_run("p", [("A", 1.0), ("A", 0.5)], {})
+    with pytest.raises(ValueError, match=re.escape("end=0.5 is before the last run time 1.0")):
+        check_timed_run("p", [("A", 1.0)], {}, end=0.5)
+    with pytest.raises(ValueError, match=re.escape("time=nan is not finite")):
+        check_timed_run("p", [("A", math.nan)], {})
+    # equal times are two entries at one instant; the end defaults to the last entry
+    assert check_timed_run("p", [("A", 1.0), ("B", 1.0)], {"A": ["p"]}).verdict == "pass"
+    assert check_timed_run("F[0,1] p", [("A", 0.0)], {"A": ["q"]}, end=0.5).verdict == "inconclusive"
