@@ -14,7 +14,14 @@ import pytest
 
 from verify.semantics import joint
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
-from verify.semantics.timed_run import UNKNOWN_ENTRY, TimedRunVerdict, check_timed_run, entry_exits, timed_run_of, timed_run_of_sets
+from verify.semantics.timed_run import (
+    UNKNOWN_ENTRY,
+    TimedRunVerdict,
+    check_timed_run,
+    entry_exits,
+    timed_run_of,
+    timed_run_of_sets,
+)
 
 INF = math.inf
 
