@@ -12,7 +12,9 @@ import re
 import numpy as np
 import pytest
 
-from verify.semantics import joint
+from tubempc.mitl import parse
+from tubempc.scenario import builtin_scenario
+from verify.semantics import joint, trajectory
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
 from verify.semantics.timed_run import (
     UNKNOWN_ENTRY,
@@ -22,6 +24,7 @@ from verify.semantics.timed_run import (
     timed_run_of,
     timed_run_of_sets,
 )
+from verify.semantics.trajectory import check_trajectory, interleave, reported_margin, trajectory_positions
 
 INF = math.inf
 
@@ -284,3 +287,64 @@ def test_a_run_with_decreasing_times_an_end_before_its_last_entry_or_a_time_not_
     # equal times are two entries at one instant; the end defaults to the last entry
     assert check_timed_run("p", [("A", 1.0), ("B", 1.0)], {"A": ["p"]}).verdict == "pass"
     assert check_timed_run("F[0,1] p", [("A", 0.0)], {"A": ["q"]}, end=0.5).verdict == "inconclusive"
+
+
+# --- trajectory --------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("verdict", "lo_m", "hi_m", "margin"), [
+    ("pass", 0.5, 2.0, 0.5),  # the guaranteed margin
+    ("fail", -3.0, -1.0, -1.0),  # violated by at least the optimistic margin
+    ("fail", -2.0, math.nan, -2.0),  # ... or by the guaranteed one when the optimistic one is not finite
+    ("fail", -INF, -INF, None),  # failing on constants: no finite margin
+    ("inconclusive", -1.0, 1.0, None),
+])
+def test_the_reported_margin_of_each_verdict(verdict: str, lo_m: float, hi_m: float, margin: float | None) -> None:
+    assert reported_margin(verdict, lo_m, hi_m) == margin
+
+
+def test_trajectory_positions_are_the_samples_and_the_open_gaps_between_samples_more_than_1_ns_apart() -> None:
+    pos, point_at, gap_at = trajectory_positions(np.array([0, 1, 5, 6, 10], dtype=np.int64))
+    assert pos.start_ns.tolist() == [0, 1, 2, 5, 6, 7, 10]
+    assert pos.stop_ns.tolist() == [0, 1, 4, 5, 6, 9, 10]
+    assert pos.is_point.tolist() == [True, True, False, True, True, False, True]
+    assert pos.end_ns == 10
+    assert (point_at.tolist(), gap_at.tolist()) == ([0, 1, 3, 4, 6], [-1, 2, -1, 5])
+    pos, point_at, gap_at = trajectory_positions(np.zeros(0, dtype=np.int64))
+    assert (pos.size, pos.end_ns, point_at.tolist(), gap_at.tolist()) == (0, 0, [], [])
+
+
+def test_interleave_puts_sample_values_at_the_samples_and_gap_values_at_the_gaps() -> None:
+    _, point_at, gap_at = trajectory_positions(np.array([0, 1, 5, 6, 10], dtype=np.int64))
+    v = interleave(np.array([1.0, 2.0, 3.0, 4.0, 5.0]), np.array([11.0, 12.0, 13.0, 14.0, 15.0]),
+                   np.array([-1.0, -2.0, -3.0, -4.0]), np.array([-11.0, -12.0, -13.0, -14.0]),
+                   point_at=point_at, gap_at=gap_at, size=7)
+    assert v.lo.tolist() == [1.0, 2.0, -2.0, 3.0, 4.0, -4.0, 5.0]
+    assert v.hi.tolist() == [11.0, 12.0, -12.0, 13.0, 14.0, -14.0, 15.0]
+    # every pair of samples leaves a gap
+    pos, point_at, gap_at = trajectory_positions(np.array([0, 5, 10], dtype=np.int64))
+    v = interleave(np.array([1.0, 2.0, 3.0]), np.array([11.0, 12.0, 13.0]), np.array([-1.0, -2.0]),
+                   np.array([-11.0, -12.0]), point_at=point_at, gap_at=gap_at, size=pos.size)
+    assert v.lo.tolist() == [1.0, -1.0, 2.0, -2.0, 3.0]
+    assert v.hi.tolist() == [11.0, -11.0, 12.0, -12.0, 13.0]
+    pos, point_at, gap_at = trajectory_positions(np.array([7], dtype=np.int64))
+    v = interleave(np.array([1.0]), np.array([2.0]), np.zeros(0), np.zeros(0), point_at=point_at, gap_at=gap_at,
+                   size=pos.size)
+    assert (v.lo.tolist(), v.hi.tolist()) == ([1.0], [2.0])
+
+
+def test_a_nan_sample_margin_is_unknown_and_a_known_one_is_exact() -> None:
+    lo, hi = trajectory._sample_truth(np.array([0.5, np.nan, -0.25]))
+    assert (lo.tolist(), hi.tolist()) == ([0.5, -INF, -0.25], [0.5, INF, -0.25])
+    margin = np.array([0.5, -0.25])
+    lo, hi = trajectory._sample_truth(margin)
+    assert (lo.tolist(), hi.tolist()) == ([0.5, -0.25], [0.5, -0.25])
+
+
+def test_a_trajectory_without_samples_is_inconclusive_and_says_so() -> None:
+    empty = np.zeros(0)
+    r = check_trajectory(parse("G !obs"), np.zeros(0, dtype=np.int64), empty, empty, builtin_scenario(),
+                         max_speed_mps=1.0)
+    assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
+        "inconclusive", -INF, INF, "G[0,inf) !obs", None, "no pose samples")
+    assert (r.signal_t_ns.dtype, r.signal_t_ns.size, r.signal_rho_m.size) == (np.int64, 0, 0)
