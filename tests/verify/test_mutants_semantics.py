@@ -347,4 +347,4 @@ def test_a_trajectory_without_samples_is_inconclusive_and_says_so() -> None:
                          max_speed_mps=1.0)
     assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
         "inconclusive", -INF, INF, "G[0,inf) !obs", None, "no pose samples")
-    assert (r.signal_t_ns.dtype, r.signal_t_ns.size, r.signal_rho_m.size) == (np.int64, 0, 0)
+    assert (r.signal_t_ns.dtype, r.signal_t_ns.size, r.signal_rho_m.size) == (np.dtype(np.int64), 0, 0)
