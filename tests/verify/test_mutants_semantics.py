@@ -14,7 +14,9 @@ import pytest
 
 from tubempc.mitl import parse
 from tubempc.scenario import builtin_scenario
+from verify.monitor.engine import Positions, Truth, evaluate_at_points
 from verify.semantics import joint, trajectory
+from verify.semantics.analysis import decided_times, margin_source
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
 from verify.semantics.timed_run import (
     UNKNOWN_ENTRY,
@@ -348,3 +350,82 @@ def test_a_trajectory_without_samples_is_inconclusive_and_says_so() -> None:
     assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
         "inconclusive", -INF, INF, "G[0,inf) !obs", None, "no pose samples")
     assert (r.signal_t_ns.dtype, r.signal_t_ns.size, r.signal_rho_m.size) == (np.dtype(np.int64), 0, 0)
+
+
+# --- analysis: when each verdict was decided, which atom a margin is ---------------------------------------------
+
+S = 1_000_000_000
+FIVE = Positions.points(np.arange(5, dtype=np.int64) * S, 4 * S)  # samples at 0..4 s, observed until 4 s
+
+
+def _bits(*bits: int | None) -> Truth:
+    """1 true, 0 false, None unknown."""
+    lo = [-INF if b is None else (1.0 if b else -1.0) for b in bits]
+    hi = [INF if b is None else (1.0 if b else -1.0) for b in bits]
+    return Truth(np.array(lo), np.array(hi))
+
+
+def _values(*margins: float) -> Truth:
+    return Truth(np.array(margins, dtype=np.float64), np.array(margins, dtype=np.float64))
+
+
+BITS = {"p": _bits(0, 0, 1, 0, 0), "q": _bits(1, 1, 0, 1, 1), "r": _bits(1, 0, 0, 0, None)}
+
+
+@pytest.mark.parametrize(("spec", "decided_s"), [
+    ("p", [0, 1, 2, 3, 4]),  # an atom at its sample
+    ("true", [0, 1, 2, 3, 4]),
+    ("!p", [0, 1, 2, 3, 4]),
+    ("F[0,2] p", [2, 2, 2, None, None]),  # at its witness; undecided while the window is open at the log's end
+    ("G[0,1] q", [1, 2, 2, 4, None]),  # true: when the window closes; false: at the first false sample
+    ("F[0,2] p | r", [0, 2, 2, None, None]),  # true: the first true argument (r at 0 s, not F at 2 s)
+    ("F[0,2] p & r", [2, 1, 2, 3, None]),  # true: the last argument decided (F at 2 s); false: the first false one
+    ("r -> F[0,2] p", [2, 1, 2, 3, None]),  # true: a false premise (r) or a true conclusion (F), whichever first
+    ("X p", [1, 2, 3, 4, 4]),  # the next sample; none: the end of the log
+    ("X[0,0.5] p", [1, 2, 3, 4, None]),  # the next sample shows it outside the window
+    ("q U[0,3] p", [2, 2, 2, None, None]),  # true: the witness p at 2 s, q held before it
+    ("q U[1,3] p", [2, 2, 2, None, None]),  # false at 2 s: q fails at 2 s before p holds in [3, 5]
+    ("!q U p", [0, 1, 2, 3, 4]),  # false where !q fails at once, true where p holds at once
+])
+def test_each_verdict_is_decided_when_the_data_seen_settles_it(spec: str, decided_s: list[int | None]) -> None:
+    f = parse(spec)
+    d = decided_times(f, FIVE, evaluate_at_points(f, FIVE, BITS))[f]
+    assert [None if math.isinf(x) else x / S for x in d] == decided_s
+
+
+def test_an_atom_over_a_gap_is_decided_at_the_next_sample() -> None:
+    pos, _, _ = trajectory_positions(np.array([0, S, 2 * S], dtype=np.int64))
+    f = parse("p & F[0,1] p")
+    values = evaluate_at_points(f, pos, {"p": Truth(np.array([1.0, 0.5, 2.0, 0.5, 3.0]), np.full(5, 4.0))})
+    d = decided_times(f, pos, values)
+    assert (d[parse("p")] / S).tolist() == [0.0, 1.0, 1.0, 2.0, 2.0]
+    assert (d[f][pos.is_point] / S).tolist() == [0.0, 1.0, 2.0]  # temporal sub-formulas: at the samples only
+
+
+MARGINS = {"p": _values(-0.5, 0.3, 0.7, -0.2, 0.1), "q": _values(0.4, 0.2, 0.9, -0.6, 0.8),
+           "r": _values(1.0, -INF, 1.0, 1.0, 1.0)}
+
+
+@pytest.mark.parametrize(("spec", "i", "bound", "source"), [
+    ("p & q", 1, "lo", ("q", 1)), ("p & q", 3, "hi", ("q", 3)), ("p | q", 3, "lo", ("p", 3)),
+    ("!p", 2, "lo", ("p", 2)), ("!(p & q)", 1, "hi", ("q", 1)),
+    ("p -> q", 0, "lo", ("p", 0)), ("p -> q", 1, "lo", ("q", 1)), ("p -> q", 3, "hi", ("p", 3)),
+    ("F[0,2] p", 0, "lo", ("p", 2)), ("F[0,2] p", 3, "lo", ("p", 4)), ("F[0,2] p", 3, "hi", None),
+    ("G[0,2] q", 0, "lo", ("q", 1)), ("G[0,2] q", 1, "hi", ("q", 3)), ("G[0,2] p", 3, "lo", None),
+    ("X p", 2, "lo", ("p", 3)), ("X p", 4, "lo", None), ("X[0,0.5] p", 0, "lo", None),
+    ("q U[0,3] p", 0, "lo", ("p", 1)), ("q U[0,3] p", 3, "lo", ("p", 3)),
+    ("true", 0, "lo", None), ("false | p", 1, "hi", ("p", 1)), ("F[0,2] (p & q)", 1, "lo", ("p", 2)),
+    ("G[0,2] r", 0, "lo", None),
+])
+def test_a_margin_is_traced_to_the_atom_and_sample_whose_value_it_is(
+        spec: str, i: int, bound: str, source: tuple[str, int] | None) -> None:
+    f = parse(spec)
+    assert margin_source(f, i, bound, FIVE, evaluate_at_points(f, FIVE, MARGINS)) == source
+
+
+def test_an_infinite_margin_is_traced_only_when_asked() -> None:
+    f = parse("G[0,2] r")
+    values = evaluate_at_points(f, FIVE, MARGINS)
+    assert margin_source(f, 0, "lo", FIVE, values, infinite=True) == ("r", 1)
+    assert margin_source(parse("true"), 0, "lo", FIVE, evaluate_at_points(parse("true"), FIVE, {}),
+                         infinite=True) is None
