@@ -429,3 +429,31 @@ def test_an_infinite_margin_is_traced_only_when_asked() -> None:
     assert margin_source(f, 0, "lo", FIVE, values, infinite=True) == ("r", 1)
     assert margin_source(parse("true"), 0, "lo", FIVE, evaluate_at_points(parse("true"), FIVE, {}),
                          infinite=True) is None
+
+
+NO_STRETCH = ("no time stretch to measure: the violation is decided by constants or at the end of the log (e.g. a "
+              "window that opens after the log ends)")
+
+
+def test_the_timed_runs_verdicts_state_the_canonical_formula_the_witness_and_its_reason() -> None:
+    assert check_timed_run("F[0,2]  p", [("P", 0.0)], {"P": ["p"]}) == TimedRunVerdict("pass", "F[0,2] p")
+    r = check_timed_run("G[0,10]  p", [("P", 0.0), ("C", 5.0)], {"P": ["p"]}, end=5.0)
+    assert r == TimedRunVerdict("fail", "G[0,10] p", "p", 5.0, "false here", None, NO_STRETCH)
+    r = check_timed_run("G[0,10] p", [("P", 0.0), ("C", 2.0), ("P", 3.0)], {"P": ["p"]}, end=5.0)
+    assert r == TimedRunVerdict("fail", "G[0,10] p", "p", 2.0, "false here", -1.0, None)
+    # the end defaults to the last entry's time
+    assert check_timed_run("p", [("A", 0.0), ("A", 1.0), ("A", 2.0)], {"A": ["p"]}).verdict == "pass"
+    assert check_timed_run("F[0,1.5] b", [("A", 0.0), ("A", 1.0), ("B", 2.0)], B).verdict == "fail"
+
+
+def test_an_inconclusive_timed_run_states_no_margin() -> None:
+    r = check_timed_run("F[0,5] b", [("A", 0.0)], B, end=2.0)
+    assert (r.verdict, r.margin_s, r.margin_reason) == ("inconclusive", None, None)
+
+
+@pytest.mark.parametrize("labels", [{}, {UNKNOWN_ENTRY: ["p"]}])
+def test_every_atom_is_unknown_at_an_unknown_entry_whatever_its_labels(labels: dict[str, list[str]]) -> None:
+    assert check_timed_run("p", [(UNKNOWN_ENTRY, 0.0)], labels).verdict == "inconclusive"
+    assert check_timed_run("!p", [(UNKNOWN_ENTRY, 0.0)], labels).verdict == "inconclusive"
+    r = check_timed_run("G[0,2] !p", [("A", 0.0), (UNKNOWN_ENTRY, 1.0), ("A", 2.0)], labels, end=3.0)
+    assert (r.verdict, r.subformula, r.time_s) == ("inconclusive", "!p", 1.0)
