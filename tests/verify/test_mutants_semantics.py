@@ -115,6 +115,15 @@ def test_a_robot_with_one_sample_is_known_only_at_it() -> None:
     assert (b.gap_lo.shape, b.gap_hi.shape) == ((0,), (0,))
 
 
+
+def test_a_robot_with_two_samples_is_bounded_in_its_one_gap() -> None:
+    track = _track("a", [10, 20], [(0, 0)] * 2, [1.0])
+    b = margin_bounds(track, np.array([1.0, 2.0]), np.array([10, 15, 20], dtype=np.int64))
+    _eq(b.point_lo, [1.0, 1.0, 2.0])
+    _eq(b.point_hi, [1.0, 2.0, 2.0])
+    _eq(b.gap_lo, [1.0, 1.0])
+    _eq(b.gap_hi, [2.0, 2.0])
+
 # --- joint: two robots' distance ---------------------------------------------------------------------------------
 
 
@@ -457,3 +466,14 @@ def test_every_atom_is_unknown_at_an_unknown_entry_whatever_its_labels(labels: d
     assert check_timed_run("!p", [(UNKNOWN_ENTRY, 0.0)], labels).verdict == "inconclusive"
     r = check_timed_run("G[0,2] !p", [("A", 0.0), (UNKNOWN_ENTRY, 1.0), ("A", 2.0)], labels, end=3.0)
     assert (r.verdict, r.subformula, r.time_s) == ("inconclusive", "!p", 1.0)
+
+
+
+def test_two_robots_distance_is_unknown_where_its_bound_is_undefined() -> None:
+    # an infinite coordinate with an unbounded path: the lower bound is inf - inf; the distance is unknown, not NaN
+    a = _track("a", [0, 10], [(0.0, 0.0), (INF, 0.0)], [INF])
+    b = _track("b", [0, 10], [(1.0, 0.0), (1.0, 0.0)], [0.0])
+    with np.errstate(invalid="ignore"):
+        d = pair_distance_bounds(a, b, np.array([0, 5, 10], dtype=np.int64))
+    assert (d.point_lo[1], d.point_hi[1], d.gap_lo.tolist(), d.gap_hi.tolist()) == (-INF, INF, [-INF, -INF],
+                                                                                      [INF, INF])
