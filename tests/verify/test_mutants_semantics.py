@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from tubempc.mitl import parse
-from tubempc.scenario import builtin_scenario
+from tubempc.scenario import Scenario, builtin_scenario
+from tubempc.scenario.model import Region, RobotSpec
 from verify.monitor.engine import Positions, Truth, evaluate_at_points
 from verify.semantics import joint, trajectory
 from verify.semantics.analysis import decided_times, margin_source
@@ -27,6 +28,7 @@ from verify.semantics.timed_run import (
     timed_run_of_sets,
 )
 from verify.semantics.trajectory import check_trajectory, interleave, reported_margin, trajectory_positions
+from verify.signals import SignalBounds
 
 INF = math.inf
 
@@ -477,3 +479,63 @@ def test_two_robots_distance_is_unknown_where_its_bound_is_undefined() -> None:
         d = pair_distance_bounds(a, b, np.array([0, 5, 10], dtype=np.int64))
     assert (d.point_lo[1], d.point_hi[1], d.gap_lo.tolist(), d.gap_hi.tolist()) == (-INF, INF, [-INF, -INF],
                                                                                       [INF, INF])
+
+
+def _home(radius_m: float) -> Scenario:
+    """One disc region ``home`` centred at the origin; robot radius 0.25 m."""
+    return builtin_scenario().model_copy(update={
+        "regions": (Region(name="H", center=(0.0, 0.0), radius=radius_m, labels=("home",)),),
+        "robot": RobotSpec(radius=0.25)})
+
+
+# parked at (0.252, 0.336): sqrt(dx*dx + dy*dy) = 0.42 and hypot = 0.42000000000000004 (one ulp apart)
+T3 = np.arange(3, dtype=np.int64) * 100_000_000
+X3, Y3 = np.full(3, 0.252), np.full(3, 0.336)
+FAST_D, EXACT_D = float(np.sqrt(0.252 * 0.252 + 0.336 * 0.336)), float(np.hypot(0.252, 0.336))
+
+
+def test_a_comfortable_pass_on_a_regular_grid_keeps_the_fast_distances() -> None:
+    assert 1.0 - FAST_D != 1.0 - EXACT_D  # the two distances give two margins here
+    r = check_trajectory(parse("home"), T3, X3, Y3, _home(1.25), max_speed_mps=1.0)
+    assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
+        "pass", 1.0 - FAST_D, 1.0 - FAST_D, None, None, None)
+    assert r.signal_t_ns is T3
+    assert r.signal_rho_m.tolist() == [1.0 - FAST_D] * 3
+
+
+def test_a_margin_within_rounding_of_zero_is_judged_on_exact_distances() -> None:
+    assert 0.67 - 0.25 == EXACT_D > FAST_D  # the fast margin is positive, the exact one exactly 0 (undecided)
+    r = check_trajectory(parse("home"), T3, X3, Y3, _home(0.67), max_speed_mps=1.0)
+    assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns) == ("inconclusive", 0.0, 0.0, "home", 0)
+
+
+def test_a_pass_near_a_zero_margin_states_the_exact_margin_and_no_witness() -> None:
+    exact = (0.67 + 5e-7 - 0.25) - EXACT_D
+    r = check_trajectory(parse("home"), T3, X3, Y3, _home(0.67 + 5e-7), max_speed_mps=1.0)
+    assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
+        "pass", exact, exact, None, None, None)
+    assert r.signal_t_ns is T3
+    assert r.signal_rho_m.tolist() == [exact] * 3
+
+
+@pytest.mark.parametrize("t_ns", [T3, np.array([0, 100_000_000, 300_000_000], dtype=np.int64)])
+def test_a_fail_states_the_formulas_bounds_at_the_first_sample(t_ns: np.ndarray) -> None:
+    # regular (grid path) and irregular (general engine) sampling; the robot leaves home 1 m, 0.5 m, 0 m outside
+    r = check_trajectory(parse("home"), t_ns, np.array([2.0, 1.5, 1.0]), np.zeros(3), _home(1.25), max_speed_mps=10.0)
+    assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
+        "fail", -1.0, -1.0, "home", 0, "false here")
+    assert r.signal_rho_m.tolist() == [-1.0, -0.5, 0.0]
+
+
+def test_samples_1_ns_apart_leave_no_gap_between_them() -> None:
+    t_ns = np.array([0, 1, 100_000_001], dtype=np.int64)
+    r = check_trajectory(parse("G[0,0.1] home"), t_ns, X3, Y3, _home(1.25), max_speed_mps=1.0)
+    assert (r.verdict, r.signal_t_ns.tolist()) == ("pass", [0, 1, 100_000_001])
+
+
+def test_signal_atoms_of_the_formula_are_judged_from_their_bounds_on_a_regular_grid_too() -> None:
+    slow = SignalBounds(np.full(3, 0.3), np.full(3, 0.4), np.full(2, 0.2), np.full(2, 0.5))
+    unused = SignalBounds(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))  # not in the formula: never read
+    r = check_trajectory(parse("G[0,0.2] (home & slow)"), T3, X3, Y3, _home(1.25), max_speed_mps=1.0,
+                         signals={"slow": slow, "fast": unused})
+    assert (r.verdict, r.margin_m, r.margin_hi_m) == ("pass", 0.2, 0.4)
