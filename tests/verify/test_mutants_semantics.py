@@ -27,7 +27,13 @@ from verify.semantics.timed_run import (
     timed_run_of,
     timed_run_of_sets,
 )
-from verify.semantics.trajectory import check_trajectory, interleave, reported_margin, trajectory_positions
+from verify.semantics.trajectory import (
+    check_trajectory,
+    interleave,
+    reported_margin,
+    trajectory_positions,
+    trajectory_values,
+)
 from verify.signals import SignalBounds
 
 INF = math.inf
@@ -484,7 +490,8 @@ def test_two_robots_distance_is_unknown_where_its_bound_is_undefined() -> None:
 def _home(radius_m: float) -> Scenario:
     """One disc region ``home`` centred at the origin; robot radius 0.25 m."""
     return builtin_scenario().model_copy(update={
-        "regions": (Region(name="H", center=(0.0, 0.0), radius=radius_m, labels=("home",)),),
+        "regions": (Region.model_validate({"name": "H", "center": (0.0, 0.0), "radius": radius_m,
+                                           "labels": ("home",)}),),
         "robot": RobotSpec(radius=0.25)})
 
 
@@ -539,3 +546,11 @@ def test_signal_atoms_of_the_formula_are_judged_from_their_bounds_on_a_regular_g
     r = check_trajectory(parse("G[0,0.2] (home & slow)"), T3, X3, Y3, _home(1.25), max_speed_mps=1.0,
                          signals={"slow": slow, "fast": unused})
     assert (r.verdict, r.margin_m, r.margin_hi_m) == ("pass", 0.2, 0.4)
+
+
+@pytest.mark.parametrize("t_ns", [T3, np.array([0, 100_000_000, 300_000_000], dtype=np.int64)])
+def test_the_values_obligations_are_read_from_use_exact_distances_on_interleaved_positions(t_ns: np.ndarray) -> None:
+    tv = trajectory_values(parse("F[0,0.1] home"), t_ns, X3, Y3, _home(0.67), max_speed_mps=1.0)
+    assert (tv.point_at.tolist(), tv.gap_at.tolist(), tv.pos.size) == ([0, 2, 4], [1, 3], 5)
+    home = tv.values[parse("home")]
+    assert home.lo[tv.point_at].tolist() == [0.0, 0.0, 0.0]  # 0.67 - 0.25 - hypot: exactly 0
