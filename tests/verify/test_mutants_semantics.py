@@ -531,7 +531,7 @@ def test_a_fail_states_the_formulas_bounds_at_the_first_sample(t_ns: np.ndarray)
     r = check_trajectory(parse("home"), t_ns, np.array([2.0, 1.5, 1.0]), np.zeros(3), _home(1.25), max_speed_mps=10.0)
     assert (r.verdict, r.margin_m, r.margin_hi_m, r.subformula, r.time_ns, r.reason) == (
         "fail", -1.0, -1.0, "home", 0, "false here")
-    assert r.signal_rho_m.tolist() == [-1.0, -0.5, 0.0]
+    assert (r.signal_t_ns.tolist(), r.signal_rho_m.tolist()) == (t_ns.tolist(), [-1.0, -0.5, 0.0])
 
 
 def test_samples_1_ns_apart_leave_no_gap_between_them() -> None:
