@@ -331,6 +331,11 @@ def test_trajectory_positions_are_the_samples_and_the_open_gaps_between_samples_
     assert (point_at.tolist(), gap_at.tolist()) == ([0, 1, 3, 4, 6], [-1, 2, -1, 5])
     pos, point_at, gap_at = trajectory_positions(np.zeros(0, dtype=np.int64))
     assert (pos.size, pos.end_ns, point_at.tolist(), gap_at.tolist()) == (0, 0, [], [])
+    # absolute stamps (ns since the epoch) stay exact integers
+    t0 = 1_700_000_000_000_000_001
+    pos, _, _ = trajectory_positions(np.array([t0, t0 + 1, t0 + 5], dtype=np.int64))
+    assert pos.start_ns.tolist() == [t0, t0 + 1, t0 + 2, t0 + 5]
+    assert pos.stop_ns.tolist() == [t0, t0 + 1, t0 + 4, t0 + 5]
 
 
 def test_interleave_puts_sample_values_at_the_samples_and_gap_values_at_the_gaps() -> None:
@@ -346,6 +351,11 @@ def test_interleave_puts_sample_values_at_the_samples_and_gap_values_at_the_gaps
                    np.array([-11.0, -12.0]), point_at=point_at, gap_at=gap_at, size=pos.size)
     assert v.lo.tolist() == [1.0, -1.0, 2.0, -2.0, 3.0]
     assert v.hi.tolist() == [11.0, -11.0, 12.0, -12.0, 13.0]
+    # one pair 1 ns apart: 3 samples, 1 gap
+    pos, point_at, gap_at = trajectory_positions(np.array([0, 1, 5], dtype=np.int64))
+    v = interleave(np.array([1.0, 2.0, 3.0]), np.array([11.0, 12.0, 13.0]), np.array([-1.0, -2.0]),
+                   np.array([-11.0, -12.0]), point_at=point_at, gap_at=gap_at, size=pos.size)
+    assert (v.lo.tolist(), v.hi.tolist()) == ([1.0, 2.0, -2.0, 3.0], [11.0, 12.0, -12.0, 13.0])
     pos, point_at, gap_at = trajectory_positions(np.array([7], dtype=np.int64))
     v = interleave(np.array([1.0]), np.array([2.0]), np.zeros(0), np.zeros(0), point_at=point_at, gap_at=gap_at,
                    size=pos.size)
