@@ -420,6 +420,37 @@ def test_each_verdict_is_decided_when_the_data_seen_settles_it(spec: str, decide
     assert [None if math.isinf(x) else x / S for x in d] == decided_s
 
 
+
+LATER = {"p": _bits(0, 0, 0, 1, 0), "q": _bits(1, 1, 0, 1, 1), "e": _bits(0, 0, 0, 0, 1), "l": _bits(0, 0, 0, 1, 1),
+         "n": _bits(0, 0, 0, 0, 0), "t": _bits(1, 1, 1, 1, 1)}
+
+
+@pytest.mark.parametrize(("spec", "decided_s"), [
+    # F[0,1] p is decided at 2 s (false at 1 s: its window closes) and at 3 s (true at 1 s and 2 s: p at 3 s)
+    ("X (F[0,1] p)", [2, 3, 3, None, 4]),  # the next sample is in the window: when its argument is decided there
+    ("X[0,1] (F[0,1] p)", [2, 3, 3, None, None]),  # ... a window closed at 1 s includes the sample 1 s later
+    ("X[1,2] (F[0,1] p)", [2, 3, 3, None, None]),  # ... and one that opens at 1 s
+    ("X[0,0.5] (F[0,1] p)", [1, 2, 3, 4, None]),  # outside the window: false when the next sample shows it
+    ("q U[0,3] n", [2, 2, 2, None, None]),  # false when q fails (at 2 s), n never holding
+    ("t U[0,1] n", [1, 2, 3, 4, None]),  # false when the window closes without n
+    ("t U[0,3] l", [3, 3, 3, 3, 4]),  # the witness at the last sample is that sample
+    ("t U[0,4] e", [4, 4, 4, 4, 4]),  # the only witness is the last sample
+])
+def test_next_and_until_are_decided_when_their_witness_or_window_end_is_seen(
+        spec: str, decided_s: list[int | None]) -> None:
+    f = parse(spec)
+    d = decided_times(f, FIVE, evaluate_at_points(f, FIVE, LATER))[f]
+    assert [None if math.isinf(x) else x / S for x in d] == decided_s
+
+
+def test_a_next_without_a_next_sample_is_decided_at_the_end_of_observation() -> None:
+    f = parse("X p")
+    for times, end_ns, decided in (([0, 1, 2, 3, 4], 6 * S, [1, 2, 3, 4, 6]), ([0], 0, [0]), ([0], 2 * S, [2])):
+        pos = Positions.points(np.array(times, dtype=np.int64) * S, end_ns)
+        atoms = {"p": _bits(*([1] * len(times)))}
+        d = decided_times(f, pos, evaluate_at_points(f, pos, atoms))[f]
+        assert (d / S).tolist() == decided
+
 def test_an_atom_over_a_gap_is_decided_at_the_next_sample() -> None:
     pos, _, _ = trajectory_positions(np.array([0, S, 2 * S], dtype=np.int64))
     f = parse("p & F[0,1] p")
