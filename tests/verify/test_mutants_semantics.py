@@ -15,7 +15,7 @@ import pytest
 from tubempc.mitl import parse
 from tubempc.scenario import Scenario, builtin_scenario
 from tubempc.scenario.model import Region, RobotSpec
-from verify.monitor.engine import Positions, Truth, evaluate_at_points
+from verify.monitor.engine import Positions, Truth, evaluate, evaluate_at_points
 from verify.semantics import joint, trajectory
 from verify.semantics.analysis import decided_times, margin_source
 from verify.semantics.joint import RobotTrack, joint_axis, margin_bounds, pair_distance_bounds
@@ -595,3 +595,67 @@ def test_the_values_obligations_are_read_from_use_exact_distances_on_interleaved
     assert (tv.point_at.tolist(), tv.gap_at.tolist(), tv.pos.size) == ([0, 2, 4], [1, 3], 5)
     home = tv.values[parse("home")]
     assert home.lo[tv.point_at].tolist() == [0.0, 0.0, 0.0]  # 0.67 - 0.25 - hypot: exactly 0
+
+
+@pytest.mark.parametrize(("spec", "end_s", "decided_s"), [
+    ("G[0,1.5] q", 4, [2, 2, 2, None, None]),  # true when the first sample after the window (2 s) is seen
+    ("G[0,0.5] q", 4, [1, 2, 2, 4, None]),  # ... the window closing between two samples
+    ("G[0,1] q", 6, [1, 2, 2, 4, 6]),  # no sample after the window: when observation ends
+])
+def test_an_always_is_decided_true_when_its_window_has_been_observed_to_its_end(
+        spec: str, end_s: int, decided_s: list[int | None]) -> None:
+    pos = Positions.points(np.arange(5, dtype=np.int64) * S, end_s * S)
+    f = parse(spec)
+    d = decided_times(f, pos, evaluate_at_points(f, pos, BITS))[f]
+    assert [None if math.isinf(x) else x / S for x in d] == decided_s
+
+
+def test_a_point_window_on_one_sample_closes_at_that_sample() -> None:
+    pos = Positions.points(np.array([0], dtype=np.int64), 2 * S)
+    f = parse("G[0,0] p")
+    assert decided_times(f, pos, evaluate_at_points(f, pos, {"p": _bits(1)}))[f].tolist() == [0.0]
+
+
+def test_an_exact_zero_or_a_straddling_value_is_undecided_and_has_no_decision_time() -> None:
+    z = Truth(np.array([0.0, -1.0, -1.0, 1.0, 0.5]), np.array([0.0, 0.5, 0.0, 1.0, 0.5]))
+    d = decided_times(parse("z"), FIVE, {parse("z"): z})[parse("z")]
+    assert [None if math.isinf(x) else x / S for x in d] == [None, None, None, 3, 4]
+
+
+def test_an_always_is_decided_false_at_its_first_false_sample_not_at_a_true_one() -> None:
+    f = parse("G[0,2] w")  # w: 0.5 (true), -1 (false), then true
+    d = decided_times(f, FIVE, evaluate_at_points(f, FIVE, {"w": _values(0.5, -1.0, 1.0, 1.0, 1.0)}))[f]
+    assert [None if math.isinf(x) else x / S for x in d] == [1, 1, 4, None, None]
+
+
+P_BOUNDS = Truth(np.array([-0.5, 0.3, 0.7, -0.2, 0.1]), np.array([0.5, 1.3, 1.7, 0.8, 1.1]))
+Q_BOUNDS = Truth(np.array([0.4, 0.2, 0.9, -0.6, 0.8]), np.array([1.4, 1.2, 1.9, 0.4, 1.8]))
+
+
+@pytest.mark.parametrize(("spec", "i", "bound", "source"), [
+    ("!p", 1, "lo", ("p", 1)),  # -1.3: p's upper bound
+    ("!p", 1, "hi", ("p", 1)),  # -0.3: p's lower bound
+    X
+    ("p -> q", 0, "hi", ("q", 0)),  # max(-(-0.5), 1.4): q's upper bound
+    ("X p", 3, "lo", ("p", 4)),  # the one later sample
+    ("q U[0,1] p", 3, "lo", ("p", 3)),  # the window of its own position, not of the first
+])
+def test_a_bound_is_traced_through_negations_to_the_atoms_other_bound(
+        spec: str, i: int, bound: str, source: tuple[str, int]) -> None:
+    f = parse(spec)
+    values = evaluate_at_points(f, FIVE, {"p": P_BOUNDS, "q": Q_BOUNDS})
+    assert margin_source(f, i, bound, FIVE, values) == source
+
+
+def test_on_samples_and_gaps_a_margin_is_traced_inside_the_window_its_bound_reads() -> None:
+    pos, _, _ = trajectory_positions(np.array([0, 1, 2, 3], dtype=np.int64) * S)  # 7 positions, gaps at 1, 3, 5
+    p = Truth(np.array([-0.5, 0.2, 0.3, 0.2, 0.7, 0.6, -0.2]), np.array([0.5, 1.1, 1.3, 1.2, 1.7, 1.6, 0.8]))
+    f = parse("X p")
+    values = evaluate_at_points(f, pos, {"p": p})
+    assert margin_source(f, 0, "lo", pos, values) == ("p", 2)  # the next sample, not the gap before it
+    assert margin_source(f, 2, "lo", pos, values) == ("p", 4)
+    # at the gap (0 s, 1 s): G's lower bound reads every position overlapping [0.5 s, 2.5 s) (the gap itself first),
+    # F's lower bound only those certainly in it (the gap (1 s, 2 s)), though the gap (0 s, 1 s) has the same value
+    for spec, source in (("G[0.5,1.5] p", ("p", 1)), ("F[0.5,1.5] p", ("p", 3))):
+        f = parse(spec)
+        assert margin_source(f, 1, "lo", pos, evaluate(f, pos, {"p": p})) == source, spec
