@@ -635,7 +635,7 @@ Q_BOUNDS = Truth(np.array([0.4, 0.2, 0.9, -0.6, 0.8]), np.array([1.4, 1.2, 1.9, 
 @pytest.mark.parametrize(("spec", "i", "bound", "source"), [
     ("!p", 1, "lo", ("p", 1)),  # -1.3: p's upper bound
     ("!p", 1, "hi", ("p", 1)),  # -0.3: p's lower bound
-    X
+    ("!(p & q)", 1, "lo", ("q", 1)),  # -min(1.3, 1.2) of the upper bounds: q's
     ("p -> q", 0, "hi", ("q", 0)),  # max(-(-0.5), 1.4): q's upper bound
     ("X p", 3, "lo", ("p", 4)),  # the one later sample
     ("q U[0,1] p", 3, "lo", ("p", 3)),  # the window of its own position, not of the first
