@@ -659,3 +659,23 @@ def test_on_samples_and_gaps_a_margin_is_traced_inside_the_window_its_bound_read
     for spec, source in (("G[0.5,1.5] p", ("p", 1)), ("F[0.5,1.5] p", ("p", 3))):
         f = parse(spec)
         assert margin_source(f, 1, "lo", pos, evaluate(f, pos, {"p": p})) == source, spec
+
+
+UNTIL = {"t": _values(1, 1, 1, 1, 1), "n": _values(-1, -1, -1, -1, -1), "z": _values(0, 1, 1, 1, 1),
+         "y": _values(1, 1, -1, 1, 1), "y0": _values(1, 0, -1, 1, 1), "y5": _values(1, 0.5, -1, 1, 1),
+         "r": _values(1, 1, 1, -1, 1), "p": _values(1, 1, 1, 1, 1)}
+
+
+@pytest.mark.parametrize(("spec", "end_s", "i", "decided_s"), [
+    ("t U[0,3] z", 4, 0, 1),  # z exactly 0 at 0 s is no witness: the witness is z at 1 s
+    ("y0 U[0,3] n", 4, 0, 2),  # y0 exactly 0 at 1 s does not fail it: y0 fails at 2 s
+    ("y5 U[0,3] n", 4, 0, 2),  # y5 is 0.5 (true) at 1 s and fails at 2 s
+    ("(X r) U[0,1] n", 4, 0, 1),  # X r fails at 2 s, just after the window [0, 1]: false when the window closes
+    ("y U[0,3] (X n)", 4, 0, 3),  # y fails at 2 s; X n there is known only at 3 s
+    ("(X p) U[0,10] n", 6, 3, 6),  # X p fails at the last sample, known at the end of observation (6 s)
+])
+def test_a_false_until_is_decided_when_its_left_side_fails_or_its_window_closes_and_the_right_side_is_known(
+        spec: str, end_s: int, i: int, decided_s: int) -> None:
+    pos = Positions.points(np.arange(5, dtype=np.int64) * S, end_s * S)
+    f = parse(spec)
+    assert decided_times(f, pos, evaluate_at_points(f, pos, UNTIL))[f][i] == decided_s * S
