@@ -636,6 +636,8 @@ Q_BOUNDS = Truth(np.array([0.4, 0.2, 0.9, -0.6, 0.8]), np.array([1.4, 1.2, 1.9, 
     ("!p", 1, "lo", ("p", 1)),  # -1.3: p's upper bound
     ("!p", 1, "hi", ("p", 1)),  # -0.3: p's lower bound
     ("!(p & q)", 1, "lo", ("q", 1)),  # -min(1.3, 1.2) of the upper bounds: q's
+    ("!(p & s)", 1, "lo", ("s", 1)),  # -min(1.3, 1.25) of the upper bounds: s's (p has the lesser lower bound)
+    ("!(p & s)", 1, "hi", ("p", 1)),  # -min(0.3, 0.35) of the lower bounds: p's
     ("p -> q", 0, "hi", ("q", 0)),  # max(-(-0.5), 1.4): q's upper bound
     ("X p", 3, "lo", ("p", 4)),  # the one later sample
     ("q U[0,1] p", 3, "lo", ("p", 3)),  # the window of its own position, not of the first
@@ -643,7 +645,8 @@ Q_BOUNDS = Truth(np.array([0.4, 0.2, 0.9, -0.6, 0.8]), np.array([1.4, 1.2, 1.9, 
 def test_a_bound_is_traced_through_negations_to_the_atoms_other_bound(
         spec: str, i: int, bound: str, source: tuple[str, int]) -> None:
     f = parse(spec)
-    values = evaluate_at_points(f, FIVE, {"p": P_BOUNDS, "q": Q_BOUNDS})
+    s_bounds = Truth(np.full(5, 0.35), np.full(5, 1.25))
+    values = evaluate_at_points(f, FIVE, {"p": P_BOUNDS, "q": Q_BOUNDS, "s": s_bounds})
     assert margin_source(f, i, bound, FIVE, values) == source
 
 
