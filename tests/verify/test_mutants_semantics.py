@@ -682,3 +682,10 @@ def test_a_false_until_is_decided_when_its_left_side_fails_or_its_window_closes_
     pos = Positions.points(np.arange(5, dtype=np.int64) * S, end_s * S)
     f = parse(spec)
     assert decided_times(f, pos, evaluate_at_points(f, pos, UNTIL))[f][i] == decided_s * S
+
+
+def test_an_until_margin_is_traced_inside_its_window_even_when_the_right_side_has_that_value_later() -> None:
+    # q U[0,1] p at 0 s: max(p(0), min(p(1), q(0))) = min(0.9, 0.4): q's 0.4 at 0 s, though p is 0.4 at 3 s
+    f = parse("q U[0,1] p")
+    values = evaluate_at_points(f, FIVE, {"q": _values(0.4, 1, 1, 1, 1), "p": _values(-1, 0.9, 0.5, 0.4, 0.2)})
+    assert margin_source(f, 0, "lo", FIVE, values) == ("q", 0)
