@@ -31,7 +31,9 @@ INF = math.inf
 @dataclass(slots=True)
 class Head:
     """The value of a formula at the first position, refined as data arrives: ``lo`` only grows, ``hi`` only
-    shrinks. ``decided_ns``: when the verdict became final; ``witness_ns``: where a false verdict was shown."""
+    shrinks. ``decided_ns``: when the verdict became final; ``witness_ns``: where a false verdict was shown;
+    ``final_ns``: the time of the sample since which ``lo`` and ``hi`` are final (no later sample can change them;
+    None while one can), whatever the batching."""
 
     formula: Formula
     lo: float = -INF
@@ -39,6 +41,7 @@ class Head:
     decided_ns: int | None = None
     witness_ns: int | None = None
     closed: bool = False
+    final_ns: int | None = None
 
     @property
     def verdict(self) -> str:
@@ -52,7 +55,7 @@ class Head:
     def margin_final(self) -> bool:
         """Whether ``lo`` and ``hi`` are final: no later sample can change them (the verdict may be final earlier,
         while a window is still open: an ``F`` already true can still become more so)."""
-        return self.closed
+        return self.closed or self.final_ns is not None
 
     def children(self) -> tuple[Head, ...]:
         return ()
@@ -78,22 +81,18 @@ class StreamHead(Head):
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or self.decided_ns is not None
-
     def need_from(self) -> int:
         return 0 if self.node.final == 0 else 1
 
     def update(self, track: Track, closing: bool) -> None:
         if self.node.final and self.node.lo.base == 0 and self.decided_ns is None:
             self.lo, self.hi = float(self.node.lo.at(0)), float(self.node.hi.at(0))
-            self.decided_ns = int(self.node.known.at(0))
+            self.decided_ns = self.final_ns = int(self.node.known.at(0))
             self.witness_ns = track.first_ns if self.hi < 0 else None
         if closing:
             self.closed = True
             if self.decided_ns is None:
-                self.decided_ns = track.end_ns
+                self.decided_ns = self.final_ns = track.end_ns
 
 
 class WindowHead(Head):
@@ -131,10 +130,6 @@ class WindowHead(Head):
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or self.complete
-
     def need_from(self) -> int:
         return self.used
 
@@ -157,6 +152,8 @@ class WindowHead(Head):
         self.lo, self.hi = (-hi, -lo) if self.always else (lo, hi)
         if closing:
             self.closed = True
+            if self.final_ns is None:
+                self.final_ns = track.end_ns
             if self.decided_ns is None:
                 self.decided_ns = track.end_ns
                 if not self.always and self.hi < 0:  # an unbounded F never met: shown at the end of the log
@@ -198,8 +195,11 @@ class WindowHead(Head):
         self.complete = bound <= end and covered
         if self.complete:
             when = int(track.first_tick_at_or_after(np.array([bound], dtype=np.int64), closing)[0])
+            # final since the first sample at or after the window's end, once every value in it is final: the same
+            # time however the samples were batched (the update that sees it may come later)
+            self.final_ns = max(min(when, end), self.acc_known)
             if self.acc_lo <= 0 and self.acc_hi < 0:  # decided once the window and its values are seen
-                self._decide(max(min(when, end), self.acc_known), min(bound, end))
+                self._decide(self.final_ns, min(bound, end))
 
     def _decide(self, when_ns: int, where_ns: int | None) -> None:
         """``where_ns``: the position that shows a violation (G) or the end of the window (F), if false."""
@@ -220,10 +220,6 @@ class BoolHead(Head):
     def children(self) -> tuple[Head, ...]:
         return tuple(self.kids)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or all(k.margin_final for k in self.kids)
-
     def need_from(self) -> int:
         return NEVER_NS  # reads no positions itself
 
@@ -242,6 +238,8 @@ class BoolHead(Head):
             self.lo, self.hi = op(p[0] for p in parts), op(p[1] for p in parts)
         if self.decided_ns is None and (self.lo > 0 or self.hi < 0):
             self.decided_ns, self.witness_ns = self._when(track)
+        if self.final_ns is None and all(k.final_ns is not None for k in self.kids):  # final once every part is
+            self.final_ns = max(_d(k, final=True) for k in self.kids)
         if closing:
             self.closed = True
             if self.decided_ns is None:
@@ -274,8 +272,10 @@ class BoolHead(Head):
         return max(_d(k) for k in self.kids), None if true else track.first_ns
 
 
-def _d(h: Head) -> int:
-    return h.decided_ns if h.decided_ns is not None else NEVER_NS
+def _d(h: Head, *, final: bool = False) -> int:
+    """When ``h`` was decided (``final``: since when its margin is final); never if not yet."""
+    t = h.final_ns if final else h.decided_ns
+    return t if t is not None else NEVER_NS
 
 
 class OfflineHead(Head):
@@ -301,6 +301,7 @@ class OfflineHead(Head):
         if self.hi < 0:  # where the certificate shows the violation
             self.witness_ns = explain(self.formula, 0, pos, values).time_ns
         self.closed = True
+        self.final_ns = track.end_ns
 
 
 # ---- building --------------------------------------------------------------------------------------------------------

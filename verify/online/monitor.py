@@ -481,17 +481,19 @@ class OnlineMonitor:
             m = m if m is not None and math.isfinite(m) else None
         decided_at = rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
         first = rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        final_at = rel_s(h.final_ns + t0, t0) if h.final_ns is not None else None
         return CheckState(name, verdict, h.decided, decided_at, m, first, h.margin_final,
-                          self._units.get(name) if margin else None)
+                          self._units.get(name) if margin else None, final_at)
 
     def _check_states(self) -> list[CheckState]:
         t0 = self.t0_ns
         if self._final is not None:
             end = self._traj.track.end_ns
-            return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
+            end_s = None if end is None else round(end * 1e-9, 9)
+            return [CheckState(c.name, c.verdict, True, end_s,
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
                                rel_s(c.first_violation_ns, t0), True,
-                               c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
+                               c.details.get("margin_unit", self._units.get(c.name)), end_s) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
     def _running_states(self) -> list[CheckState]:
@@ -528,8 +530,7 @@ class OnlineMonitor:
         for c in (*st.obligations, *st.checks):
             if c.decided and c.name not in self._reported:
                 self._reported.add(c.name)
-                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin if c.margin_final else None,
-                                    c.first_violation_s, c.unit))
+                out.append(c.decision())
         out.sort(key=lambda d: d.time_s)
         return out
 
