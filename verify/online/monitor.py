@@ -39,7 +39,7 @@ from verify.judging import formula_of, overall_verdict
 from verify.online.accumulate import SampleChecks
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.inputs import StreamInput
-from verify.online.quiet import EVERY_STREAM, Quiet
+from verify.online.quiet import EVERY_STREAM, POSE_RUN, POSE_TRAJECTORY, Quiet
 from verify.online.regions import RegionGeometry, RunLog, point_and_gap_bounds, positions_after, prepend
 from verify.online.signalfeed import SignalFeed
 from verify.online.states import CheckState, Decision, MonitorState, OnlineResult, rel_s
@@ -125,8 +125,10 @@ class OnlineMonitor:
         self._result: OnlineResult | None = None
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
-        # the second half of a judged pose batch (timed run, per-sample checks) left for the next update
+        # the second half of a judged pose batch (timed run and per-sample checks, or the checks) left for the next
+        # update, and the pose samples it feeds to the per-sample checks (the tube test of ``Quiet`` needs them)
         self._second_half: Callable[[], None] | None = None
+        self.unchecked: tuple[IntArray, FloatArray, FloatArray] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
     def _unit_of(self, formula: Formula) -> str | None:
@@ -299,7 +301,7 @@ class OnlineMonitor:
             return
         stream = self._quiet.due()
         if stream == "pose":
-            self._judge_poses(closing=False, defer=True)
+            self._judge_poses(closing=False, defer="run")
         elif stream == "cmd":
             self._judge_cmd()
         elif stream == "nominal":
@@ -326,6 +328,8 @@ class OnlineMonitor:
             self._judge_nominal()
         if "pose" in streams:
             self._judge_poses(closing)
+        elif POSE_RUN in streams or POSE_TRAJECTORY in streams:  # the rest cannot decide anything now
+            self._judge_poses(closing, defer="checks" if POSE_RUN in streams else "run")
         if "cmd" in streams:
             self._judge_cmd()
         if "nominal" in streams:
@@ -343,9 +347,9 @@ class OnlineMonitor:
             t, cols = self._cmd.take()
             self._checks.feed_cmd(t, np.column_stack(cols))
 
-    def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
+    def _judge_poses(self, closing: bool, *, defer: str | None = None) -> None:
         """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
-        (``defer``: quiet samples, half of whose judging may wait for the next update)."""
+        (``defer``: what of their judging may wait for the next update, ``_feed_pose``)."""
         self._finish_pose()
         late, self._late = self._late, []
         k = self._judgeable(closing)
@@ -369,13 +373,13 @@ class OnlineMonitor:
                              np.array([e[2] for e in late]))
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
-                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: bool = False) -> None:
+                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: str | None = None) -> None:
         """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
         samples for the per-sample checks (None: the same samples). The batch is judged with the sample before it
         (``k0`` = 1), whose gap to the first new sample it closes: the trajectory semantics, then the timed run and
-        the per-sample checks (``defer``: left to ``_finish_pose``, at the next update or any judging before it;
-        with signal atoms the timed run's entries come first, the signals' bounds there being computed with the
-        trajectory's)."""
+        the per-sample checks (``defer`` "run": those two, "checks": the checks, left to ``_finish_pose``, at the
+        next update or any judging before it; without signal atoms only: with them the timed run's entries come
+        first, the signals' bounds there being computed with the trajectory's)."""
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
         t0 = self.t0_ns
@@ -396,11 +400,16 @@ class OnlineMonitor:
         entry_dist = None if dist is None else dist[:, k0:]
         if not self._feeds:
             self._push_trajectory(t_rel, bounds, k0)
-            self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
-            if not defer:
+            if defer == "run":
+                self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
+            else:
+                self._push_run(*self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist), {})
+                self._second_half = partial(self._feed_every, *checks)
+            self.unchecked = (t_abs[k0:], x[k0:], y[k0:])
+            if defer is None:
                 self._finish_pose()
             return
-        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
+        conv, entry, members = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
         bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
         for row in self._signal_rows:  # signal atoms: verify.signals on the messages held around this batch
@@ -416,14 +425,13 @@ class OnlineMonitor:
                         checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None]
                         ) -> None:
         """The second half of a pose batch without signal atoms: the timed run, then the per-sample checks."""
-        entry, members, conv = self._run_changes(t_rel, x, y, dist)
-        self._push_run(conv, entry, members, {})
+        self._push_run(*self._run_changes(t_rel, x, y, dist), {})
         self._feed_every(*checks)
 
     def _finish_pose(self) -> None:
         """The second half of the last pose batch, if it was left for later."""
         if self._second_half is not None:
-            second, self._second_half = self._second_half, None
+            second, self._second_half, self.unchecked = self._second_half, None, None
             second()
 
     def _push_trajectory(self, t_rel: IntArray, bounds: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
@@ -440,9 +448,11 @@ class OnlineMonitor:
         tr.evaluation.step()
 
     def _run_changes(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None
-                     ) -> tuple[IntArray, list[str], IntArray]:
-        """The timed run's new entries (``RunLog.changes``)."""
-        return self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
+                     ) -> tuple[IntArray, IntArray, list[str]]:
+        """The timed run's new entries (``RunLog.changes``): the converted times, the entries among them, and the
+        regions containing the robot at each."""
+        entry, members, conv = self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
+        return conv, entry, members
 
     def _push_run(self, conv: IntArray, entry: IntArray, members: list[str],
                   entry_values: dict[str, tuple[FloatArray, FloatArray]]) -> None:
@@ -524,7 +534,26 @@ class OnlineMonitor:
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
+    def _undecided_heads(self) -> list[tuple[str, Head]]:
+        """The formula's selected checks and obligations not reported decided yet, with their heads."""
+        heads = [(n, h) for n, h in (("spec_trajectory", self._traj.head), ("spec_timed_run", self._run.head))
+                 if n in self._selected]
+        if "spec" in self.selection:
+            heads += zip(self._obligation_names, self._traj.obligations, strict=True)
+        return [(n, h) for n, h in heads if n not in self._reported]
+
+    def _anything_decided(self) -> bool:
+        """Whether a selected check or obligation not reported yet is decided (a cheap test before the state is
+        built: checks are decided before ``close`` only by failing, or with no unsafe region to touch)."""
+        if any(h.decided for _, h in self._undecided_heads()):
+            return True
+        return any((failed or (name == "obstacle_clearance" and not self._checks.unsafe))
+                   and name in self._selected and name not in self._reported
+                   for name, failed, _, _ in self._checks.running())
+
     def _new_decisions(self) -> list[Decision]:
+        if not self._closed and not self._anything_decided():
+            return []
         out: list[Decision] = []
         st = self._state(closed=self._closed)
         for c in (*st.obligations, *st.checks):
