@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until, subformulas
 from tubempc.mitl import atoms as atoms_of
@@ -25,6 +26,7 @@ from verify.online.track import NEVER_NS, Track, floats, ints
 __all__ = ["BoolHead", "Evaluation", "Head", "OfflineHead", "StreamHead", "WindowHead", "build_head"]
 
 INF = math.inf
+IntArray = npt.NDArray[np.int64]
 
 
 # ---- the formula at its first position -------------------------------------------------------------------------------
@@ -163,26 +165,34 @@ class WindowHead(Head):
         """The argument's new final values: those inside the window update the running extrema (and decide the
         head at the first position that makes the argument true, false for G)."""
         p, c = self.used, self.node.final
-        start, stop = ints(track.start, p, c), ints(track.stop_ns, p, c)
-        inside = stop >= t0 + self.lo_ns
-        if self.hi_ns is not None:
-            inside &= start <= t0 + self.hi_ns
         self.used = c
-        if not inside.any():
+        track_start, track_stop = track.start, track.stop_ns
+        first, last = t0 + self.lo_ns, None if self.hi_ns is None else t0 + self.hi_ns
+        # positions are in time order (starts and stops rising): none, all or some of them meet the window
+        if track_stop.at(c - 1) < first or (last is not None and track_start.at(p) > last):
             return
-        lo_a, hi_a = floats(self.node.lo, p, c), floats(self.node.hi, p, c)
+        start = ints(track_start, p, c)
+        sel: slice | IntArray
+        if track_stop.at(p) >= first and (last is None or track_start.at(c - 1) <= last):
+            sel = slice(None)
+        else:
+            inside = ints(track_stop, p, c) >= first
+            if last is not None:
+                inside &= start <= last
+            sel = np.flatnonzero(inside)
+        lo_a, hi_a = floats(self.node.lo, p, c)[sel], floats(self.node.hi, p, c)[sel]
         if self.always:
             lo_a, hi_a = -hi_a, -lo_a
-        sel = np.flatnonzero(inside)
-        run_lo = np.maximum.accumulate(lo_a[sel])
-        known = ints(self.node.known, p, c)
+        run_lo = np.maximum.accumulate(lo_a)
+        known = ints(self.node.known, p, c)[sel]
         if self.acc_lo <= 0 < run_lo[-1]:  # the argument decides it in this batch: at which position
-            k = int(sel[int(np.argmax(run_lo > 0))])
+            j = int(np.argmax(run_lo > 0))
+            k = j if isinstance(sel, slice) else int(sel[j])
             where = int(self.node.witness(track, p + k, p + k + 1)[0]) if self.always else int(start[k])
-            self._decide(int(known[k]), where)
+            self._decide(int(known[j]), where)
         self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
-        self.acc_hi = max(self.acc_hi, float(hi_a[sel].max()))
-        self.acc_known = max(self.acc_known, int(known[sel].max()))
+        self.acc_hi = max(self.acc_hi, float(hi_a.max()))
+        self.acc_known = max(self.acc_known, int(known.max()))
 
     def _complete(self, track: Track, t0: int, end: int, closing: bool) -> None:
         """Whether the window has been observed to its end with every value in it final (then a head not yet

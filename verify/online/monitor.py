@@ -463,14 +463,19 @@ class OnlineMonitor:
             self._run_log.record(members, t_e, entry_values)
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
+            some_unknown = bool(unknown_entry.any())
+            labels = self._run_log.entry_labels
             for name in self._names:
                 if name in entry_values:
                     e_lo, e_hi = entry_values[name]
                     run.atoms[name].push(e_lo, e_hi, t_e)
                     continue
-                labels = self._run_log.entry_labels
-                v1 = np.where(np.array([name in labels[m] for m in members], dtype=bool), 1.0, -1.0)
-                run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
+                v1 = np.array([1.0 if name in labels[m] else -1.0 for m in members])
+                if some_unknown:  # every label unknown there
+                    run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1),
+                                         t_e)
+                else:
+                    run.atoms[name].push(v1, v1, t_e)
         run.track.tick(conv)
         run.evaluation.step()
 
@@ -507,9 +512,14 @@ class OnlineMonitor:
         return [c for c in self._running_states() if c.name in self._selected]
 
     def _running_states(self) -> list[CheckState]:
+        return [self._head_state("spec_trajectory", self._traj.head, margin=True),
+                self._head_state("spec_timed_run", self._run.head, margin=False), *self._sample_states()]
+
+    def _sample_states(self) -> list[CheckState]:
+        """The per-sample checks before ``close``: decided only by failing (obstacle clearance: also with no unsafe
+        region to touch)."""
         t0 = self.t0_ns
-        out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
-               self._head_state("spec_timed_run", self._run.head, margin=False)]
+        out: list[CheckState] = []
         for name, failed, when, m in self._checks.running():
             if name == "obstacle_clearance" and not self._checks.unsafe:
                 out.append(CheckState(name, "pass", True, 0.0, None, None))
@@ -534,32 +544,33 @@ class OnlineMonitor:
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
-    def _undecided_heads(self) -> list[tuple[str, Head]]:
-        """The formula's selected checks and obligations not reported decided yet, with their heads."""
-        heads = [(n, h) for n, h in (("spec_trajectory", self._traj.head), ("spec_timed_run", self._run.head))
-                 if n in self._selected]
+    def _newly_decided(self) -> list[CheckState]:
+        """Before ``close``: the states ``_state`` gives, in its order, of the selected obligations and checks
+        decided but not reported yet (the others' are not built: this runs at every judging)."""
+        rep, sel = self._reported, self._selected
+        out: list[CheckState] = []
         if "spec" in self.selection:
-            heads += zip(self._obligation_names, self._traj.obligations, strict=True)
-        return [(n, h) for n, h in heads if n not in self._reported]
-
-    def _anything_decided(self) -> bool:
-        """Whether a selected check or obligation not reported yet is decided (a cheap test before the state is
-        built: checks are decided before ``close`` only by failing, or with no unsafe region to touch)."""
-        if any(h.decided for _, h in self._undecided_heads()):
-            return True
-        return any((failed or (name == "obstacle_clearance" and not self._checks.unsafe))
-                   and name in self._selected and name not in self._reported
-                   for name, failed, _, _ in self._checks.running())
+            out += [self._head_state(n, h, margin=True)
+                    for n, h in zip(self._obligation_names, self._traj.obligations, strict=True)
+                    if h.decided and n not in rep]
+        out += [self._head_state(n, h, margin=n == "spec_trajectory")
+                for n, h in (("spec_trajectory", self._traj.head), ("spec_timed_run", self._run.head))
+                if h.decided and n in sel and n not in rep]
+        if any((failed or (name == "obstacle_clearance" and not self._checks.unsafe)) and name in sel
+               and name not in rep for name, failed, _, _ in self._checks.running()):
+            out += [c for c in self._sample_states() if c.decided and c.name in sel and c.name not in rep]
+        return out
 
     def _new_decisions(self) -> list[Decision]:
-        if not self._closed and not self._anything_decided():
-            return []
+        if self._closed:
+            st = self._state(closed=True)
+            states = [c for c in (*st.obligations, *st.checks) if c.decided and c.name not in self._reported]
+        else:
+            states = self._newly_decided()
         out: list[Decision] = []
-        st = self._state(closed=self._closed)
-        for c in (*st.obligations, *st.checks):
-            if c.decided and c.name not in self._reported:
-                self._reported.add(c.name)
-                out.append(c.decision())
+        for c in states:
+            self._reported.add(c.name)
+            out.append(c.decision())
         out.sort(key=lambda d: d.time_s)
         return out
 
