@@ -21,6 +21,9 @@ IntArray = npt.NDArray[np.int64]
 NEVER_NS = np.iinfo(np.int64).max
 #: a witness at the position's own start
 AT_START = np.iinfo(np.int64).min
+#: elements a buffer has room for at first: a quiet batch of pose samples and its gaps (2 x 256 positions) and what
+#: is retained fit without a new array (8 KiB of address space per buffer)
+_FIRST_CAPACITY = 1024
 
 
 class Buffer:
@@ -29,7 +32,7 @@ class Buffer:
     __slots__ = ("_a", "_off", "base", "stop")
 
     def __init__(self, dtype: type) -> None:
-        self._a: npt.NDArray[np.generic] = np.empty(256, dtype=dtype)
+        self._a: npt.NDArray[np.generic] = np.empty(_FIRST_CAPACITY, dtype=dtype)
         self._off = 0
         self.base = 0  # global index of the first retained element
         self.stop = 0  # global index past the last element
@@ -41,7 +44,7 @@ class Buffer:
         n = self.stop - self.base
         if self._off + n + k > self._a.shape[0]:
             grow = 2 * (n + k) > self._a.shape[0]
-            new = np.empty(max(256, 4 * (n + k)), dtype=self._a.dtype) if grow else self._a
+            new = np.empty(max(_FIRST_CAPACITY, 4 * (n + k)), dtype=self._a.dtype) if grow else self._a
             new[:n] = self._a[self._off : self._off + n]
             self._a, self._off = new, 0
         return self._off + n
