@@ -103,6 +103,8 @@ def _feed(pushes: list[tuple[str, tuple[float, ...]]], spec: str, *, every: bool
        pending=st.sampled_from([100, 37, 1000]), faults=st.fixed_dictionaries({f: st.booleans() for f in FAULTS}))
 @example(seed=0, n=214, spec=FORMULAS[3], pending=100,  # the F decided at 0.98 s: its margin final at 2.2 s only
          faults={f: f == "dropouts" for f in FAULTS})
+@example(seed=0, n=499, spec=FORMULAS[2], pending=1000,  # a window between two entries of the timed run
+         faults={f: f in ("jitter", "line") for f in FAULTS})
 def test_an_update_per_sample_decides_as_judging_every_call(seed: int, n: int, spec: str, pending: int,
                                                              faults: dict[str, bool]) -> None:
     pushes = _run(np.random.default_rng(seed), n, faults)

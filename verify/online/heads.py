@@ -168,7 +168,8 @@ class WindowHead(Head):
         self.used = c
         track_start, track_stop = track.start, track.stop_ns
         first, last = t0 + self.lo_ns, None if self.hi_ns is None else t0 + self.hi_ns
-        # positions are in time order (starts and stops rising): none, all or some of them meet the window
+        # positions are in time order (starts and stops rising): all of them may meet the window, or none of them
+        # (the timed run's entries are points: a window may also fall between two)
         if track_stop.at(c - 1) < first or (last is not None and track_start.at(p) > last):
             return
         start = ints(track_start, p, c)
@@ -180,6 +181,8 @@ class WindowHead(Head):
             if last is not None:
                 inside &= start <= last
             sel = np.flatnonzero(inside)
+            if not sel.size:
+                return
         lo_a, hi_a = floats(self.node.lo, p, c)[sel], floats(self.node.hi, p, c)[sel]
         if self.always:
             lo_a, hi_a = -hi_a, -lo_a
