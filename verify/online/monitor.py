@@ -282,7 +282,8 @@ class OnlineMonitor:
         decided when ``max_pending`` samples made a push judge the buffer). Samples that cannot decide anything
         (``verify.online.quiet``) may stay buffered until one can: the same decisions, at the same call, with the
         same times, as judging at every call. Those are judged one stream at a time, one stream per update, once
-        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once."""
+        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once; and when only a
+        semantics of the formula can decide, the rest waits for the next update in the same way."""
         loud = self._quiet.loud()
         if loud:
             self._process(loud)

@@ -3,9 +3,12 @@
 input: the ``OnlineMonitor`` (its scenario, its buffered samples, the state of its heads and checks) -> output:
 ``Quiet.loud()``, the streams whose buffered samples can make a check or obligation final if judged now (none: the
 update may leave them buffered and return no decision, exactly as judging them would have; ``due`` then names a
-stream whose tested samples are judged at this update, one stream per update, ``batch`` at a time). Judging them
-later, together with the samples that follow, gives the same verdicts and the same decision times (the monitor's
-verdicts do not depend on the batching), so decisions come at the same ``update`` as when every call judges.
+stream whose tested samples are judged at this update, one stream per update, ``batch`` at a time; for the pose
+samples, whether only the trajectory semantics or only the two semantics can: the timed run and the per-sample
+checks, the nominal samples and the tube then wait for the next update, so that an update judges less at once).
+Judging them later, together with the samples that follow, gives the same verdicts and the same decision times (the
+monitor's verdicts do not depend on the batching), so decisions come at the same ``update`` as when every call
+judges.
 
 The test is scalar (plain floats, a few operations per sample) and conservative: any doubt -- a value within
 ``EPS`` of a limit, a NaN, a duplicate that disagrees, a formula or scenario it does not cover -- says "not quiet".
