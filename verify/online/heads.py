@@ -184,17 +184,17 @@ class WindowHead(Head):
             if not sel.size:
                 return
         lo_a, hi_a = floats(self.node.lo, p, c)[sel], floats(self.node.hi, p, c)[sel]
-        if self.always:
-            lo_a, hi_a = -hi_a, -lo_a
-        run_lo = np.maximum.accumulate(lo_a)
         known = ints(self.node.known, p, c)[sel]
-        if self.acc_lo <= 0 < run_lo[-1]:  # the argument decides it in this batch: at which position
-            j = int(np.argmax(run_lo > 0))
+        # the (negated for G) argument's extrema over these positions
+        best, worst = (-float(hi_a.min()), -float(lo_a.min())) if self.always else (float(lo_a.max()),
+                                                                                     float(hi_a.max()))
+        if self.acc_lo <= 0 < best:  # the argument decides it in this batch: at its first position that does
+            j = int(np.argmax(-hi_a > 0 if self.always else lo_a > 0))
             k = j if isinstance(sel, slice) else int(sel[j])
             where = int(self.node.witness(track, p + k, p + k + 1)[0]) if self.always else int(start[k])
             self._decide(int(known[j]), where)
-        self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
-        self.acc_hi = max(self.acc_hi, float(hi_a.max()))
+        self.acc_lo = max(self.acc_lo, best)
+        self.acc_hi = max(self.acc_hi, worst)
         self.acc_known = max(self.acc_known, int(known.max()))
 
     def _complete(self, track: Track, t0: int, end: int, closing: bool) -> None:
