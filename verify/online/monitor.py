@@ -126,9 +126,8 @@ class OnlineMonitor:
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
         # the second half of a judged pose batch (timed run and per-sample checks, or the checks) left for the next
-        # update, and the pose samples it feeds to the per-sample checks (the tube test of ``Quiet`` needs them)
+        # update
         self._second_half: Callable[[], None] | None = None
-        self.unchecked: tuple[IntArray, FloatArray, FloatArray] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
     def _unit_of(self, formula: Formula) -> str | None:
@@ -336,7 +335,7 @@ class OnlineMonitor:
         if "nominal" in streams:
             self._checks.resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
-        self._quiet.refresh()
+        self._quiet.refresh(keep_tube="nominal" not in streams and (POSE_RUN in streams or POSE_TRAJECTORY in streams))
 
     def _judge_nominal(self) -> None:
         if self._nom.t:
@@ -406,7 +405,6 @@ class OnlineMonitor:
             else:
                 self._push_run(*self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist), {})
                 self._second_half = partial(self._feed_every, *checks)
-            self.unchecked = (t_abs[k0:], x[k0:], y[k0:])
             if defer is None:
                 self._finish_pose()
             return
@@ -432,7 +430,7 @@ class OnlineMonitor:
     def _finish_pose(self) -> None:
         """The second half of the last pose batch, if it was left for later."""
         if self._second_half is not None:
-            second, self._second_half, self.unchecked = self._second_half, None, None
+            second, self._second_half = self._second_half, None
             second()
 
     def _push_trajectory(self, t_rel: IntArray, bounds: tuple[FloatArray, FloatArray, FloatArray, FloatArray],

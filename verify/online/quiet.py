@@ -164,10 +164,11 @@ class Quiet:
         self.match_ns = mon._checks.period_ns // 2
         self.refresh()
 
-    def refresh(self) -> None:
-        """After a judging: what is still open, and the samples the next test starts from."""
+    def refresh(self, *, keep_tube: bool = False) -> None:
+        """After a judging: what is still open, and the samples the next test starts from (``keep_tube``: the pose
+        samples were judged without the nominal ones: the tube test goes on where it was)."""
         mon = self.mon
-        self.pose_seen = self.cmd_seen = self.nom_seen = 0
+        self.pose_seen = self.cmd_seen = 0
         self.block = False
         # the last sample tested in full: (x, y, how far the robot may move before any tested value can reach its
         # limit, the time from which it must be tested again)
@@ -200,10 +201,12 @@ class Quiet:
         self.prev_t = mon._prev[0] if mon._prev is not None else None
         ps = mon._run_log.prev_set
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
+        if keep_tube:
+            return
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
+        self.nom_seen = 0
         self.unmatched: deque[tuple[int, float, float]] = deque()
-        later = [mon.unchecked] if mon.unchecked is not None else []  # judged, but not by the checks yet
-        for t, x, y in (*checks.tube_pending, *later):
+        for t, x, y in checks.tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
         nt, nx, ny = checks.nominal
         last = mon._pose.last_ns
