@@ -7,7 +7,8 @@ drifting out of the tube, a command outside the box, no nominal, no commands; st
 on a region's boundary) and formulas with
 bounded, unbounded and nested windows: a monitor that judges at every update (the test switched off) and one that
 may wait return, call by call, the same decisions (name, verdict, time, margin, first violation); both equal a feed
-that calls ``update()`` only at the end; and ``close()`` gives the same checks. (A duplicate stamp with other
+that calls ``update()`` only at the end; and ``close()`` gives the same checks. A decision states a margin only if
+it was final when decided, and then it is the one ``close()`` states (the certificate's). (A duplicate stamp with other
 values makes its sample unknown only while the sample waits, and else keeps the formula from passing: that depends
 on when the sample was judged, as it always has, so the duplicates here agree.)
 """
@@ -15,7 +16,7 @@ on when the sample was judged, as it always has, so the duplicates here agree.)
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from tubempc.scenario import builtin_scenario
@@ -100,6 +101,10 @@ def _feed(pushes: list[tuple[str, tuple[float, ...]]], spec: str, *, every: bool
 @settings(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 500), spec=st.sampled_from(FORMULAS),
        pending=st.sampled_from([100, 37, 1000]), faults=st.fixed_dictionaries({f: st.booleans() for f in FAULTS}))
+@example(seed=0, n=214, spec=FORMULAS[3], pending=100,  # the F decided at 0.98 s: its margin final at 2.2 s only
+         faults={f: f == "dropouts" for f in FAULTS})
+@example(seed=0, n=499, spec=FORMULAS[2], pending=1000,  # a window between two entries of the timed run
+         faults={f: f in ("jitter", "line") for f in FAULTS})
 def test_an_update_per_sample_decides_as_judging_every_call(seed: int, n: int, spec: str, pending: int,
                                                              faults: dict[str, bool]) -> None:
     pushes = _run(np.random.default_rng(seed), n, faults)
@@ -111,3 +116,9 @@ def test_an_update_per_sample_decides_as_judging_every_call(seed: int, n: int, s
     for mon in (judging, batched):
         assert [(c.name, c.verdict, c.margin, c.first_violation_ns) for c in mon.close().checks] == \
             [(c.name, c.verdict, c.margin, c.first_violation_ns) for c in waiting.close().checks]
+    final = waiting.close().state
+    margins = {c.name: c.margin for c in (*final.obligations, *final.checks)}
+    late = waiting._formula_late_conflicts  # a duplicate of a judged sample: the formula's checks cannot pass
+    for name, _verdict, _time, margin, _first, _unit in (d for call in got for d in call):
+        if margin is not None and not (late and str(name).startswith("spec_")):
+            assert margins[str(name)] == margin, (name, margin)  # a stated margin is the final one

@@ -60,9 +60,9 @@ def test_a_command_outside_the_box_is_reported_at_its_update() -> None:
     assert [(d.name, d.verdict, d.time_s) for d in got] == [("input_box", "fail", 0.5)]
 
 
-def _judging_log(mon: OnlineMonitor) -> list[str]:
+def _judging_log(mon: OnlineMonitor, *, run: bool = False) -> list[str]:
     """Records which part of the judging runs: the trajectory semantics, the per-sample checks on poses, the
-    commands, the nominal states."""
+    commands, the nominal states (``run``: and the timed-run semantics)."""
     log: list[str] = []
 
     def logging(name: str, fn: Any) -> Any:
@@ -72,8 +72,9 @@ def _judging_log(mon: OnlineMonitor) -> list[str]:
 
         return logged
 
-    for name, obj, attr in (("trajectory", mon._traj.evaluation, "step"), ("poses", mon._checks, "feed_poses"),
-                            ("cmd", mon._checks, "feed_cmd"), ("nominal", mon._checks, "feed_nominal")):
+    parts = [("trajectory", mon._traj.evaluation, "step"), ("poses", mon._checks, "feed_poses"),
+             ("cmd", mon._checks, "feed_cmd"), ("nominal", mon._checks, "feed_nominal")]
+    for name, obj, attr in parts + ([("run", mon._run.evaluation, "step")] if run else []):
         setattr(obj, attr, logging(name, getattr(obj, attr)))
     return log
 
@@ -118,3 +119,34 @@ def test_a_command_outside_the_box_judges_the_commands_alone() -> None:
     assert [(d.name, d.verdict, d.time_s) for d in got] == [("input_box", "fail", 0.5)]
     assert log == ["cmd"] and mon._pose.t
     assert mon.close().verdict == "fail"
+
+
+def test_an_entry_judges_the_formula_and_leaves_the_checks_for_the_next_update() -> None:
+    """Driving into R1 at 0.2 m/s with an update per sample: the update after the sample that enters it judges the
+    two semantics of the formula and returns the F's decision with that sample's time, as judging at every call;
+    the per-sample checks of those poses, the nominal states and the commands (none of which can decide anything
+    then) wait for the next updates, so that the deciding update does not pay for them."""
+    spec = "F[0,inf) mission_1 & G[0,inf) !obs_1"
+    cx, cy = SC.region("R1").center
+    mons = [OnlineMonitor(SC, spec=spec) for _ in range(2)]
+    mons[1]._quiet.enabled = False  # judges at every call
+    log = _judging_log(mons[0], run=True)
+    per_update: list[tuple[list[str], list[tuple[str, str, float]]]] = []
+    judged: list[list[tuple[str, str, float]]] = []
+    for i in range(300):
+        t, y = T0 + i * DT, cy + 0.6 - 0.002 * i
+        before = len(log)
+        for m in mons:
+            m.push_nominal(t, cx, y)
+            m.push_pose(t, cx, y)
+            m.push_cmd(t, 0.0, 0.0, 0.0)
+        got = [(d.name, d.verdict, d.time_s) for d in mons[0].update()]
+        per_update.append((log[before:], got))
+        judged.append([(d.name, d.verdict, d.time_s) for d in mons[1].update()])
+    assert [got for _, got in per_update] == judged  # the same decisions at the same calls
+    k = next(i for i, (_, got) in enumerate(per_update) if got)
+    parts, decided = per_update[k]
+    assert decided == [("F[0,inf) mission_1", "pass", 2.1)]  # the disc inside R1: 0.6 - 0.002 i = 0.45 - 0.27 (+ ulps)
+    assert sorted(parts) == ["run", "trajectory"]  # the formula alone
+    assert per_update[k + 1][0] == ["poses"]  # the per-sample checks of those poses at the next update
+    assert mons[0].close().checks == mons[1].close().checks

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Next, Not, Or, Until, subformulas
 from tubempc.mitl import atoms as atoms_of
@@ -26,13 +27,16 @@ from verify.semantics.analysis import decided_times
 __all__ = ["BoolHead", "Evaluation", "Head", "OfflineHead", "StreamHead", "WindowHead", "build_head"]
 
 INF = math.inf
+IntArray = npt.NDArray[np.int64]
 
 
 # ---- the formula at its first position -------------------------------------------------------------------------------
 @dataclass(slots=True)
 class Head:
     """The value of a formula at the first position, refined as data arrives: ``lo`` only grows, ``hi`` only
-    shrinks. ``decided_ns``: when the verdict became final; ``witness_ns``: where a false verdict was shown."""
+    shrinks. ``decided_ns``: when the verdict became final; ``witness_ns``: where a false verdict was shown;
+    ``final_ns``: the time of the sample since which ``lo`` and ``hi`` are final (no later sample can change them;
+    None while one can), whatever the batching."""
 
     formula: Formula
     lo: float = -INF
@@ -40,6 +44,7 @@ class Head:
     decided_ns: int | None = None
     witness_ns: int | None = None
     closed: bool = False
+    final_ns: int | None = None
 
     @property
     def verdict(self) -> str:
@@ -53,7 +58,7 @@ class Head:
     def margin_final(self) -> bool:
         """Whether ``lo`` and ``hi`` are final: no later sample can change them (the verdict may be final earlier,
         while a window is still open: an ``F`` already true can still become more so)."""
-        return self.closed
+        return self.closed or self.final_ns is not None
 
     def children(self) -> tuple[Head, ...]:
         return ()
@@ -79,22 +84,18 @@ class StreamHead(Head):
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or self.decided_ns is not None
-
     def need_from(self) -> int:
         return 0 if self.node.final == 0 else 1
 
     def update(self, track: Track, closing: bool) -> None:
         if self.node.final and self.node.lo.base == 0 and self.decided_ns is None:
             self.lo, self.hi = float(self.node.lo.at(0)), float(self.node.hi.at(0))
-            self.decided_ns = int(self.node.known.at(0))
+            self.decided_ns = self.final_ns = int(self.node.known.at(0))
             self.witness_ns = track.first_ns if self.hi < 0 else None
         if closing:
             self.closed = True
             if self.decided_ns is None:
-                self.decided_ns = track.end_ns
+                self.decided_ns = self.final_ns = track.end_ns
 
 
 class WindowHead(Head):
@@ -132,10 +133,6 @@ class WindowHead(Head):
     def nodes(self) -> tuple[Node, ...]:
         return (self.node,)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or self.complete
-
     def need_from(self) -> int:
         return self.used
 
@@ -158,6 +155,8 @@ class WindowHead(Head):
         self.lo, self.hi = (-hi, -lo) if self.always else (lo, hi)
         if closing:
             self.closed = True
+            if self.final_ns is None:
+                self.final_ns = track.end_ns
             if self.decided_ns is None:
                 self.decided_ns = track.end_ns
                 if not self.always and self.hi < 0:  # an unbounded F never met: shown at the end of the log
@@ -167,26 +166,37 @@ class WindowHead(Head):
         """The argument's new final values: those inside the window update the running extrema (and decide the
         head at the first position that makes the argument true, false for G)."""
         p, c = self.used, self.node.final
-        start, stop = ints(track.start, p, c), ints(track.stop_ns, p, c)
-        inside = stop >= t0 + self.lo_ns
-        if self.hi_ns is not None:
-            inside &= start <= t0 + self.hi_ns
         self.used = c
-        if not inside.any():
+        track_start, track_stop = track.start, track.stop_ns
+        first, last = t0 + self.lo_ns, None if self.hi_ns is None else t0 + self.hi_ns
+        # positions are in time order (starts and stops rising): all of them may meet the window, or none of them
+        # (the timed run's entries are points: a window may also fall between two)
+        if track_stop.at(c - 1) < first or (last is not None and track_start.at(p) > last):
             return
-        lo_a, hi_a = floats(self.node.lo, p, c), floats(self.node.hi, p, c)
-        if self.always:
-            lo_a, hi_a = -hi_a, -lo_a
-        sel = np.flatnonzero(inside)
-        run_lo = np.maximum.accumulate(lo_a[sel])
-        known = ints(self.node.known, p, c)
-        if self.acc_lo <= 0 < run_lo[-1]:  # the argument decides it in this batch: at which position
-            k = int(sel[int(np.argmax(run_lo > 0))])
+        start = ints(track_start, p, c)
+        sel: slice | IntArray
+        if track_stop.at(p) >= first and (last is None or track_start.at(c - 1) <= last):
+            sel = slice(None)
+        else:
+            inside = ints(track_stop, p, c) >= first
+            if last is not None:
+                inside &= start <= last
+            sel = np.flatnonzero(inside)
+            if not sel.size:
+                return
+        lo_a, hi_a = floats(self.node.lo, p, c)[sel], floats(self.node.hi, p, c)[sel]
+        known = ints(self.node.known, p, c)[sel]
+        # the (negated for G) argument's extrema over these positions
+        best, worst = (-float(hi_a.min()), -float(lo_a.min())) if self.always else (float(lo_a.max()),
+                                                                                     float(hi_a.max()))
+        if self.acc_lo <= 0 < best:  # the argument decides it in this batch: at its first position that does
+            j = int(np.argmax(-hi_a > 0 if self.always else lo_a > 0))
+            k = j if isinstance(sel, slice) else int(sel[j])
             where = int(self.node.witness(track, p + k, p + k + 1)[0]) if self.always else int(start[k])
-            self._decide(int(known[k]), where)
-        self.acc_lo = max(self.acc_lo, float(run_lo[-1]))
-        self.acc_hi = max(self.acc_hi, float(hi_a[sel].max()))
-        self.acc_known = max(self.acc_known, int(known[sel].max()))
+            self._decide(int(known[j]), where)
+        self.acc_lo = max(self.acc_lo, best)
+        self.acc_hi = max(self.acc_hi, worst)
+        self.acc_known = max(self.acc_known, int(known.max()))
 
     def _complete(self, track: Track, t0: int, end: int, closing: bool) -> None:
         """Whether the window has been observed to its end with every value in it final (then a head not yet
@@ -199,8 +209,11 @@ class WindowHead(Head):
         self.complete = bound <= end and covered
         if self.complete:
             when = int(track.first_tick_at_or_after(np.array([bound], dtype=np.int64), closing)[0])
+            # final since the first sample at or after the window's end, once every value in it is final: the same
+            # time however the samples were batched (the update that sees it may come later)
+            self.final_ns = max(min(when, end), self.acc_known)
             if self.acc_lo <= 0 and self.acc_hi < 0:  # decided once the window and its values are seen
-                self._decide(max(min(when, end), self.acc_known), min(bound, end))
+                self._decide(self.final_ns, min(bound, end))
 
     def _decide(self, when_ns: int, where_ns: int | None) -> None:
         """``where_ns``: the position that shows a violation (G) or the end of the window (F), if false."""
@@ -221,10 +234,6 @@ class BoolHead(Head):
     def children(self) -> tuple[Head, ...]:
         return tuple(self.kids)
 
-    @property
-    def margin_final(self) -> bool:
-        return self.closed or all(k.margin_final for k in self.kids)
-
     def need_from(self) -> int:
         return NEVER_NS  # reads no positions itself
 
@@ -243,6 +252,8 @@ class BoolHead(Head):
             self.lo, self.hi = op(p[0] for p in parts), op(p[1] for p in parts)
         if self.decided_ns is None and (self.lo > 0 or self.hi < 0):
             self.decided_ns, self.witness_ns = self._when(track)
+        if self.final_ns is None and all(k.final_ns is not None for k in self.kids):  # final once every part is
+            self.final_ns = max(_d(k, final=True) for k in self.kids)
         if closing:
             self.closed = True
             if self.decided_ns is None:
@@ -275,8 +286,10 @@ class BoolHead(Head):
         return max(_d(k) for k in self.kids), None if true else track.first_ns
 
 
-def _d(h: Head) -> int:
-    return h.decided_ns if h.decided_ns is not None else NEVER_NS
+def _d(h: Head, *, final: bool = False) -> int:
+    """When ``h`` was decided (``final``: since when its margin is final); never if not yet."""
+    t = h.final_ns if final else h.decided_ns
+    return t if t is not None else NEVER_NS
 
 
 class OfflineHead(Head):
@@ -304,6 +317,7 @@ class OfflineHead(Head):
         if self.hi < 0:  # where the certificate shows the violation
             self.witness_ns = explain(self.formula, 0, pos, values).time_ns
         self.closed = True
+        self.final_ns = track.end_ns
 
 
 # ---- building --------------------------------------------------------------------------------------------------------

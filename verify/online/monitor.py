@@ -40,7 +40,7 @@ from verify.judging import formula_of, overall_verdict, split_obligations
 from verify.online.accumulate import SampleChecks
 from verify.online.heads import BoolHead, Evaluation, Head, build_head
 from verify.online.inputs import StreamInput
-from verify.online.quiet import EVERY_STREAM, Quiet
+from verify.online.quiet import EVERY_STREAM, POSE_RUN, POSE_TRAJECTORY, Quiet
 from verify.online.regions import RegionGeometry, RunLog, point_and_gap_bounds, positions_after, prepend
 from verify.online.signalfeed import SignalFeed
 from verify.online.states import CheckState, Decision, MonitorState, OnlineResult, rel_s
@@ -135,7 +135,8 @@ class OnlineMonitor:
         self._result: OnlineResult | None = None
         self._final: list[CheckResult] | None = None
         self._unreturned: list[Decision] = []
-        # the second half of a judged pose batch (timed run, per-sample checks) left for the next update
+        # the second half of a judged pose batch (timed run and per-sample checks, or the checks) left for the next
+        # update
         self._second_half: Callable[[], None] | None = None
         self._quiet = Quiet(self)  # whether an update can leave the buffered samples buffered (nothing to decide)
 
@@ -290,7 +291,8 @@ class OnlineMonitor:
         decided when ``max_pending`` samples made a push judge the buffer). Samples that cannot decide anything
         (``verify.online.quiet``) may stay buffered until one can: the same decisions, at the same call, with the
         same times, as judging at every call. Those are judged one stream at a time, one stream per update, once
-        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once."""
+        ``QUIET_BATCH`` of them wait, so that no update pays for judging every stream at once; and when only a
+        semantics of the formula can decide, the rest waits for the next update in the same way."""
         loud = self._quiet.loud()
         if loud:
             self._process(loud)
@@ -309,7 +311,7 @@ class OnlineMonitor:
             return
         stream = self._quiet.due()
         if stream == "pose":
-            self._judge_poses(closing=False, defer=True)
+            self._judge_poses(closing=False, defer="run")
         elif stream == "cmd":
             self._judge_cmd()
         elif stream == "nominal":
@@ -336,12 +338,14 @@ class OnlineMonitor:
             self._judge_nominal()
         if "pose" in streams:
             self._judge_poses(closing)
+        elif POSE_RUN in streams or POSE_TRAJECTORY in streams:  # the rest cannot decide anything now
+            self._judge_poses(closing, defer="checks" if POSE_RUN in streams else "run")
         if "cmd" in streams:
             self._judge_cmd()
         if "nominal" in streams:
             self._checks.resolve_tube(closing=False)
         self._unreturned.extend(self._new_decisions())
-        self._quiet.refresh()
+        self._quiet.refresh(keep_tube="nominal" not in streams and (POSE_RUN in streams or POSE_TRAJECTORY in streams))
 
     def _judge_nominal(self) -> None:
         if self._nom.t:
@@ -353,9 +357,9 @@ class OnlineMonitor:
             t, cols = self._cmd.take()
             self._checks.feed_cmd(t, np.column_stack(cols))
 
-    def _judge_poses(self, closing: bool, *, defer: bool = False) -> None:
+    def _judge_poses(self, closing: bool, *, defer: str | None = None) -> None:
         """The pose samples every used signal is known for, with their duplicates that disagree and the late ones
-        (``defer``: quiet samples, half of whose judging may wait for the next update)."""
+        (``defer``: what of their judging may wait for the next update, ``_feed_pose``)."""
         self._finish_pose()
         late, self._late = self._late, []
         k = self._judgeable(closing)
@@ -379,13 +383,13 @@ class OnlineMonitor:
                              np.array([e[2] for e in late]))
 
     def _feed_pose(self, t_abs: IntArray, x: FloatArray, y: FloatArray,
-                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: bool = False) -> None:
+                   every: tuple[IntArray, FloatArray, FloatArray] | None, *, defer: str | None = None) -> None:
         """``x``, ``y``: one sample per time for the formula (NaN where duplicates disagree); ``every``: all the
         samples for the per-sample checks (None: the same samples). The batch is judged with the sample before it
         (``k0`` = 1), whose gap to the first new sample it closes: the trajectory semantics, then the timed run and
-        the per-sample checks (``defer``: left to ``_finish_pose``, at the next update or any judging before it;
-        with signal atoms the timed run's entries come first, the signals' bounds there being computed with the
-        trajectory's)."""
+        the per-sample checks (``defer`` "run": those two, "checks": the checks, left to ``_finish_pose``, at the
+        next update or any judging before it; without signal atoms only: with them the timed run's entries come
+        first, the signals' bounds there being computed with the trajectory's)."""
         if self.t0_ns is None:
             self.t0_ns = int(t_abs[0])
         t0 = self.t0_ns
@@ -406,11 +410,15 @@ class OnlineMonitor:
         entry_dist = None if dist is None else dist[:, k0:]
         if not self._feeds:
             self._push_trajectory(t_rel, bounds, k0)
-            self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
-            if not defer:
+            if defer == "run":
+                self._second_half = partial(self._run_and_checks, t_rel[k0:], x[k0:], y[k0:], entry_dist, checks)
+            else:
+                self._push_run(*self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist), {})
+                self._second_half = partial(self._feed_every, *checks)
+            if defer is None:
                 self._finish_pose()
             return
-        entry, members, conv = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
+        conv, entry, members = self._run_changes(t_rel[k0:], x[k0:], y[k0:], entry_dist)
         entry_values: dict[str, tuple[FloatArray, FloatArray]] = {}
         bounds = (bounds[0].copy(), bounds[1].copy(), bounds[2], bounds[3])
         for row in self._signal_rows:  # signal atoms: verify.signals on the messages held around this batch
@@ -426,8 +434,7 @@ class OnlineMonitor:
                         checks: tuple[IntArray, FloatArray, FloatArray, tuple[FloatArray, FloatArray, int] | None]
                         ) -> None:
         """The second half of a pose batch without signal atoms: the timed run, then the per-sample checks."""
-        entry, members, conv = self._run_changes(t_rel, x, y, dist)
-        self._push_run(conv, entry, members, {})
+        self._push_run(*self._run_changes(t_rel, x, y, dist), {})
         self._feed_every(*checks)
 
     def _finish_pose(self) -> None:
@@ -450,9 +457,11 @@ class OnlineMonitor:
         tr.evaluation.step()
 
     def _run_changes(self, t_rel: IntArray, x: FloatArray, y: FloatArray, dist: FloatArray | None
-                     ) -> tuple[IntArray, list[str], IntArray]:
-        """The timed run's new entries (``RunLog.changes``)."""
-        return self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
+                     ) -> tuple[IntArray, IntArray, list[str]]:
+        """The timed run's new entries (``RunLog.changes``): the converted times, the entries among them, and the
+        regions containing the robot at each."""
+        entry, members, conv = self._run_log.changes(t_rel, x, y, self._geometry.containment(x, y, dist))
+        return conv, entry, members
 
     def _push_run(self, conv: IntArray, entry: IntArray, members: list[str],
                   entry_values: dict[str, tuple[FloatArray, FloatArray]]) -> None:
@@ -463,14 +472,19 @@ class OnlineMonitor:
             self._run_log.record(members, t_e, entry_values)
             run.track.append(t_e, t_e, np.ones(entry.size, dtype=bool))
             unknown_entry = np.array([m == UNKNOWN_ENTRY for m in members], dtype=bool)
+            some_unknown = bool(unknown_entry.any())
+            labels = self._run_log.entry_labels
             for name in self._names:
                 if name in entry_values:
                     e_lo, e_hi = entry_values[name]
                     run.atoms[name].push(e_lo, e_hi, t_e)
                     continue
-                labels = self._run_log.entry_labels
-                v1 = np.where(np.array([name in labels[m] for m in members], dtype=bool), 1.0, -1.0)
-                run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1), t_e)
+                v1 = np.array([1.0 if name in labels[m] else -1.0 for m in members])
+                if some_unknown:  # every label unknown there
+                    run.atoms[name].push(np.where(unknown_entry, -np.inf, v1), np.where(unknown_entry, np.inf, v1),
+                                         t_e)
+                else:
+                    run.atoms[name].push(v1, v1, t_e)
         run.track.tick(conv)
         run.evaluation.step()
 
@@ -491,17 +505,19 @@ class OnlineMonitor:
             m = m if m is not None and math.isfinite(m) else None
         decided_at = rel_s(h.decided_ns + t0, t0) if h.decided and h.decided_ns is not None else None
         first = rel_s(h.witness_ns + t0, t0) if verdict == "fail" and h.witness_ns is not None else None
+        final_at = rel_s(h.final_ns + t0, t0) if h.final_ns is not None else None
         return CheckState(name, verdict, h.decided, decided_at, m, first, h.margin_final,
-                          self._units.get(name) if margin else None)
+                          self._units.get(name) if margin else None, final_at)
 
     def _check_states(self) -> list[CheckState]:
         t0 = self.t0_ns
         if self._final is not None:
             end = self._traj.track.end_ns
-            return [CheckState(c.name, c.verdict, True, None if end is None else round(end * 1e-9, 9),
+            end_s = None if end is None else round(end * 1e-9, 9)
+            return [CheckState(c.name, c.verdict, True, end_s,
                                c.margin if c.margin is None or math.isfinite(c.margin) else None,
                                rel_s(c.first_violation_ns, t0), True,
-                               c.details.get("margin_unit", self._units.get(c.name))) for c in self._final]
+                               c.details.get("margin_unit", self._units.get(c.name)), end_s) for c in self._final]
         return [c for c in self._running_states() if c.name in self._selected]
 
     @property
@@ -512,9 +528,14 @@ class OnlineMonitor:
         return self._pose.t[0] if self._pose.t else None
 
     def _running_states(self) -> list[CheckState]:
+        return [self._head_state("spec_trajectory", self._traj.head, margin=True),
+                self._head_state("spec_timed_run", self._run.head, margin=False), *self._sample_states()]
+
+    def _sample_states(self) -> list[CheckState]:
+        """The per-sample checks before ``close``: decided only by failing (obstacle clearance: also with no unsafe
+        region to touch)."""
         t0 = self._time0_ns
-        out = [self._head_state("spec_trajectory", self._traj.head, margin=True),
-               self._head_state("spec_timed_run", self._run.head, margin=False)]
+        out: list[CheckState] = []
         for name, failed, when, m in self._checks.running():
             if name == "obstacle_clearance" and not self._checks.unsafe:
                 out.append(CheckState(name, "pass", True, 0.0, None, None))
@@ -542,16 +563,35 @@ class OnlineMonitor:
         verdict = "fail" if any(c.verdict == "fail" and c.decided for c in checks) else "inconclusive"
         return MonitorState(verdict, tuple(checks), tuple(obligations), dict(self.counts), closed)
 
+    def _newly_decided(self) -> list[CheckState]:
+        """Before ``close``: the states ``_state`` gives, in its order, of the selected obligations and checks
+        decided but not reported yet (the others' are not built: this runs at every judging)."""
+        rep, sel = self._reported, self._selected
+        out: list[CheckState] = []
+        if "spec" in self.selection:
+            out += [self._head_state(n, h, margin=True)
+                    for n, h in zip(self._obligation_names, self._traj.obligations, strict=True)
+                    if h.decided and n not in rep]
+        out += [self._head_state(n, h, margin=n == "spec_trajectory")
+                for n, h in (("spec_trajectory", self._traj.head), ("spec_timed_run", self._run.head))
+                if h.decided and n in sel and n not in rep]
+        if any((failed or (name == "obstacle_clearance" and not self._checks.unsafe)) and name in sel
+               and name not in rep for name, failed, _, _ in self._checks.running()):
+            out += [c for c in self._sample_states() if c.decided and c.name in sel and c.name not in rep]
+        return out
+
     def _new_decisions(self) -> list[Decision]:
+        if self._time0_ns is None:  # a command decided before any pose sample: told once time 0 is known
+            return []
+        if self._closed:
+            st = self._state(closed=True)
+            states = [c for c in (*st.obligations, *st.checks) if c.decided and c.name not in self._reported]
+        else:
+            states = self._newly_decided()
         out: list[Decision] = []
-        if self._time0_ns is None:  # a command decided before any pose sample: its time is told once time 0 is
-            return out
-        st = self._state(closed=self._closed)
-        for c in (*st.obligations, *st.checks):
-            if c.decided and c.name not in self._reported:
-                self._reported.add(c.name)
-                out.append(Decision(c.name, c.verdict, c.decided_at_s or 0.0, c.margin if c.margin_final else None,
-                                    c.first_violation_s, c.unit))
+        for c in states:
+            self._reported.add(c.name)
+            out.append(c.decision())
         out.sort(key=lambda d: d.time_s)
         return out
 

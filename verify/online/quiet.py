@@ -3,9 +3,12 @@
 input: the ``OnlineMonitor`` (its scenario, its buffered samples, the state of its heads and checks) -> output:
 ``Quiet.loud()``, the streams whose buffered samples can make a check or obligation final if judged now (none: the
 update may leave them buffered and return no decision, exactly as judging them would have; ``due`` then names a
-stream whose tested samples are judged at this update, one stream per update, ``batch`` at a time). Judging them
-later, together with the samples that follow, gives the same verdicts and the same decision times (the monitor's
-verdicts do not depend on the batching), so decisions come at the same ``update`` as when every call judges.
+stream whose tested samples are judged at this update, one stream per update, ``batch`` at a time; for the pose
+samples, whether only the trajectory semantics or only the two semantics can: the timed run and the per-sample
+checks, the nominal samples and the tube then wait for the next update, so that an update judges less at once).
+Judging them later, together with the samples that follow, gives the same verdicts and the same decision times (the
+monitor's verdicts do not depend on the batching), so decisions come at the same ``update`` as when every call
+judges.
 
 The test is scalar (plain floats, a few operations per sample) and conservative: any doubt -- a value within
 ``EPS`` of a limit, a NaN, a duplicate that disagrees, a formula or scenario it does not cover -- says "not quiet".
@@ -43,7 +46,7 @@ from verify.online.heads import BoolHead, Head, OfflineHead, StreamHead, WindowH
 if TYPE_CHECKING:
     from verify.online.monitor import OnlineMonitor
 
-__all__ = ["EPS", "EVERY_STREAM", "MAX_WAITING", "QUIET_BATCH", "Quiet"]
+__all__ = ["EPS", "EVERY_STREAM", "MAX_WAITING", "POSE_RUN", "POSE_TRAJECTORY", "QUIET_BATCH", "Quiet"]
 
 #: how close to a limit (m, or the command's unit) a value must stay away for a batch to be quiet: far above the
 #: rounding differences between this scalar arithmetic and the vectorised judging
@@ -58,6 +61,15 @@ MAX_WAITING = 2 * QUIET_BATCH
 
 #: the buffered streams an update may judge
 EVERY_STREAM = frozenset({"pose", "nominal", "cmd"})
+#: instead of "pose": the pose samples judged now for the trajectory semantics only, their timed run and per-sample
+#: checks at the next update (those cannot decide anything now) ...
+POSE_TRAJECTORY = "pose:trajectory"
+#: ... or for both semantics now, their per-sample checks at the next update
+POSE_RUN = "pose:run"
+#: what judging a pose sample now can decide (``Quiet._tested``): a window of the trajectory semantics, the timed
+#: run, a per-sample check (workspace, obstacle clearance) -- or anything
+_WINDOW, _RUN, _CHECKS = 1, 2, 4
+_ANY = _WINDOW | _RUN | _CHECKS
 _POSE_AND_NOMINAL = frozenset({"pose", "nominal"})
 _CMD = frozenset({"cmd"})
 _NONE: frozenset[str] = frozenset()
@@ -152,10 +164,11 @@ class Quiet:
         self.match_ns = mon._checks.period_ns // 2
         self.refresh()
 
-    def refresh(self) -> None:
-        """After a judging: what is still open, and the samples the next test starts from."""
+    def refresh(self, *, keep_tube: bool = False) -> None:
+        """After a judging: what is still open, and the samples the next test starts from (``keep_tube``: the pose
+        samples were judged without the nominal ones: the tube test goes on where it was)."""
         mon = self.mon
-        self.pose_seen = self.cmd_seen = self.nom_seen = 0
+        self.pose_seen = self.cmd_seen = 0
         self.block = False
         # the last sample tested in full: (x, y, how far the robot may move before any tested value can reach its
         # limit, the time from which it must be tested again)
@@ -188,7 +201,10 @@ class Quiet:
         self.prev_t = mon._prev[0] if mon._prev is not None else None
         ps = mon._run_log.prev_set
         self.prev_key: list[bool] | None = None if ps is None else [bool(v) for v in ps[:, 0].tolist()]
+        if keep_tube:
+            return
         # tube: the pose samples judged but not matched yet, and the nominal samples they (or later ones) may match
+        self.nom_seen = 0
         self.unmatched: deque[tuple[int, float, float]] = deque()
         for t, x, y in checks.tube_pending:
             self.unmatched.extend(zip(t.tolist(), x.tolist(), y.tolist(), strict=True))
@@ -217,9 +233,12 @@ class Quiet:
                 self.noms.extend(zip(nom_t[k:], nx[k:], ny[k:], strict=True))
                 self.nom_seen = len(nom_t)
         cmd = self.cmd and self.cmd_seen < len(mon._cmd.t) and not self._commands_quiet()
-        pose = self.pose_seen < len(mon._pose.t) and not self._poses_quiet()
-        if pose or (self.tube and self.unmatched and not self._tube_quiet()):
+        pose = self._poses_loud() if self.pose_seen < len(mon._pose.t) else 0
+        if pose & _CHECKS or (self.tube and self.unmatched and not self._tube_quiet()):
             return EVERY_STREAM if cmd else _POSE_AND_NOMINAL
+        if pose:  # what cannot decide anything now waits for the next update (an update judges less at once)
+            part = POSE_RUN if pose & _RUN else POSE_TRAJECTORY
+            return frozenset({part, "cmd"}) if cmd else frozenset({part})
         return _CMD if cmd else _NONE
 
     def due(self) -> str | None:
@@ -250,69 +269,77 @@ class Quiet:
         self.cmd_seen = len(cmd.t)
         return True
 
-    def _poses_quiet(self) -> bool:
-        """The pose samples pushed since the last test, each near the last sample tested in full (every margin
-        tested is 1-Lipschitz in the position, so none has come within EPS of its limit, no region was entered or
-        left, no window argument changed sides) or tested in full (``_tested``)."""
+    def _poses_loud(self) -> int:
+        """What the pose samples pushed since the last test can decide if judged now (0: nothing): each is near the
+        last sample tested in full (every margin tested is 1-Lipschitz in the position, so none has come within EPS
+        of its limit, no region was entered or left, no window argument changed sides) or tested in full
+        (``_tested``). Once a part can decide, the later samples are tested for the other parts only."""
         mon = self.mon
         pt, (px, py) = mon._pose.t, mon._pose.cols
         hypot, isfinite = math.hypot, math.isfinite
         prev_t, ref, deadline = self.prev_t, self.ref, self.deadline
         unmatched = self.unmatched if self.tube and not self.tube_wait else None
+        loud = 0
         for i in range(self.pose_seen, len(pt)):
             t, x, y = pt[i], px[i], py[i]
             if prev_t is None or t >= deadline or not (isfinite(x) and isfinite(y)):
                 return self._loud_from(i)
             if ref is None or t >= ref[3] or not hypot(x - ref[0], y - ref[1]) < ref[2]:
-                ok, ref = self._tested(t, x, y, prev_t)
-                if not ok:
+                found, ref = self._tested(t, x, y, prev_t, loud)
+                loud |= found
+                if loud & _CHECKS:
                     return self._loud_from(i)
             if unmatched is not None:
                 unmatched.append((t, x, y))
             prev_t = t
         self.prev_t, self.ref = prev_t, ref
         self.pose_seen = len(pt)
-        return True
+        return loud
 
-    def _loud_from(self, i: int) -> bool:
-        """The pose sample ``i`` is not quiet: the pose samples are judged now, so the tube test takes it and those
-        after it too (False)."""
+    def _loud_from(self, i: int) -> int:
+        """The pose sample ``i`` can decide anything: the pose samples are judged now in full, so the tube test
+        takes it and those after it too."""
         if self.tube and not self.tube_wait:
             mon = self.mon
             pt, (px, py) = mon._pose.t, mon._pose.cols
             self.unmatched.extend(zip(pt[i:], px[i:], py[i:], strict=True))
-        return False
+        return _ANY
 
-    def _tested(self, t: int, x: float, y: float, prev_t: int) -> tuple[bool, tuple[float, float, float, float] | None]:
-        """The full test of one sample: whether it is quiet, and (if some room is left) the reference the next
-        samples are compared with: (x, y, how far the robot may move before any tested value can reach its limit,
-        the time from which it must be tested again)."""
+    def _tested(self, t: int, x: float, y: float, prev_t: int, skip: int
+                ) -> tuple[int, tuple[float, float, float, float] | None]:
+        """The full test of one sample for the parts not in ``skip``: the parts it can decide, and (if some room
+        is left) the reference the next samples are compared with: (x, y, how far the robot may move before any
+        tested value can reach its limit, the time from which it must be tested again)."""
         x0, x1, y0, y1 = self.inner_box
         if self.ws and not (x0 <= x <= x1 and y0 <= y <= y1):  # workspace margin below EPS
-            return False, None
+            return _CHECKS, None
         slack = min(x - x0, x1 - x, y - y0, y1 - y) if self.ws else math.inf
-        room = self._discs_room(x, y)
-        if room is None:
-            return False, None
-        slack = min(slack, room[0])
-        mg = room[1]
+        found, room, mg = self._discs_room(x, y, skip)
+        if found & _CHECKS:
+            return found, None
+        slack = min(slack, room)
         until = self.deadline
-        for always, lo, hi, value in self.windows:
-            v = value(mg)
-            margin = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
-            if margin > 0:
-                slack = min(slack, margin)
-            elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
-                return False, None
-            else:  # the window has not started: test again when it does
-                until = min(until, lo)
-        return True, ((x, y, slack, until) if slack > 0 else None)
+        if not (skip | found) & _WINDOW:
+            for always, lo, hi, value in self.windows:
+                v = value(mg)
+                margin = (v - EPS) if always else (-EPS - v)  # how far the argument is from deciding it
+                if margin > 0:
+                    slack = min(slack, margin)
+                elif t >= lo and prev_t + 1 <= hi:  # the sample or the gap before it is in the window
+                    found |= _WINDOW
+                    break
+                else:  # the window has not started: test again when it does
+                    until = min(until, lo)
+        return found, ((x, y, slack, until) if slack > 0 else None)
 
-    def _discs_room(self, x: float, y: float) -> tuple[float, list[float]] | None:
-        """Obstacle clearance and the timed run's containing set at one sample: None when a clearance is below
-        EPS, the sample is on a region's boundary or the set changes; else how far the robot may move before one
-        of those can happen, and every disc's margin."""
-        eta, clear, run_open, hypot = self.eta, self.clear, self.run_open, math.hypot
+    def _discs_room(self, x: float, y: float, skip: int) -> tuple[int, float, list[float]]:
+        """Obstacle clearance and (unless ``skip`` has it) the timed run's containing set at one sample: what it
+        can decide (a clearance below EPS: the per-sample checks; on a region's boundary or a new containing set:
+        the timed run), how far the robot may move before another of those can happen, and every disc's margin
+        (complete unless a clearance is below EPS)."""
+        eta, clear, hypot = self.eta, self.clear, math.hypot
+        run_open = self.run_open and not skip & _RUN
+        found = 0
         slack = math.inf
         mg: list[float] = []
         key: list[bool] = []
@@ -320,20 +347,21 @@ class Quiet:
             d = hypot(x - cx, y - cy)
             if unsafe and clear:
                 if off - d > -EPS:  # obstacle clearance below EPS
-                    return None
+                    return _CHECKS, 0.0, mg
                 slack = min(slack, d - off - EPS)
             if run_open:
                 c = d + eta - r
                 if -EPS <= c <= EPS:  # on a region's boundary: let the judging say which side
-                    return None
-                key.append(c < 0)
-                slack = min(slack, abs(c) - EPS)
+                    found, run_open = _RUN, False
+                else:
+                    key.append(c < 0)
+                    slack = min(slack, abs(c) - EPS)
             mg.append(off - d)
         if run_open:
             key.append(False)  # the "position unknown" row: a finite sample
             if key != self.prev_key:  # a new timed-run entry
-                return None
-        return slack, mg
+                found = _RUN
+        return found, slack, mg
 
     def _tube_quiet(self) -> bool:
         """The pose samples the next judging can match are inside the tube against every candidate nominal."""
@@ -344,8 +372,12 @@ class Quiet:
         match, limit, hypot = self.match_ns, self.tube_limit, math.hypot
         while unmatched and unmatched[0][0] <= last_nom:  # in time order: the ones the next judging matches
             t, x, y = unmatched[0]
-            for nt, nx, ny in noms:
-                if abs(nt - t) <= match and not hypot(x - nx, y - ny) <= limit:  # also NaN
+            while noms[0][0] < t - match:  # too early for this pose sample and any later one
+                noms.popleft()
+            for nt, nx, ny in noms:  # in time order: those within the matching distance of t
+                if nt > t + match:
+                    break
+                if not hypot(x - nx, y - ny) <= limit:  # also NaN
                     return False
             unmatched.popleft()
         last = self.mon._pose.last_ns

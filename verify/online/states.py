@@ -21,7 +21,8 @@ __all__ = ["CheckState", "Decision", "MonitorState", "OnlineResult", "final_line
 class CheckState:
     """One check or obligation: verdict so far, whether final, when decided (s from the first pose sample), the
     margin so far (the certificate's rule, ``verify.semantics.trajectory.reported_margin``, on the bounds so far),
-    whether that margin is final (no later sample can change it) and the first violation (s)."""
+    whether that margin is final (no later sample can change it), since when (s: the sample after which none can)
+    and the first violation (s)."""
 
     name: str
     verdict: str
@@ -31,6 +32,16 @@ class CheckState:
     first_violation_s: float | None
     margin_final: bool = False
     unit: str | None = None
+    margin_final_at_s: float | None = None
+
+    def decision(self) -> Decision:
+        """The decision of a decided check: its margin only if that was final at the decision's time (a margin that
+        became final later, e.g. an ``F`` true at 1 s whose window runs to 2 s, is left out here and shown at the
+        end), so that a decision states the same whatever the batching."""
+        final = (self.margin_final and self.margin_final_at_s is not None and self.decided_at_s is not None
+                 and self.margin_final_at_s <= self.decided_at_s)
+        return Decision(self.name, self.verdict, self.decided_at_s or 0.0, self.margin if final else None,
+                        self.first_violation_s, self.unit)
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,6 +21,9 @@ IntArray = npt.NDArray[np.int64]
 NEVER_NS = np.iinfo(np.int64).max
 #: a witness at the position's own start
 AT_START = np.iinfo(np.int64).min
+#: elements a buffer has room for at first: a quiet batch of pose samples and its gaps (2 x 256 positions) and what
+#: is retained fit without a new array (8 KiB of address space per buffer)
+_FIRST_CAPACITY = 1024
 
 
 class Buffer:
@@ -29,18 +32,19 @@ class Buffer:
     __slots__ = ("_a", "_off", "base", "stop")
 
     def __init__(self, dtype: type) -> None:
-        self._a: npt.NDArray[np.generic] = np.empty(256, dtype=dtype)
+        self._a: npt.NDArray[np.generic] = np.empty(_FIRST_CAPACITY, dtype=dtype)
         self._off = 0
         self.base = 0  # global index of the first retained element
         self.stop = 0  # global index past the last element
 
     def _room(self, k: int) -> int:
-        """Room for ``k`` more elements (moving the retained ones to the front, or to a larger array, when the end
-        is reached); returns where they go."""
+        """Room for ``k`` more elements (moving the retained ones to the front, or to a larger array when they would
+        fill more than half of it, when the end is reached); returns where they go. A new array is four times what
+        it holds then, so that neither moves nor new arrays come at every append of a similar size."""
         n = self.stop - self.base
         if self._off + n + k > self._a.shape[0]:
-            cap = max(256, 2 * (n + k))
-            new = np.empty(cap, dtype=self._a.dtype) if cap > self._a.shape[0] else self._a
+            grow = 2 * (n + k) > self._a.shape[0]
+            new = np.empty(max(_FIRST_CAPACITY, 4 * (n + k)), dtype=self._a.dtype) if grow else self._a
             new[:n] = self._a[self._off : self._off + n]
             self._a, self._off = new, 0
         return self._off + n
@@ -55,7 +59,9 @@ class Buffer:
 
     def fill(self, value: float | int, k: int) -> None:
         """``k`` copies of ``value``."""
-        at = self._room(k)
+        at = self._off + self.stop - self.base
+        if at + k > self._a.shape[0]:
+            at = self._room(k)
         self._a[at : at + k] = value
         self.stop += k
 
