@@ -112,3 +112,27 @@ def test_root_bounds_of_formulas_around_windows_equal_the_engine() -> None:
             for op in _TEMPORAL:
                 for root in _ROOTS:
                     _agree(root(op(iv, inner)))
+
+
+#: sub-formulas below a window whose gap values are explicit: a negated window, an and/or of windows and Nexts
+#: (explicit only), an and/or of an atom and a window (centred and explicit mixed)
+_EXPLICIT: tuple[Formula, ...] = (Not(Eventually(_ns(0, 4), Q)), Not(Next(_ns(0, 3), Q)),
+                                  And((Eventually(_ns(0, 4), Q), Next(_ns(0, 3), P))),
+                                  Or((Always(_ns(1, 5, False, True), P), Not(Eventually(_ns(0, 2), Q)))),
+                                  And((P, Eventually(_ns(0, 4), Q))), Implies(Always(_ns(0, 2), Q), P))
+
+
+def test_windows_over_explicit_gap_values_equal_the_engine() -> None:
+    for iv in _SOME:
+        for inner in _EXPLICIT:
+            for op in _TEMPORAL:
+                for wrap in _WRAPS:
+                    _agree(wrap(op(iv, inner)))
+
+
+def test_a_value_whose_gap_bounds_were_half_computed_negates_as_the_engine() -> None:
+    """``p`` is first needed for its gaps' upper bound only (under the negated F), then negated below G: the
+    negation reads the mid-points, not the half-filled cache."""
+    for iv in _SOME:
+        _agree(And((Not(Eventually(iv, P)), Always(_ns(0, 3), Not(P)))))
+        _agree(And((Eventually(iv, P), Always(_ns(0, 3), Not(P)))))
