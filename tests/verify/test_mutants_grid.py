@@ -41,23 +41,31 @@ def _engine(f: Formula, grid: Grid, margins: dict[str, np.ndarray], step: np.nda
     return evaluate_at_points(f, pos, values), point_at, gap_at
 
 
+def _same(got: np.ndarray, want: np.ndarray, what: str, g: Formula, f: Formula) -> None:
+    # np.array_equal, not assert_array_equal, and the message formatted only on a failure: the sweeps make thousands
+    # of comparisons (NaN equals NaN, as in assert_array_equal)
+    if not np.array_equal(got, want, equal_nan=True):
+        raise AssertionError(f"{what} of {g} in {f}: {got} != {want}")
+
+
 def _agree(f: Formula, grid: Grid = GRID, margins: dict[str, np.ndarray] | None = None,
            step: np.ndarray = STEP) -> None:
     """``evaluate_root`` and ``evaluate_grid`` (every sub-formula, samples and gaps) equal the general engine."""
     margins = MARGINS if margins is None else margins
     want, point_at, gap_at = _engine(f, grid, margins, step)
     root = evaluate_root(f, grid, margins, step)
-    np.testing.assert_array_equal(root.lo, want[f].lo[point_at], err_msg=f"root lo of {f}")
-    assert root.hi_first == want[f].hi[point_at[0]], f"root hi of {f}"
+    _same(root.lo, want[f].lo[point_at], "root lo", f, f)
+    _same(np.array(root.hi_first), want[f].hi[point_at[0]], "root hi", f, f)
     res = evaluate_grid(f, grid, margins, step)
-    np.testing.assert_array_equal(res.root.p_lo, want[f].lo[point_at], err_msg=f"grid lo of {f}")
-    np.testing.assert_array_equal(res.root.p_hi, want[f].hi[point_at], err_msg=f"grid hi of {f}")
+    _same(res.root.p_lo, want[f].lo[point_at], "grid lo", f, f)
+    _same(res.root.p_hi, want[f].hi[point_at], "grid hi", f, f)
     for g, v in res.values().items():
-        np.testing.assert_array_equal(v.p_lo, want[g].lo[point_at], err_msg=f"{g} in {f}")
-        np.testing.assert_array_equal(v.p_hi, want[g].hi[point_at], err_msg=f"{g} in {f}")
+        w = want[g]
+        _same(v.p_lo, w.lo[point_at], "lo", g, f)
+        _same(v.p_hi, w.hi[point_at], "hi", g, f)
         if v.g_lo is not None and v.g_hi is not None:
-            np.testing.assert_array_equal(v.g_lo, want[g].lo[gap_at], err_msg=f"{g} at gaps in {f}")
-            np.testing.assert_array_equal(v.g_hi, want[g].hi[gap_at], err_msg=f"{g} at gaps in {f}")
+            _same(v.g_lo, w.lo[gap_at], "gap lo", g, f)
+            _same(v.g_hi, w.hi[gap_at], "gap hi", g, f)
 
 
 def _ns(lo: int, hi: int | None, lo_closed: bool = True, hi_closed: bool = True) -> Interval:
