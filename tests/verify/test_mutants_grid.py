@@ -13,11 +13,12 @@ from collections.abc import Callable, Iterator
 from fractions import Fraction
 
 import numpy as np
+import pytest
 
-from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interval, Next, Not, Or
+from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Interval, Next, Not, Or, parse
 from verify.geometry import gap_bounds
 from verify.monitor.engine import Truth, evaluate_at_points
-from verify.monitor.grid import Grid, evaluate_grid, evaluate_root
+from verify.monitor.grid import Grid, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
 from verify.semantics.trajectory import interleave, trajectory_positions
 
 NS = Fraction(1, 10**9)
@@ -144,3 +145,40 @@ def test_a_value_whose_gap_bounds_were_half_computed_negates_as_the_engine() -> 
     for iv in _SOME:
         _agree(And((Not(Eventually(iv, P)), Always(_ns(0, 3), Not(P)))))
         _agree(And((Eventually(iv, P), Always(_ns(0, 3), Not(P)))))
+
+
+def test_a_grid_needs_two_samples_and_an_instant_between_them() -> None:
+    for dt_ns, n in ((1, 5), (5, 1), (0, 0)):
+        with pytest.raises(ValueError, match=rf"^a grid needs dt_ns >= 2 and n >= 2, got dt_ns={dt_ns}, n={n}$"):
+            Grid(0, dt_ns, n)
+
+
+def test_regular_grid_of_two_samples_a_late_start_and_the_shortest_period() -> None:
+    assert regular_grid(np.array([0, 10], dtype=np.int64)) == Grid(0, 10, 2)
+    assert regular_grid(np.array([5, 15, 25], dtype=np.int64)) == Grid(5, 10, 3)
+    assert regular_grid(np.array([7, 9, 11, 13], dtype=np.int64)) == Grid(7, 2, 4)
+    assert regular_grid(np.array([5, 15, 26], dtype=np.int64)) is None
+
+
+def test_grid_refusals_name_what_is_wrong() -> None:
+    grid, ones = Grid(0, 10, 3), np.ones(3)
+    with pytest.raises(ValueError, match=r"^step_m has shape \(3,\), expected \(2,\)$"):
+        evaluate_grid(parse("p"), grid, {"p": ones}, np.ones(3))
+    with pytest.raises(KeyError, match=r"atom='r' has no valuation"):
+        evaluate_grid(parse("p & r"), grid, {"p": ones}, np.ones(2))
+    with pytest.raises(UnsupportedFormulaError, match=r"^p U\[0,1\] q \(until\) is evaluated by the general engine$"):
+        evaluate_grid(parse("p U[0,1] q"), grid, {"p": ones, "q": ones}, np.ones(2))
+    with pytest.raises(TypeError, match=r"^unknown formula node 'p'$"):
+        evaluate_grid("p", grid, {"p": ones}, np.ones(2))  # type: ignore[arg-type]
+
+
+def test_sub_formulas_needed_at_the_samples_only_have_no_gap_values() -> None:
+    """``SplitTruth``: gap values only for what a window reads (here ``q`` and ``true`` under F, not ``p``, ``false``
+    or the root's conjunction)."""
+    values = evaluate_grid(parse("(p | false) & F[0,1] (q & true)"), GRID, MARGINS, STEP).values()
+    samples_only: tuple[Formula, ...] = (P, Const(False), Or((P, Const(False))))
+    with_gaps: tuple[Formula, ...] = (Q, Const(True), And((Q, Const(True))))
+    for g in samples_only:
+        assert values[g].g_lo is None and values[g].g_hi is None, g
+    for g in with_gaps:
+        assert values[g].g_lo is not None and values[g].g_hi is not None, g
