@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tubempc.mitl import Eventually, Interval, parse
+from tubempc.scenario import Scenario, load_scenario
+from verify.ingest.fields import SignalStream
+from verify.judging import FormulaJudgement, Unknown, judge_formula
 from verify.monitor import engine
 from verify.monitor.engine import Positions, Truth, evaluate, evaluate_at_points, range_reduce
 from verify.semantics.timed_run import check_timed_run
+from verify.signals import SignalBounds
 
 S = 1_000_000_000
 NS = Fraction(1, S)
@@ -170,3 +175,129 @@ def test_a_gap_exactly_as_long_as_the_window_has_one_instant_every_window_holds(
     v = evaluate(f, pos, {"p": _truth([-1.0, 1.0, -1.0])})[f]
     assert _verdicts(v) == ["pass", "pass", "inconclusive"]  # 4 ns: its window runs past the end
     assert v.lo[1] == 1.0
+
+
+# ---- judge_formula: what an undecided obligation says (verify.judging._unknown_*) ----------------------------------
+ROOT = Path(__file__).resolve().parents[2]
+T0 = 1_700_000_000 * S
+
+
+@pytest.fixture(scope="module")
+def room() -> Scenario:
+    return load_scenario(ROOT / "docs" / "examples" / "diffdrive-room.yaml")
+
+
+def _judge_slow(room: Scenario, spec: str, msg_s: list[float], values: list[float], *, rate_hz: float | None = None,
+                pose_s: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0)) -> FormulaJudgement:
+    """``spec`` over the room's signal ``slow`` (/odom twist.twist.linear.x <= 0.5 m/s, messages every 0.1 s by their
+    median spacing unless ``rate_hz``), the robot parked in the dock at the pose samples ``pose_s``."""
+    sp = room.signals["slow"] if rate_hz is None else room.signals["slow"].model_copy(update={"rate_hz": rate_hz})
+    msg_ns = T0 + np.round(np.array(msg_s, dtype=np.float64) * S).astype(np.int64)
+    stream = SignalStream("slow", sp, msg_ns, np.array(values, dtype=np.float64), S // 10, "header")
+    t = np.round(np.array(pose_s) * S).astype(np.int64)
+    cx, cy = room.region("dock").center
+    return judge_formula(parse(spec), t, np.full(t.size, cx), np.full(t.size, cy), room, time0_ns=T0,
+                         max_speed_mps=0.5, streams={"slow": stream})
+
+
+MEDIAN = "hold 0.15 s = 1.5 periods of 0.1 s from the median spacing of its messages"
+
+
+@pytest.mark.parametrize(("spec", "msg_s", "values", "rate_hz", "pose_s", "want"), [
+    # no message before the sample: the first one comes later
+    ("slow", [0.5], [0.2], None, (0.0, 1.0, 2.0, 3.0),
+     Unknown("slow", "slow", 0.0, 3.0, "no message of /odom before 0.00 s (its first at 0.50 s)",
+             "a message of /odom by 0.00 s would decide it")),
+    # the message held at the sample has no usable value
+    ("slow", [0.0], [math.nan], None, (0.0, 1.0, 2.0, 3.0),
+     Unknown("slow", "slow", 0.0, 3.0, "the message of /odom at 0.00 s has no usable twist.twist.linear.x (NaN, or "
+             "messages at one time that disagree)", "a usable twist.twist.linear.x there would decide it")),
+    # silent at a gap: the last message before the gap's end (1.5 s, not the one held at its start), unknown from
+    # when its hold ran out; the period from the messages' spacing
+    ("G[0,inf) slow", [k / 10 for k in range(11)] + [1.5], [0.2] * 12, None, (0.0, 1.0, 2.0, 3.0),
+     Unknown("slow", "slow", 1.65, 3.0, f"/odom silent 0.50 s after its message at 1.50 s > {MEDIAN}",
+             "give signals.slow.rate_hz if /odom publishes less often")),
+    # silent at a sample (F[2,2]: the sample at 2 s), the period from rate_hz
+    ("F[2,2] slow", [0.0, 1.0], [0.2, 0.2], 10.0, (0.0, 1.0, 2.0, 3.0),
+     Unknown("slow", "slow", 1.15, 3.0, "/odom silent 1.00 s after its message at 1.00 s > hold 0.15 s = 1.5 periods "
+             "of 0.1 s from rate_hz", "messages of /odom at least every 0.15 s would decide it")),
+    # every message in time, on both sides of the threshold between two samples
+    ("G[0,inf) slow", [k / 10 for k in range(11)], [0.2, 0.8] * 5 + [0.2], None, (0.0, 1.0),
+     Unknown("slow", "slow", 1e-9, 1.0, "twist.twist.linear.x is on both sides of <= 0.5 between the pose samples "
+             f"around 0.00 s (or a message in between is missing: {MEDIAN})",
+             "pose samples closer together there would decide it")),
+    # exactly on the threshold everywhere (a zero margin is undecided): the whole log, whichever position the window
+    # of the formula starts at
+    *[(spec, [k / 10 for k in range(21)], [0.5] * 21, None, (0.0, 1.0, 2.0),
+       Unknown("slow", "slow", 0.0, 2.0, "twist.twist.linear.x is on both sides of <= 0.5 between the pose samples "
+               f"around 0.00 s (or a message in between is missing: {MEDIAN})",
+               "pose samples closer together there would decide it"))
+      for spec in ("G[0,inf) slow", "G[0.5,inf) slow", "G[1,inf) slow")],
+])
+def test_an_undecided_signal_atom_says_why_and_what_would_decide_it(
+        room: Scenario, *, spec: str, msg_s: list[float], values: list[float], rate_hz: float | None,
+        pose_s: tuple[float, ...], want: Unknown) -> None:
+    res = _judge_slow(room, spec, msg_s, values, rate_hz=rate_hz, pose_s=pose_s).whole
+    assert res.verdict == "inconclusive"
+    assert res.unknown == want
+    assert res.explanation == want.sentence()
+    assert res.to_json()["unknown"] == want.to_json()
+
+
+def _judge_pose(room: Scenario, spec: str, t_s: list[float], x_m: list[float], y_m: list[float], *,
+                joint: dict[str, tuple[SignalBounds, str]] | None = None) -> FormulaJudgement:
+    t = np.round(np.array(t_s) * S).astype(np.int64)
+    return judge_formula(parse(spec), t, np.array(x_m), np.array(y_m), room, time0_ns=T0, max_speed_mps=0.5,
+                         joint_atoms=joint)
+
+
+_CROSSED = ("the samples at {t0} s and {t1} s are {m0} m and -0.2 m from table's boundary, and the robot may move "
+            "0.5 m between them (speed bound 0.5 m/s): it may have crossed")
+
+
+@pytest.mark.parametrize(("spec", "t_s", "x_m", "y_m", "want"), [
+    # an unknown pose sample (the first): the sample and the gap after it
+    ("G[0,inf) !table", [0.0, 1.0, 3.0], [0.75] * 3, [math.nan, 1.4, 1.4],
+     Unknown("!table", "table", 0.0, 1.0, "the pose at 0.00 s is unknown (NaN, or samples at one time that disagree)",
+             "a usable pose sample there would decide it")),
+    # an unknown pose next to the first gap
+    ("G[0,inf) !table", [0.0, 1.0, 3.0], [0.75] * 3, [1.4, math.nan, 1.4],
+     Unknown("!table", "table", 1e-9, 3.0, "a pose next to the gap 0.00-1.00 s is unknown (NaN or conflicting samples)",
+             "usable pose samples there would decide it")),
+    # 0.20 m and 0.25 m clear of the table (the disc's edge), a second apart at 0.5 m/s: the second gap
+    ("G[0,inf) !table", [0.0, 0.1, 1.1], [0.75, 0.70, 0.75], [1.4] * 3,
+     Unknown("!table", "table", 0.100000001, 1.1, _CROSSED.format(t0="0.10", t1="1.10", m0="-0.25"),
+             "samples at most 0.9 s apart there (or a lower speed bound) would decide it")),
+    # the window opens in the second gap: only that gap, not the one before it
+    ("G[1.5,inf) !table", [0.0, 1.0, 2.0], [0.75] * 3, [1.4] * 3,
+     Unknown("!table", "table", 1.000000001, 2.0, _CROSSED.format(t0="1.00", t1="2.00", m0="-0.2"),
+             "samples at most 0.8 s apart there (or a lower speed bound) would decide it")),
+])
+def test_an_undecided_region_atom_says_which_samples_leave_it_open(
+        room: Scenario, *, spec: str, t_s: list[float], x_m: list[float], y_m: list[float], want: Unknown) -> None:
+    res = _judge_pose(room, spec, t_s, x_m, y_m).whole
+    assert res.verdict == "inconclusive"
+    assert res.unknown == want
+    assert res.explanation == want.sentence()
+
+
+def test_an_undecided_atom_of_a_joint_run_says_whose_samples_would_decide_it(room: Scenario) -> None:
+    # known at the samples and over the first gap, unknown over the second
+    bounds = SignalBounds(np.ones(3), np.ones(3), np.array([1.0, -math.inf]), np.array([1.0, math.inf]))
+    two_docks = room.model_copy(update={"regions": [*room.regions, room.region("dock").model_copy(
+        update={"name": "dock2"})]})
+    cases = [
+        (room, "b.dock", "robot b may have crossed the boundary of dock between its own samples (or was not observed "
+         "there)", "samples of b closer together there (or a lower speed bound) would decide it"),
+        (two_docks, "b.dock", "robot b may have crossed the boundary of dock or dock2 between its own samples (or was "
+         "not observed there)", "samples of b closer together there (or a lower speed bound) would decide it"),
+        (room, "b.slow", "b's signal slow is on both sides of its threshold or not known there",
+         "samples of b closer together there (or a lower speed bound) would decide it"),
+        (room, "near", "the robots may have crossed the proximity distance between their samples (or were not "
+         "observed)", "samples of both robots closer together there would decide it"),
+    ]
+    for scenario, atom, cause, decide in cases:
+        res = _judge_pose(scenario, f"G[0,inf) {atom}", [0.0, 1.0, 3.0], [0.75] * 3, [1.4] * 3,
+                          joint={atom: (bounds, "m")}).whole
+        assert res.verdict == "inconclusive"
+        assert res.unknown == Unknown(atom, atom, 1.000000001, 3.0, cause, decide), atom
