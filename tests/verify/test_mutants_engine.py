@@ -233,6 +233,11 @@ MEDIAN = "hold 0.15 s = 1.5 periods of 0.1 s from the median spacing of its mess
                f"around 0.00 s (or a message in between is missing: {MEDIAN})",
                "pose samples closer together there would decide it"))
       for spec in ("G[0,inf) slow", "G[0.5,inf) slow", "G[1,inf) slow")],
+    # ... to the last sample, 1 ns after the one before it (no gap between them)
+    ("G[0,inf) slow", [k / 10 for k in range(21)], [0.5] * 21, None, (0.0, 1.0, 2.0, 2.000000001),
+     Unknown("slow", "slow", 0.0, 2.000000001, "twist.twist.linear.x is on both sides of <= 0.5 between the pose "
+             f"samples around 0.00 s (or a message in between is missing: {MEDIAN})",
+             "pose samples closer together there would decide it")),
 ])
 def test_an_undecided_signal_atom_says_why_and_what_would_decide_it(
         room: Scenario, *, spec: str, msg_s: list[float], values: list[float], rate_hz: float | None,
@@ -301,3 +306,33 @@ def test_an_undecided_atom_of_a_joint_run_says_whose_samples_would_decide_it(roo
                           joint={atom: (bounds, "m")}).whole
         assert res.verdict == "inconclusive"
         assert res.unknown == Unknown(atom, atom, 1.000000001, 3.0, cause, decide), atom
+
+
+def test_a_log_without_pose_samples_decides_nothing_and_says_so(room: Scenario) -> None:
+    f = parse("G[0,inf) !table & F[15,25] dock & slow")
+    none = np.zeros(0)
+    res = judge_formula(f, np.zeros(0, dtype=np.int64), none, none, room, time0_ns=T0, max_speed_mps=0.5)
+    why = Unknown(str(f), None, None, None, "the log has no pose samples", "a log with pose samples")
+    assert [(r.formula, r.role, r.window_s, r.body) for r in res.entries] == [
+        (str(f), "formula", None, str(f)), ("G[0,inf) !table", "conjunct", (0.0, None), "!table"),
+        ("F[15,25] dock", "conjunct", (15.0, 25.0), "dock"), ("slow", "conjunct", None, "slow")]
+    for r in res.entries:
+        assert (r.verdict, r.lo, r.hi, r.margin, r.margin_unit, r.margin_atom, r.margin_time_ns, r.margin_reason,
+                r.first_violation_ns, r.decided_ns, r.subformula, r.reason, r.unknown, r.body_unit) == (
+            "inconclusive", -math.inf, math.inf, None, None, None, None, None, None, None, r.formula,
+            "no pose samples", why, None)
+        assert r.curve_t_ns.shape == r.curve.shape == (0,) and r.curve_t_ns.dtype == np.int64
+        assert r.curve.dtype == np.float64
+        assert r.explanation == f"{f} unknown: the log has no pose samples; a log with pose samples"
+    assert res.signal_t_ns.shape == res.signal.shape == (0,) and res.signal_t_ns.dtype == np.int64
+    assert res.panels == res.conjuncts
+    single = judge_formula(parse("dock"), np.zeros(0, dtype=np.int64), none, none, room, time0_ns=T0,
+                           max_speed_mps=0.5)
+    assert single.conjuncts == () and single.panels == (single.whole,)
+
+
+def test_a_log_of_one_pose_sample_is_judged_at_it(room: Scenario) -> None:
+    cx, cy = room.region("dock").center
+    one = np.zeros(1, dtype=np.int64)
+    res = judge_formula(parse("dock"), one, np.array([cx]), np.array([cy]), room, time0_ns=T0, max_speed_mps=0.5)
+    assert res.whole.verdict == "pass" and res.whole.decided_ns == 0 and res.whole.margin_atom == "dock"
