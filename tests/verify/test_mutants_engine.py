@@ -336,3 +336,44 @@ def test_a_log_of_one_pose_sample_is_judged_at_it(room: Scenario) -> None:
     one = np.zeros(1, dtype=np.int64)
     res = judge_formula(parse("dock"), one, np.array([cx]), np.array([cy]), room, time0_ns=T0, max_speed_mps=0.5)
     assert res.whole.verdict == "pass" and res.whole.decided_ns == 0 and res.whole.margin_atom == "dock"
+
+
+_X, _Y = 0.75, 1.4  # in the room, 0.2 m clear of the table's disc edge, far from the dock
+
+
+@pytest.mark.parametrize(("spec", "t_s", "y_m", "want"), [
+    # a window past the end of the log: an Eventually could still hold before the end if its window opens before it
+    ("F[2,5] dock", [0.0, 1.0, 3.0], [_Y] * 3,
+     Unknown("F[2,5] dock", None, 2.0, 5.0, "its window 2.00-5.00 s reaches past the end of the log at 3.00 s",
+             "a log that runs to 5.00 s would decide it (or dock holding before 3.00 s)")),
+    ("F[2,5] dock", [0.5, 1.0, 3.0], [_Y] * 3,  # the first sample at 0.5 s: the window from there
+     Unknown("F[2,5] dock", None, 2.5, 5.5, "its window 2.50-5.50 s reaches past the end of the log at 3.00 s",
+             "a log that runs to 5.50 s would decide it (or dock holding before 3.00 s)")),
+    ("F[4,5] dock", [0.0, 1.0, 3.0], [_Y] * 3,
+     Unknown("F[4,5] dock", None, 4.0, 5.0, "its window 4.00-5.00 s reaches past the end of the log at 3.00 s",
+             "a log that runs to 5.00 s would decide it")),
+    ("G[1,5] !dock", [0.0, 1.0, 3.0], [_Y] * 3,
+     Unknown("G[1,5] !dock", None, 1.0, 5.0, "its window 1.00-5.00 s reaches past the end of the log at 3.00 s",
+             "a log that runs to 5.00 s would decide it")),
+    # an Until left open, bounded and unbounded
+    ("in_room U[0,5] dock", [0.0, 1.0, 3.0], [_Y] * 3,
+     Unknown("in_room U[0,5] dock", None, 0.0, 5.0, "undecided at the end of the log (3.00 s)",
+             "a longer log would decide it")),
+    ("in_room U[0,inf) dock", [0.5, 1.0, 3.0], [_Y, math.nan, _Y],
+     Unknown("in_room U[0,inf) dock", None, 0.5, None, "undecided at the end of the log (3.00 s)",
+             "a longer log would decide it")),
+    # a Next without its next sample
+    ("X[0,5] !dock", [0.5], [_Y],
+     Unknown("X[0,5] !dock", None, 0.5, 0.5, "no sample after 0.50 s within its window before the log ends at 0.50 s",
+             "a later sample would decide it")),
+    ("G[0,inf) X[0,5] !dock", [0.5, 1.0, 3.0], [_Y] * 3,
+     Unknown("X[0,5] !dock", None, 0.500000001, 3.0,
+             "no sample after 0.50 s within its window before the log ends at 3.00 s", "a later sample would decide it")),
+])
+def test_an_undecided_temporal_operator_says_what_log_would_decide_it(
+        room: Scenario, spec: str, t_s: list[float], y_m: list[float], want: Unknown) -> None:
+    res = _judge_pose(room, spec, t_s, [_X] * len(t_s), y_m).whole
+    assert res.verdict == "inconclusive"
+    assert res.unknown == want
+    assert res.explanation == want.sentence()
+    assert res.to_json()["unknown"] == want.to_json()
