@@ -368,7 +368,8 @@ _X, _Y = 0.75, 1.4  # in the room, 0.2 m clear of the table's disc edge, far fro
              "a later sample would decide it")),
     ("G[0,inf) X[0,5] !dock", [0.5, 1.0, 3.0], [_Y] * 3,
      Unknown("X[0,5] !dock", None, 0.500000001, 3.0,
-             "no sample after 0.50 s within its window before the log ends at 3.00 s", "a later sample would decide it")),
+             "no sample after 0.50 s within its window before the log ends at 3.00 s",
+             "a later sample would decide it")),
 ])
 def test_an_undecided_temporal_operator_says_what_log_would_decide_it(
         room: Scenario, spec: str, t_s: list[float], y_m: list[float], want: Unknown) -> None:
