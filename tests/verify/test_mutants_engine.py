@@ -14,8 +14,9 @@ import pytest
 
 from tubempc.mitl import Eventually, Interval, parse
 from tubempc.scenario import Scenario, load_scenario
+from verify.errors import SpecError
 from verify.ingest.fields import SignalStream
-from verify.judging import FormulaJudgement, Unknown, judge_formula
+from verify.judging import FormulaJudgement, Unknown, formula_of, judge_formula
 from verify.monitor import engine
 from verify.monitor.engine import Positions, Truth, evaluate, evaluate_at_points, range_reduce
 from verify.semantics.timed_run import check_timed_run
@@ -378,3 +379,75 @@ def test_an_undecided_temporal_operator_says_what_log_would_decide_it(
     assert res.unknown == want
     assert res.explanation == want.sentence()
     assert res.to_json()["unknown"] == want.to_json()
+
+
+def _entry_json(room: Scenario, spec: str, x_m: list[float]) -> list[dict[str, object]]:
+    t = np.round(np.array([0.0, 0.1, 0.25, 0.3]) * S).astype(np.int64)
+    res = judge_formula(parse(spec), t, np.array(x_m), np.full(4, _Y), room, time0_ns=T0, max_speed_mps=0.5)
+    return [r.to_json() for r in res.entries]
+
+
+_TIMING = "-inf: decided by constants or timing (a window or next sample), not by an atom's value"
+
+
+def test_each_obligation_states_its_times_in_seconds_and_its_window(room: Scenario) -> None:
+    """Samples at 0, 0.1, 0.25 and 0.3 s (irregular: the general engine), 0.5 m/s."""
+    # 0.23 m and 0.20 m clear of the table at 0.1 s and 0.25 s, 0.15 s apart: at least (0.23 + 0.20) / 2 - 0.5 *
+    # 0.15 / 2 = 0.1775 m clear in between (the margin of the gap after the sample at 0.1 s)
+    safe, = _entry_json(room, "G[0,inf) !table", [0.70, 0.72, 0.75, 0.74])
+    assert safe == {"formula": "G[0,inf) !table", "role": "formula", "verdict": "pass",
+                    "margin": pytest.approx(0.1775, abs=1e-12), "margin_unit": "m", "margin_atom": "table",
+                    "margin_time": 0.1, "margin_reason": None, "first_violation_time": None, "decided_at": 0.3,
+                    "subformula": None, "reason": None, "unknown": None, "window": [0.0, None], "explanation": None}
+    # into the table: 0.05 m in at 0.1 s (the first violation), 0.15 m at 0.3 s (the margin)
+    hit, = _entry_json(room, "G[0,inf) !table", [0.9, 1.0, 1.05, 1.1])
+    assert hit == {"formula": "G[0,inf) !table", "role": "formula", "verdict": "fail",
+                   "margin": pytest.approx(-0.15, abs=1e-12), "margin_unit": "m", "margin_atom": "table",
+                   "margin_time": 0.3, "margin_reason": None, "first_violation_time": 0.1, "decided_at": 0.1,
+                   "subformula": "!table", "reason": "its negation holds", "unknown": None, "window": [0.0, None],
+                   "explanation": "violated at 0.10 s: !table (its negation holds); margin -0.15 m (table at 0.30 s)"}
+    whole, _, bounded, unbounded = _entry_json(
+        room, "G[0,inf) !table & in_room U[0,5] dock & in_room U[1,inf) dock", [0.70, 0.72, 0.75, 0.74])
+    assert (whole["window"], bounded["window"], unbounded["window"]) == (None, [0.0, 5.0], [1.0, None])
+    assert (bounded["verdict"], bounded["margin_time"], bounded["first_violation_time"], bounded["decided_at"]) == (
+        "inconclusive", None, None, None)
+    assert unbounded == {"formula": "in_room U[1,inf) dock", "role": "conjunct", "verdict": "fail", "margin": None,
+                         "margin_unit": None, "margin_atom": None, "margin_time": None, "margin_reason": _TIMING,
+                         "first_violation_time": 0.0, "decided_at": 0.3, "subformula": "in_room U[1,inf) dock",
+                         "reason": "violated", "unknown": None, "window": [1.0, None],
+                         "explanation": f"violated at 0.00 s: in_room U[1,inf) dock (violated); no finite margin "
+                                        f"({_TIMING})"}
+
+
+def test_a_signal_without_a_unit_has_its_margin_in_the_field_unit(room: Scenario) -> None:
+    room_no_unit = room.model_copy(update={"signals": {
+        "slow": room.signals["slow"].model_copy(update={"unit": None})}})
+    res = _judge_slow(room_no_unit, "G[0,inf) slow", [k / 10 for k in range(11)], [0.2] * 11, pose_s=(0.0, 1.0))
+    assert (res.whole.verdict, res.whole.margin_atom, res.whole.margin_unit, res.whole.body_unit) == (
+        "pass", "slow", "field unit", "field unit")
+    assert res.whole.margin == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize(("unknown", "sentence"), [
+    (Unknown("!table", "table", 1e-9, 3.0, "c", "d"), "table unknown 0.00-3.00 s: c; d"),
+    (Unknown("X p", None, 0.5, 0.5, "c", "d"), "X p unknown at 0.50 s: c; d"),
+    (Unknown("p", "p", 1.0, 1.004, "c", "d"), "p unknown at 1.00 s: c; d"),  # within 5 ms: one time
+    (Unknown("p", "p", 1.0, 1.006, "c", "d"), "p unknown 1.00-1.01 s: c; d"),
+    (Unknown("p U q", None, 0.5, None, "c", "d"), "p U q unknown: c; d"),
+    (Unknown("F p", None, None, None, "c", "d"), "F p unknown: c; d"),
+])
+def test_an_unknown_is_said_in_one_sentence_naming_its_atom_and_when(unknown: Unknown, sentence: str) -> None:
+    assert unknown.sentence() == sentence
+
+
+def test_the_formula_judged_names_atoms_that_mean_nothing_in_the_scenario(room: Scenario) -> None:
+    with pytest.raises(SpecError) as err:
+        formula_of(room, "G b.dock")
+    assert str(err.value) == ("formula G[0,inf) b.dock: qualified atom(s) b.dock need a robots: block (this scenario "
+                              "has one robot: write the atom without the robot's name)")
+    with pytest.raises(SpecError) as err:
+        formula_of(room, "F nowhere & G (zz | dock)")
+    assert str(err.value) == ("formula F[0,inf) nowhere & G[0,inf) (zz | dock): proposition(s) nowhere, zz label no "
+                              "region and name no signal of scenario 'diffdrive-room'")
+    assert formula_of(room, "dock & slow") == parse("dock & slow")
+    assert formula_of(room, None) == parse(room.spec)
