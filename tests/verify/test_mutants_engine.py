@@ -451,3 +451,26 @@ def test_the_formula_judged_names_atoms_that_mean_nothing_in_the_scenario(room: 
                               "region and name no signal of scenario 'diffdrive-room'")
     assert formula_of(room, "dock & slow") == parse("dock & slow")
     assert formula_of(room, None) == parse(room.spec)
+
+
+def _positions(start: list[int], stop: list[int], point: list[bool], end: int) -> Positions:
+    return Positions(np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64), np.array(point), end)
+
+
+@pytest.mark.parametrize(("start", "stop", "point", "end", "message"), [
+    ([0, 5], [0, 5], [True, True, True], 5, "start_ns, stop_ns and is_point must have the same length"),
+    ([0, 5], [1, 4], [False, False], 5, "position spans must be non-empty and sorted"),  # 5 > 4: empty span
+    ([0, 1], [2, 3], [False, False], 3, "position spans must be non-empty and sorted"),  # overlapping spans
+    ([0, 2, 3], [1, 4, 5], [False, False, False], 5, "position spans must be non-empty and sorted"),
+    ([0, 0], [0, 5], [True, False], 5, "a gap span must not touch its neighbours"),
+    ([0, 1, 5], [0, 5, 5], [True, False, True], 5, "a gap span must not touch its neighbours"),
+    ([0, 5, 7], [0, 5, 7], [True, True, True], 6, "end_ns=6 is before the last position (7)"),
+])
+def test_positions_refuse_spans_out_of_order_and_say_why(start: list[int], stop: list[int], point: list[bool],
+                                                         end: int, message: str) -> None:
+    with pytest.raises(ValueError, match=r"^" + message.replace("(", r"\(").replace(")", r"\)") + "$"):
+        _positions(start, stop, point, end)
+
+
+def test_positions_allow_points_at_one_instant_and_a_gap_between_samples() -> None:
+    assert _positions([0, 0, 1, 5], [0, 0, 4, 5], [True, True, False, True], 5).size == 4
