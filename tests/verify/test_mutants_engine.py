@@ -474,3 +474,42 @@ def test_positions_refuse_spans_out_of_order_and_say_why(start: list[int], stop:
 
 def test_positions_allow_points_at_one_instant_and_a_gap_between_samples() -> None:
     assert _positions([0, 0, 1, 5], [0, 0, 4, 5], [True, True, False, True], 5).size == 4
+
+
+def test_each_obligation_carries_its_bounds_its_bodys_curve_and_unit(room: Scenario) -> None:
+    """slow's margin falls from 0.3 m/s at 0 s to 0.1 m/s at 1 s (messages every 0.1 s); the robot in the dock."""
+    values = [0.2 + 0.02 * k for k in range(11)]
+    res = _judge_slow(room, "G[0,inf) slow & F[0,1] (dock | slow) & true", [k / 10 for k in range(11)], values,
+                      pose_s=(0.0, 1.0))
+    whole, g, _, true = res.entries
+    assert [(r.body, r.body_unit) for r in res.entries] == [
+        (str(whole.formula), "mixed: dock m, slow m/s"), ("slow", "m/s"), ("dock | slow", "mixed: dock m, slow m/s"),
+        ("true", None)]
+    for r in res.entries:
+        assert r.curve_t_ns.tolist() == [0, S] and r.curve.dtype == np.float64
+    assert g.curve.tolist() == pytest.approx([0.3, 0.1])  # the body's guaranteed margin at each sample, not the G's
+    assert [g.lo, g.hi] == pytest.approx([0.1, 0.1])
+    assert (true.lo, true.hi, true.margin, true.margin_reason) == (math.inf, math.inf, None, "+inf: decided by "
+                                                                   "constants or timing (a window or next sample), "
+                                                                   "not by an atom's value")
+    assert res.signal.tolist() == whole.curve.tolist() == pytest.approx([0.1, 0.1])
+    assert res.signal_t_ns.tolist() == [0, S] and res.signal.dtype == np.float64
+    # a field value beyond float64's range at 1 s: no finite margin, and where it comes from
+    inf = _judge_slow(room, "G[0,inf) slow", [k / 10 for k in range(11)], [0.2] * 10 + [math.inf],
+                      pose_s=(0.0, 1.0)).whole
+    assert (inf.verdict, inf.margin, inf.margin_atom, inf.margin_reason) == (
+        "fail", None, "slow", "-inf: the margin of slow at 1.00 s is -inf (a position, field value or region size at "
+                              "or beyond float64's range)")
+
+
+def test_an_until_over_more_positions_than_its_robustness_limit_says_why_it_has_no_margin(room: Scenario) -> None:
+    n = engine.UNTIL_ROBUSTNESS_LIMIT // 2 + 1  # 10,001 samples, 10,000 gaps: one position over the limit
+    t = np.arange(n, dtype=np.int64) * (S // 10) + np.arange(n, dtype=np.int64) % 2  # irregular: the general engine
+    x, y = np.full(n, _X), np.full(n, _Y)
+    big = judge_formula(parse("in_room U[0,0.01] dock"), t, x, y, room, time0_ns=T0, max_speed_mps=0.5).whole
+    assert (big.verdict, big.margin, big.margin_reason) == (
+        "fail", None, "Until over more than 20000 positions: only its verdict is computed, not its robustness")
+    t[-1] = t[-2] + 1  # the last two samples 1 ns apart: no gap between them, 20,000 positions, at the limit
+    at_limit = judge_formula(parse("false & in_room U[0,0.01] dock"), t, x, y, room, time0_ns=T0,
+                             max_speed_mps=0.5).whole
+    assert (at_limit.verdict, at_limit.margin_reason) == ("fail", _TIMING)
