@@ -353,6 +353,16 @@ _X, _Y = 0.75, 1.4  # in the room, 0.2 m clear of the table's disc edge, far fro
     ("F[4,5] dock", [0.0, 1.0, 3.0], [_Y] * 3,
      Unknown("F[4,5] dock", None, 4.0, 5.0, "its window 4.00-5.00 s reaches past the end of the log at 3.00 s",
              "a log that runs to 5.00 s would decide it")),
+    ("F[3,5] dock", [0.0, 1.0, 3.0], [_Y] * 3,  # opens as the log ends: nothing before the end could decide it
+     Unknown("F[3,5] dock", None, 3.0, 5.0, "its window 3.00-5.00 s reaches past the end of the log at 3.00 s",
+             "a log that runs to 5.00 s would decide it")),
+    # times said to the nanosecond, whatever the bounds' digits beyond it
+    ("F[2.0000000004,5.0000000004] dock", [0.0, 1.0, 3.0], [_Y] * 3,
+     Unknown("F[2.0000000004,5.0000000004] dock", None, 2.0, 5.0, "its window 2.00-5.00 s reaches past the end of "
+             "the log at 3.00 s", "a log that runs to 5.00 s would decide it (or dock holding before 3.00 s)")),
+    ("in_room U[0.0000000004,5.0000000004] dock", [0.5, 1.0, 3.0], [_Y] * 3,
+     Unknown("in_room U[0.0000000004,5.0000000004] dock", None, 0.5, 5.5, "undecided at the end of the log (3.00 s)",
+             "a longer log would decide it")),
     ("G[1,5] !dock", [0.0, 1.0, 3.0], [_Y] * 3,
      Unknown("G[1,5] !dock", None, 1.0, 5.0, "its window 1.00-5.00 s reaches past the end of the log at 3.00 s",
              "a log that runs to 5.00 s would decide it")),
@@ -433,6 +443,7 @@ def test_a_signal_without_a_unit_has_its_margin_in_the_field_unit(room: Scenario
     (Unknown("X p", None, 0.5, 0.5, "c", "d"), "X p unknown at 0.50 s: c; d"),
     (Unknown("p", "p", 1.0, 1.004, "c", "d"), "p unknown at 1.00 s: c; d"),  # within 5 ms: one time
     (Unknown("p", "p", 1.0, 1.006, "c", "d"), "p unknown 1.00-1.01 s: c; d"),
+    (Unknown("p", "p", 0.0, 0.005, "c", "d"), "p unknown 0.00-0.01 s: c; d"),  # 5 ms: two times
     (Unknown("p U q", None, 0.5, None, "c", "d"), "p U q unknown: c; d"),
     (Unknown("F p", None, None, None, "c", "d"), "F p unknown: c; d"),
 ])
