@@ -213,6 +213,9 @@ MEDIAN = "hold 0.15 s = 1.5 periods of 0.1 s from the median spacing of its mess
     ("slow", [0.0], [math.nan], None, (0.0, 1.0, 2.0, 3.0),
      Unknown("slow", "slow", 0.0, 3.0, "the message of /odom at 0.00 s has no usable twist.twist.linear.x (NaN, or "
              "messages at one time that disagree)", "a usable twist.twist.linear.x there would decide it")),
+    ("slow", [0.5], [math.nan], None, (0.5, 1.0, 2.0, 3.0),
+     Unknown("slow", "slow", 0.5, 3.0, "the message of /odom at 0.50 s has no usable twist.twist.linear.x (NaN, or "
+             "messages at one time that disagree)", "a usable twist.twist.linear.x there would decide it")),
     # silent at a gap: the last message before the gap's end (1.5 s, not the one held at its start), unknown from
     # when its hold ran out; the period from the messages' spacing
     ("G[0,inf) slow", [k / 10 for k in range(11)] + [1.5], [0.2] * 12, None, (0.0, 1.0, 2.0, 3.0),
@@ -265,6 +268,9 @@ _CROSSED = ("the samples at {t0} s and {t1} s are {m0} m and -0.2 m from table's
     # an unknown pose sample (the first): the sample and the gap after it
     ("G[0,inf) !table", [0.0, 1.0, 3.0], [0.75] * 3, [math.nan, 1.4, 1.4],
      Unknown("!table", "table", 0.0, 1.0, "the pose at 0.00 s is unknown (NaN, or samples at one time that disagree)",
+             "a usable pose sample there would decide it")),
+    ("G[0,inf) !table", [0.5, 1.0, 3.0], [0.75] * 3, [math.nan, 1.4, 1.4],
+     Unknown("!table", "table", 0.5, 1.0, "the pose at 0.50 s is unknown (NaN, or samples at one time that disagree)",
              "a usable pose sample there would decide it")),
     # an unknown pose next to the first gap
     ("G[0,inf) !table", [0.0, 1.0, 3.0], [0.75] * 3, [1.4, math.nan, 1.4],
@@ -330,6 +336,9 @@ def test_a_log_without_pose_samples_decides_nothing_and_says_so(room: Scenario) 
     single = judge_formula(parse("dock"), np.zeros(0, dtype=np.int64), none, none, room, time0_ns=T0,
                            max_speed_mps=0.5)
     assert single.conjuncts == () and single.panels == (single.whole,)
+    two = judge_formula(parse("dock & slow"), np.zeros(0, dtype=np.int64), none, none, room, time0_ns=T0,
+                        max_speed_mps=0.5)
+    assert [c.formula for c in two.conjuncts] == ["dock", "slow"]
 
 
 def test_a_log_of_one_pose_sample_is_judged_at_it(room: Scenario) -> None:
@@ -419,8 +428,8 @@ def test_each_obligation_states_its_times_in_seconds_and_its_window(room: Scenar
     whole, _, bounded, unbounded = _entry_json(
         room, "G[0,inf) !table & in_room U[0,5] dock & in_room U[1,inf) dock", [0.70, 0.72, 0.75, 0.74])
     assert (whole["window"], bounded["window"], unbounded["window"]) == (None, [0.0, 5.0], [1.0, None])
-    assert (bounded["verdict"], bounded["margin_time"], bounded["first_violation_time"], bounded["decided_at"]) == (
-        "inconclusive", None, None, None)
+    assert (bounded["verdict"], bounded["margin_time"], bounded["margin_reason"], bounded["first_violation_time"],
+            bounded["decided_at"]) == ("inconclusive", None, None, None, None)
     assert unbounded == {"formula": "in_room U[1,inf) dock", "role": "conjunct", "verdict": "fail", "margin": None,
                          "margin_unit": None, "margin_atom": None, "margin_time": None, "margin_reason": _TIMING,
                          "first_violation_time": 0.0, "decided_at": 0.3, "subformula": "in_room U[1,inf) dock",
@@ -508,9 +517,10 @@ def test_each_obligation_carries_its_bounds_its_bodys_curve_and_unit(room: Scena
     # a field value beyond float64's range at 1 s: no finite margin, and where it comes from
     inf = _judge_slow(room, "G[0,inf) slow", [k / 10 for k in range(11)], [0.2] * 10 + [math.inf],
                       pose_s=(0.0, 1.0)).whole
-    assert (inf.verdict, inf.margin, inf.margin_atom, inf.margin_reason) == (
-        "fail", None, "slow", "-inf: the margin of slow at 1.00 s is -inf (a position, field value or region size at "
-                              "or beyond float64's range)")
+    assert (inf.verdict, inf.margin, inf.margin_unit, inf.margin_atom, inf.margin_reason) == (
+        "fail", None, None, "slow",
+        "-inf: the margin of slow at 1.00 s is -inf (a position, field value or region size at or beyond float64's "
+        "range)")
 
 
 def test_an_until_over_more_positions_than_its_robustness_limit_says_why_it_has_no_margin(room: Scenario) -> None:
