@@ -46,6 +46,9 @@ def test_a_signal_atom_without_a_stream_is_unknown_not_false() -> None:
     log = _log([0, 100_000_000], *MISSION_1)
     cert = _certificate(log, "calm", SC_SIGNAL)
     assert cert.check("spec_trajectory").verdict.value == "inconclusive"  # type: ignore[union-attr]
+    unknown = cert.panels[0].unknown
+    assert unknown is not None and (unknown.atom, unknown.cause, unknown.decide) == (
+        "calm", "no message of /speed before 0.00 s (it has none)", "a message of /speed by 0.00 s would decide it")
     mon, _ = _online([0, 100_000_000], *MISSION_1, "calm", SC_SIGNAL)
     assert mon.close().checks[0].verdict == "inconclusive"
 
