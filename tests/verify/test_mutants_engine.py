@@ -534,3 +534,16 @@ def test_an_until_over_more_positions_than_its_robustness_limit_says_why_it_has_
     at_limit = judge_formula(parse("false & in_room U[0,0.01] dock"), t, x, y, room, time0_ns=T0,
                              max_speed_mps=0.5).whole
     assert (at_limit.verdict, at_limit.margin_reason) == ("fail", _TIMING)
+
+
+def test_a_crossing_under_a_zero_speed_bound_asks_for_no_closer_samples() -> None:
+    """A robot that left the room between two samples, judged with a speed bound of 0 (the bound is the displacement
+    alone): the window inside the gap is undecided, and what would decide it is said without dividing by the bound."""
+    room = load_scenario(Path(__file__).resolve().parents[2] / "docs" / "examples" / "diffdrive-room.yaml")
+    judged = judge_formula(parse("F[0.4,0.6] in_room"), np.array([0, 10**9], dtype=np.int64), np.array([1.0, 4.0]),
+                           np.array([1.0, 1.0]), room, time0_ns=0, max_speed_mps=0.0)
+    unknown = judged.whole.unknown
+    assert judged.whole.verdict == "inconclusive" and unknown is not None
+    assert unknown.cause == ("the samples at 0.00 s and 1.00 s are +0.75 m and -1.05 m from room's boundary, and the "
+                             "robot may move 3 m between them (speed bound 0 m/s): it may have crossed")
+    assert unknown.decide == "samples at most 0 s apart there (or a lower speed bound) would decide it"
