@@ -509,12 +509,21 @@ def _unknown_signal(atom: str, sub: str, i: int, *, from_s: float, to_s: float, 
                        f"the message of {spec.topic} at {_s(int(st[j]) - ctx.time0_ns):.2f} s has no usable "
                        f"{spec.field} (NaN, or messages at one time that disagree)",
                        f"a usable {spec.field} there would decide it")
-    silent = (int(pos.stop_ns[i]) + ctx.time0_ns - int(st[j])) * 1e-9
+    end_ns = int(pos.stop_ns[i]) + ctx.time0_ns
+    k, until_ns = j, end_ns
+    if not pos.is_point[i]:  # the first silence longer than the hold within the gap (where it became unknown)
+        k0 = max(int(np.searchsorted(st, t_abs, side="right")) - 1, 0)
+        held = st[k0 : j + 1].astype(np.int64)
+        ends = np.append(held[1:], end_ns)
+        longer = np.flatnonzero(ends - held > stream.hold_ns)
+        if longer.size:
+            k, until_ns = k0 + int(longer[0]), int(ends[longer[0]])
+    silent = (until_ns - int(st[k])) * 1e-9
     if silent > hold_s:
-        from_s = max(from_s, _s(int(st[j]) + stream.hold_ns - ctx.time0_ns))  # unknown once the hold ran out
+        from_s = max(from_s, _s(int(st[k]) + stream.hold_ns - ctx.time0_ns))  # unknown once the hold ran out
         return Unknown(sub, atom, from_s, to_s,
                        f"{spec.topic} silent {silent:.2f} s after its message at "
-                       f"{_s(int(st[j]) - ctx.time0_ns):.2f} s > {period}", rate_hint)
+                       f"{_s(int(st[k]) - ctx.time0_ns):.2f} s > {period}", rate_hint)
     return Unknown(sub, atom, from_s, to_s,
                    f"{spec.field} is on both sides of {spec.op} {spec.value} between the pose samples around "
                    f"{from_s:.2f} s (or a message in between is missing: {period})",

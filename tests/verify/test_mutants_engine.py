@@ -216,10 +216,10 @@ MEDIAN = "hold 0.15 s = 1.5 periods of 0.1 s from the median spacing of its mess
     ("slow", [0.5], [math.nan], None, (0.5, 1.0, 2.0, 3.0),
      Unknown("slow", "slow", 0.5, 3.0, "the message of /odom at 0.50 s has no usable twist.twist.linear.x (NaN, or "
              "messages at one time that disagree)", "a usable twist.twist.linear.x there would decide it")),
-    # silent at a gap: the last message before the gap's end (1.5 s, not the one held at its start), unknown from
-    # when its hold ran out; the period from the messages' spacing
+    # silent at a gap: the first silence longer than the hold in it (after the message at 1 s held at its start,
+    # not after the last one at 1.5 s), unknown from when its hold ran out; the period from the messages' spacing
     ("G[0,inf) slow", [k / 10 for k in range(11)] + [1.5], [0.2] * 12, None, (0.0, 1.0, 2.0, 3.0),
-     Unknown("slow", "slow", 1.65, 3.0, f"/odom silent 0.50 s after its message at 1.50 s > {MEDIAN}",
+     Unknown("slow", "slow", 1.15, 3.0, f"/odom silent 0.50 s after its message at 1.00 s > {MEDIAN}",
              "give signals.slow.rate_hz if /odom publishes less often")),
     # silent at a sample (F[2,2]: the sample at 2 s), the period from rate_hz
     ("F[2,2] slow", [0.0, 1.0], [0.2, 0.2], 10.0, (0.0, 1.0, 2.0, 3.0),
@@ -547,3 +547,13 @@ def test_a_crossing_under_a_zero_speed_bound_asks_for_no_closer_samples() -> Non
     assert unknown.cause == ("the samples at 0.00 s and 1.00 s are +0.75 m and -1.05 m from room's boundary, and the "
                              "robot may move 3 m between them (speed bound 0 m/s): it may have crossed")
     assert unknown.decide == "samples at most 0 s apart there (or a lower speed bound) would decide it"
+
+
+def test_a_signal_silent_inside_a_gap_is_told_silent_even_if_a_message_ends_the_gap(room: Scenario) -> None:
+    """Messages every 0.1 s to 1 s, none until one at the gap's last instant (2 s - 1 ns): the stretch is unknown
+    because the signal fell silent after 1 s (it was told "on both sides of the threshold", from the last message)."""
+    msgs = [k / 10 for k in range(11)] + [2.0 - 1e-9]
+    res = _judge_slow(room, "G[0,inf) slow", msgs, [0.2] * 12, rate_hz=None, pose_s=(0.0, 1.0, 2.0, 3.0)).whole
+    assert res.unknown is not None
+    assert res.unknown.cause == f"/odom silent 1.00 s after its message at 1.00 s > {MEDIAN}"
+    assert res.unknown.from_s == 1.15
