@@ -557,3 +557,43 @@ def test_a_signal_silent_inside_a_gap_is_told_silent_even_if_a_message_ends_the_
     assert res.unknown is not None
     assert res.unknown.cause == f"/odom silent 1.00 s after its message at 1.00 s > {MEDIAN}"
     assert res.unknown.from_s == 1.15
+
+
+_BASE = [k / 10 for k in range(11)]  # a message every 0.1 s to 1 s: every position before the gap 1-2 s known
+RATE = "hold 0.15 s = 1.5 periods of 0.1 s from rate_hz"
+
+
+@pytest.mark.parametrize(("spec", "msg_s", "values", "pose_s", "cause", "from_s"), [
+    # the message held at the gap's start is the first silent one, not one before it
+    ("F[1.2,1.3] slow", [0.0, 0.1, 0.2, 0.3, 0.4, 1.0, 1.5], [0.2] * 7, (0.0, 1.0, 2.0, 3.0),
+     f"/odom silent 0.50 s after its message at 1.00 s > {RATE}", 1.15),
+    # ... also when it is the stream's first message
+    ("F[0.7,0.8] slow", [0.0, 0.5], [0.2, 0.2], (0.0, 1.0, 2.0), f"/odom silent 0.50 s after its message at 0.00 s > "
+     f"{RATE}", 0.15),
+    # ... and when it came 1 ns into the gap
+    ("F[1.2,1.3] slow", [k / 10 for k in range(9)] + [1.000000001, 1.5], [0.2] * 11, (0.0, 1.0, 2.0, 3.0),
+     f"/odom silent 0.50 s after its message at 1.00 s > {RATE}", 1.150000001),
+    # the first silence longer than the hold, after shorter ones (one of exactly the hold: not longer)
+    ("G[0,inf) slow", [*_BASE, 1.1, 1.2, 1.999999999], [0.2] * 14, (0.0, 1.0, 2.0, 3.0),
+     f"/odom silent 0.80 s after its message at 1.20 s > {RATE}", 1.35),
+    ("G[0,inf) slow", [*_BASE, 1.15, 1.2, 1.999999999], [0.2] * 14, (0.0, 1.0, 2.0, 3.0),
+     f"/odom silent 0.80 s after its message at 1.20 s > {RATE}", 1.35),
+    # every message in time within the gap (the one after it, at 2.5 s, does not count; nor does a last one held
+    # exactly to the gap's end): on both sides of the threshold
+    ("G[1.2,1.3] slow", _BASE + [1.1 + k / 10 for k in range(9)] + [2.5], [0.2] * 11 + [0.8, 0.2] * 4 + [0.8, 0.2],
+     (0.0, 1.0, 2.0, 3.0), "twist.twist.linear.x is on both sides of <= 0.5 between the pose samples around 1.00 s "
+     f"(or a message in between is missing: {RATE})", 1.000000001),
+    ("G[1.2,1.3] slow", _BASE + [1.1 + k / 10 for k in range(7)] + [1.849999999], [0.2] * 11 + [0.8, 0.2] * 4,
+     (0.0, 1.0, 2.0, 3.0), "twist.twist.linear.x is on both sides of <= 0.5 between the pose samples around 1.00 s "
+     f"(or a message in between is missing: {RATE})", 1.000000001),
+    # a message without a usable value at the gap's last instant
+    ("G[0,inf) slow", _BASE + [1.1 + k / 10 for k in range(9)] + [1.999999999], [0.2] * 20 + [math.nan],
+     (0.0, 1.0, 2.0, 3.0), "the message of /odom at 2.00 s has no usable twist.twist.linear.x (NaN, or messages at "
+     "one time that disagree)", 1.000000001),
+])
+def test_an_undecided_signal_over_a_gap_is_told_by_its_first_silence_in_the_gap(
+        room: Scenario, *, spec: str, msg_s: list[float], values: list[float], pose_s: tuple[float, ...], cause: str,
+        from_s: float) -> None:
+    res = _judge_slow(room, spec, msg_s, values, rate_hz=10.0, pose_s=pose_s).whole
+    assert res.verdict == "inconclusive" and res.unknown is not None
+    assert (res.unknown.cause, res.unknown.from_s) == (cause, from_s)
