@@ -211,3 +211,13 @@ def test_watch_follow_is_never_a_pass_on_times_certify_would_not_use(tmp_path: P
         assert res.finished and res.result.verdict == want, (log, res.result.verdict_reason, res.notes)
         named = [n for n in res.notes if n.startswith(f"{sc.topics.nominal}: 1 of 301 sample(s)")]
         assert len(named) == (want == "inconclusive"), res.notes
+
+
+def test_a_log_time_beyond_int64_is_ordered_as_certify_orders_it() -> None:
+    """A closed MCAP log whose message has a log time of 2**63 or more (a flipped top bit): watch ordered the poll by
+    int64 and crashed (exit 70, fault campaign seed 66 case 0); u64, as certify's reader, puts it last."""
+    from verify.ingest.salvage import SalvagedMessage
+    from verify.online.watch import _in_log_order
+
+    msgs = [SalvagedMessage("/p", "std_msgs/msg/Empty", True, t, b"") for t in (5, 2**63 + 7, 3, 2**64 - 1, 4)]
+    assert [m.log_ns for m in _in_log_order(msgs)] == [3, 4, 5, 2**63 + 7, 2**64 - 1]
