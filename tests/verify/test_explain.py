@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.verify.positions import with_gaps as _with_gaps
 from tubempc.mitl import parse
 from verify.monitor import engine
 from verify.monitor.engine import Positions, Truth, evaluate_at_points, explain
@@ -127,19 +128,6 @@ def test_an_undecided_always_names_its_first_instant_that_is_not_true() -> None:
     assert (e.subformula, e.time_ns) == ("p", 2 * S), e
 
 
-def _with_gaps(times_ns: list[int]) -> Positions:
-    """Samples at ``times_ns`` with the open gaps between them (the trajectory semantics' positions)."""
-    start, stop, point = [], [], []
-    for k, t in enumerate(times_ns):
-        if k:
-            start.append(times_ns[k - 1] + 1)
-            stop.append(t - 1)
-            point.append(False)
-        start.append(t)
-        stop.append(t)
-        point.append(True)
-    return Positions(np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64), np.array(point),
-                     times_ns[-1])
 
 
 def test_a_false_always_at_a_gap_names_a_violation_within_its_window_for_every_instant_of_the_gap() -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.verify.positions import with_gaps as _interleaved
 from tubempc.mitl import Eventually, Interval, parse
 from tubempc.scenario import Scenario, load_scenario
 from verify.errors import SpecError
@@ -36,18 +37,6 @@ def _points(n: int) -> Positions:
     return Positions(t, t.copy(), np.ones(n, dtype=bool), int(t[-1]) if n else 0)
 
 
-def _interleaved(t_ns: list[int]) -> Positions:
-    """Sample points at ``t_ns`` with the open gap between each two as a position of its own."""
-    start, stop, point = [], [], []
-    for k, t in enumerate(t_ns):
-        if k:
-            start.append(t_ns[k - 1] + 1)
-            stop.append(t - 1)
-            point.append(False)
-        start.append(t)
-        stop.append(t)
-        point.append(True)
-    return Positions(np.array(start, dtype=np.int64), np.array(stop, dtype=np.int64), np.array(point), t_ns[-1])
 
 
 def _verdicts(t: Truth) -> list[str]:

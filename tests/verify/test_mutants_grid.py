@@ -15,11 +15,9 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from tests.verify.positions import engine_on_grid as _engine
 from tubempc.mitl import Always, And, Atom, Const, Eventually, Formula, Implies, Interval, Next, Not, Or, parse
-from verify.geometry import gap_bounds
-from verify.monitor.engine import Truth, evaluate_at_points
 from verify.monitor.grid import Grid, UnsupportedFormulaError, evaluate_grid, evaluate_root, regular_grid
-from verify.semantics.trajectory import interleave, trajectory_positions
 
 NS = Fraction(1, 10**9)
 P, Q = Atom("p"), Atom("q")
@@ -30,16 +28,6 @@ MARGINS = {"p": np.array([0.5, -1.0, 2.0, -0.25]), "q": np.array([-0.75, 1.25, 0
 STEP = np.array([0.3, 0.7, 0.1])
 
 
-def _engine(f: Formula, grid: Grid, margins: dict[str, np.ndarray], step: np.ndarray
-            ) -> tuple[dict[Formula, Truth], np.ndarray, np.ndarray]:
-    """The general engine's values on the interleaved positions, the index of every sample and of every gap."""
-    t_ns = grid.t0_ns + grid.dt_ns * np.arange(grid.n, dtype=np.int64)
-    pos, point_at, gap_at = trajectory_positions(t_ns)
-    values = {}
-    for name, m in margins.items():
-        gb = gap_bounds(m, step)
-        values[name] = interleave(m, m, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
-    return evaluate_at_points(f, pos, values), point_at, gap_at
 
 
 def _same(got: np.ndarray, want: np.ndarray, what: str, g: Formula, f: Formula) -> None:

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
+from tests.verify.positions import engine_on_grid
 from tubempc.mitl import Always, And, Atom, Eventually, Formula, Implies, Interval, Next, Not, Or, Until, parse
 from tubempc.scenario import builtin_scenario
-from verify.geometry import gap_bounds, label_margins, step_bound_m, step_bound_regular_m
-from verify.monitor.engine import Truth, evaluate_at_points
+from verify.geometry import label_margins, step_bound_m, step_bound_regular_m
 from verify.monitor.grid import (
     Grid,
     UnsupportedFormulaError,
@@ -21,7 +21,7 @@ from verify.monitor.grid import (
     regular_grid,
     sliding_clipped,
 )
-from verify.semantics.trajectory import check_trajectory, interleave, trajectory_positions
+from verify.semantics.trajectory import check_trajectory
 
 NS = Fraction(1, 10**9)
 
@@ -70,15 +70,6 @@ def grids(draw: st.DrawFn) -> tuple[Grid, dict[str, np.ndarray], np.ndarray]:
     return grid, margins, step
 
 
-def _general(f: Formula, grid: Grid, margins: dict[str, np.ndarray], step: np.ndarray) -> tuple[dict[Formula, Truth],
-                                                                                                 np.ndarray]:
-    t_ns = grid.t0_ns + grid.dt_ns * np.arange(grid.n, dtype=np.int64)
-    pos, point_at, gap_at = trajectory_positions(t_ns)
-    values = {}
-    for name, m in margins.items():
-        gb = gap_bounds(m, step)
-        values[name] = interleave(m, m, gb.lo, gb.hi, point_at=point_at, gap_at=gap_at, size=pos.size)
-    return evaluate_at_points(f, pos, values), point_at
 
 
 @given(grid_formulas(), grids())
@@ -91,7 +82,7 @@ def _general(f: Formula, grid: Grid, margins: dict[str, np.ndarray], step: np.nd
           np.ones(2)))  # window inside one gap
 def test_grid_values_equal_general_engine(f: Formula, case: tuple[Grid, dict[str, np.ndarray], np.ndarray]) -> None:
     grid, margins, step = case
-    want, point_at = _general(f, grid, margins, step)
+    want, point_at, _ = engine_on_grid(f, grid, margins, step)
     res = evaluate_grid(f, grid, margins, step)
     # bit-identical: min/max are exact and the gap bounds are computed by the same operations
     np.testing.assert_array_equal(res.root.p_lo, want[f].lo[point_at])
@@ -114,7 +105,7 @@ def test_root_bounds_equal_grid_values(f: Formula, case: tuple[Grid, dict[str, n
     """``evaluate_root``: the root's lower bound at every sample and upper bound at the first, as the general
     engine gives them (bit-identical: the same operations, only fewer of them)."""
     grid, margins, step = case
-    want, point_at = _general(f, grid, margins, step)
+    want, point_at, _ = engine_on_grid(f, grid, margins, step)
     got = evaluate_root(f, grid, margins, step)
     np.testing.assert_array_equal(got.lo, want[f].lo[point_at])
     assert got.hi_first == want[f].hi[0]
