@@ -344,3 +344,38 @@ def test_the_mcap_record_walk_reads_each_chunks_neighbourhood_once(tmp_path: Pat
         storage.close()
     assert n_chunks >= 5
     assert reads[0] <= n_chunks + 2, f"{reads[0]} reads for {n_chunks} chunks"
+
+
+@pytest.mark.usefixtures("ingest_path")
+@pytest.mark.parametrize("fmt", ["bag", "bag-lz4"])
+def test_a_connection_record_that_is_not_utf8_is_damage_for_every_reader(fmt: str, tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """A byte of the message definition in the bag index's connection record flipped to 0xff (fault campaign seed
+    68 case 183): rosbags cannot read the field as text and refuses the bag; the fast reader accepted it (exit 0)
+    and so did ``watch`` (pass). Now every path refuses it, exit 3."""
+    path = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", fmt)
+    data = bytearray(path.read_bytes())
+    at = data.rindex(b"message_definition=") + len(b"message_definition=")
+    data[at] = 0xFF
+    path.write_bytes(bytes(data))
+    base = [str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    for argv in (["certify", *base], ["certify", *base, "--salvage"], ["watch", *base, "--time-base", "auto"]):
+        code, _, err = run(argv, capsys)
+        assert code == 3, (argv, err)
+        assert "message_definition" in err, err
+
+
+def test_rows_of_a_topic_not_asked_for_are_damage(tmp_path: Path) -> None:
+    """rosbags can yield a message of another connection from a damaged bag (fault campaign seed 68 case 68: exit 70
+    with a KeyError in --salvage): the rows are checked against the topics asked for."""
+    from rosbags.interfaces import Connection
+
+    from verify.errors import LogReadError
+    from verify.ingest.raw import _check_rows
+
+    def conn(topic: str) -> Connection:
+        return Connection(1, topic, "std_msgs/msg/Empty", "", "", 0, None, None)  # type: ignore[arg-type]
+
+    _check_rows(tmp_path, "ros1", [(conn("/a"), 1, b""), (conn("/b"), 2, b"")], ["/a", "/b"])
+    with pytest.raises(LogReadError, match="yields messages of /camera, which was not asked for"):
+        _check_rows(tmp_path, "ros1", [(conn("/a"), 1, b""), (conn("/camera"), 2, b"")], ["/a", "/b"])

@@ -374,17 +374,23 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
                 raw_topic.log_ns, raw_topic.payloads = m.log_ns, PayloadBuffer(m.data, m.offsets, m.lengths)
         _check_counts(path, fmt, selected, out)
         return RawLog(str(path), fmt, False, out, available, False, tuple(notes))
-    _check_rows(path, fmt, rows)
+    _check_rows(path, fmt, rows, list(out))
     for topic, (log_ns, payloads) in _split_by_topic(rows, list(out)).items():
         out[topic].log_ns, out[topic].payloads = log_ns, payloads
     _check_counts(path, fmt, selected, out)
     return RawLog(str(path), fmt, fmt == "ros1", out, available, False, tuple(notes))
 
 
-def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | memoryview]]) -> None:
-    """Every row a reader yields has an integer log time and a payload: a damaged sqlite3 page can hold a message
-    row whose columns read as NULL (its NOT NULL constraint is only checked when rows are written), which rosbags
-    yields as it is."""
+def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | memoryview]], topics: list[str]
+                ) -> None:
+    """Every row a reader yields is of a topic asked for (a damaged ROS1 index or message record can make rosbags
+    yield a message of another connection) and has an integer log time and a payload: a damaged sqlite3 page can hold
+    a message row whose columns read as NULL (its NOT NULL constraint is only checked when rows are written), which
+    rosbags yields as it is."""
+    stray = set(map(attrgetter("topic"), map(itemgetter(0), rows))).difference(topics)
+    if stray:
+        raise LogReadError(f"damaged {fmt} log: reading the wanted topics yields messages of {min(stray)}, which was "
+                           f"not asked for (a damaged index or message record)", path=str(path))
     if all(map(int.__instancecheck__, map(itemgetter(1), rows))) and \
             all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))):
         return

@@ -142,6 +142,10 @@ def index_data(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int,
     return cid, np.frombuffer(data, dtype=INDEX_ENTRY)
 
 
+#: the string fields of a connection record's data, read (and decoded) by every ROS1 reader
+_STRING_FIELDS = ("type", "md5sum", "message_definition", "callerid")
+
+
 def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, str, str, bool]:
     """A connection record -> (id, topic, type as pkg/msg/Name, whether it carries the message definition)."""
     cid = _u32(header, "conn")
@@ -149,10 +153,15 @@ def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[i
     if topic is None:
         raise MalformedError("a connection record without a topic")
     fields = header_fields(data)
-    typ = fields.get("type", b"").decode("utf-8", "replace")
+    for name, value in (("topic", topic), *((k, fields[k]) for k in _STRING_FIELDS if k in fields)):
+        try:  # as rosbags reads them: a field that is not UTF-8 makes the connection (and the bag) unreadable
+            value.decode()
+        except UnicodeDecodeError:
+            raise MalformedError(f"a connection record whose {name} field is not UTF-8 text") from None
+    typ = fields.get("type", b"").decode()
     has_def = bool(fields.get("message_definition", b"").strip())
     # ROS1 names are pkg/Name; rosbags names them pkg/msg/Name (its own rule, so every reader names a type alike)
-    return cid, topic_name(topic.decode("utf-8", "replace")), normalize_msgtype(typ) if typ else typ, has_def
+    return cid, topic_name(topic.decode()), normalize_msgtype(typ) if typ else typ, has_def
 
 
 def topic_name(name: str) -> str:
@@ -313,6 +322,8 @@ class Ros1Stream:
             rec = record_at(buf, pos, len(buf))  # CutError: not all written yet
             if rec.op not in (Op.CONNECTION, Op.CHUNK_INFO):
                 raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
+            if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8)
+                connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
             pos = rec.end
         return True
 
