@@ -379,3 +379,22 @@ def test_rows_of_a_topic_not_asked_for_are_damage(tmp_path: Path) -> None:
     _check_rows(tmp_path, "ros1", [(conn("/a"), 1, b""), (conn("/b"), 2, b"")], ["/a", "/b"])
     with pytest.raises(LogReadError, match="yields messages of /camera, which was not asked for"):
         _check_rows(tmp_path, "ros1", [(conn("/a"), 1, b""), (conn("/camera"), 2, b"")], ["/a", "/b"])
+
+
+@pytest.mark.usefixtures("ingest_path")
+@pytest.mark.parametrize("fmt", ["bag", "bag-lz4"])
+def test_a_chunk_info_naming_no_chunk_is_damage_for_every_reader(fmt: str, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A bit of the last chunk info record's chunk position flipped (fault campaign seed 68 case 575): rosbags reads
+    a record header there and refuses the bag; ``watch`` found the bag closed by its recorder and passed it (exit 0)
+    and ``--salvage`` judged it (exit 2). Now every path refuses it, exit 3."""
+    path = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", fmt)
+    data = bytearray(path.read_bytes())
+    last = max(pos for pos, rec in _records(bytes(data)) if rec.op == Op.CHUNK_INFO)
+    at = data.index(b"chunk_pos=", last) + len(b"chunk_pos=") + 2
+    data[at] ^= 0x87
+    path.write_bytes(bytes(data))
+    base = [str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    for argv in (["certify", *base], ["certify", *base, "--salvage"], ["watch", *base, "--time-base", "auto"]):
+        code, _, err = run(argv, capsys)
+        assert code == 3, (argv, err)

@@ -127,6 +127,13 @@ def _u32(header: dict[str, bytes], name: str) -> int:
     return int(struct.unpack("<I", value)[0])
 
 
+def _u64(header: dict[str, bytes], name: str) -> int:
+    value = header.get(name)
+    if value is None or len(value) != 8:
+        raise MalformedError(f"header field {name!r} is not a u64")
+    return int(struct.unpack("<Q", value)[0])
+
+
 #: an index data record's entries: the log time (sec, nsec) and offset in the chunk's records of each message
 INDEX_ENTRY = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
 
@@ -241,6 +248,7 @@ class Ros1Stream:
     closed: bool = False
     chunk: _Chunk | None = None
     indexing: _ChunkIndex | None = None  # the last closed chunk, while its index data records are read
+    chunk_positions: set[int] = field(default_factory=set)  # every chunk record read (the bag index must name them)
 
     @property
     def resume_at(self) -> int:
@@ -272,6 +280,7 @@ class Ros1Stream:
                     self._chunk_indexed()
                 if head.op == Op.CHUNK:
                     self.chunk = _Chunk(self.pos, head.header.get("compression", b"none").decode("ascii", "replace"))
+                    self.chunk_positions.add(self.pos)
                     continue
                 rec = record_at(buf, self.pos - base, len(buf))
                 if rec.op == Op.BAG_HEADER:
@@ -324,6 +333,8 @@ class Ros1Stream:
                 raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
             if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8)
                 connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
+            elif (at := _u64(rec.header, "chunk_pos")) not in self.chunk_positions:  # the indexed readers go there
+                raise MalformedError(f"the bag's index names a chunk at byte {at}, where the bag has none")
             pos = rec.end
         return True
 
