@@ -348,15 +348,18 @@ def test_the_mcap_record_walk_reads_each_chunks_neighbourhood_once(tmp_path: Pat
 
 @pytest.mark.usefixtures("ingest_path")
 @pytest.mark.parametrize("fmt", ["bag", "bag-lz4"])
-def test_a_connection_record_that_is_not_utf8_is_damage_for_every_reader(fmt: str, tmp_path: Path,
+@pytest.mark.parametrize(("shift", "byte"), [(len(b"message_definition="), 0xFF), (6, 0x04)])
+def test_a_connection_record_that_is_not_utf8_is_damage_for_every_reader(fmt: str, shift: int, byte: int,
+                                                                          tmp_path: Path,
                                                                           capsys: pytest.CaptureFixture[str]) -> None:
-    """A byte of the message definition in the bag index's connection record flipped to 0xff (fault campaign seed
-    68 case 183): rosbags cannot read the field as text and refuses the bag; the fast reader accepted it (exit 0)
-    and so did ``watch`` (pass). Now every path refuses it, exit 3."""
+    """In the bag index's last connection record, a byte of the message definition flipped to 0xff (fault campaign
+    seed 68 case 183), or one of its field name (``messag\\x04_definition``: seed 70 case 1390): rosbags cannot read
+    the field as text, or finds none, and refuses the bag; the fast reader accepted the first (exit 0), ``watch``
+    passed both and ``--salvage`` judged the second (exit 2). Now every path refuses them, exit 3."""
     path = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", fmt)
     data = bytearray(path.read_bytes())
-    at = data.rindex(b"message_definition=") + len(b"message_definition=")
-    data[at] = 0xFF
+    at = data.rindex(b"message_definition=") + shift
+    data[at] = byte
     path.write_bytes(bytes(data))
     base = [str(path), "--scenario", "nexus-sml", "--spec", SPEC]
     for argv in (["certify", *base], ["certify", *base, "--salvage"], ["watch", *base, "--time-base", "auto"]):

@@ -151,6 +151,8 @@ def index_data(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int,
 
 #: the string fields of a connection record's data, read (and decoded) by every ROS1 reader
 _STRING_FIELDS = ("type", "md5sum", "message_definition", "callerid")
+#: ... of which every connection record must have these (the message definition may be empty)
+_REQUIRED_FIELDS = ("type", "md5sum", "message_definition")
 
 
 def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, str, str, bool]:
@@ -160,6 +162,9 @@ def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[i
     if topic is None:
         raise MalformedError("a connection record without a topic")
     fields = header_fields(data)
+    for name in _REQUIRED_FIELDS:
+        if name not in fields:  # rosbags reads each of them and refuses the bag without it
+            raise MalformedError(f"a connection record without its {name} field")
     for name, value in (("topic", topic), *((k, fields[k]) for k in _STRING_FIELDS if k in fields)):
         try:  # as rosbags reads them: a field that is not UTF-8 makes the connection (and the bag) unreadable
             value.decode()
