@@ -193,14 +193,12 @@ def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
     for _ in range(count):
         header, start, dlen, pos = f.record(pos)
         _op(header, _OP_CONN)
-        data = f.read(start, dlen)
-        info = _fields(data)
-        if not info.get("type") or "md5sum" not in info or "message_definition" not in info:
-            raise _UnusualError("connection without type, md5sum or definition")  # rosbags decides
-        try:
-            cid, topic, typ, has_def = connection_of(header, data)
+        try:  # the record layer's rule (its fields there, as text): else rosbags decides
+            cid, topic, typ, has_def = connection_of(header, f.read(start, dlen))
         except MalformedError as err:
             raise _UnusualError(str(err)) from None
+        if not typ:
+            raise _UnusualError("connection with an empty type")  # rosbags decides
         conns.append(_Conn(cid, topic, typ, has_def))
     return conns, pos
 
