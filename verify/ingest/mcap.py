@@ -137,15 +137,29 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
         # payloads are copied out at once (all topics together) and split by topic at the end, for all chunks
         whole = _sparse(fd, size, selected, wanted, known)
         if whole is not None:
-            batches: Iterable[tuple[IntArray, IntArray, IntArray, IntArray, U8Array]] = [whole]
+            batches: Iterable[tuple[IntArray, IntArray, U8Array, IntArray]] = [_copied_out(whole)]
         else:
             workers = WORKERS if any(c.compression for c in selected) else 1  # threads only for decompression
-            batches = in_order(lambda c: _chunk_messages(fd, size, c, wanted, known, is_known=is_known,
-                                                         is_wanted=is_wanted), selected, workers=workers)
-        for channel, log_ns, starts, lens, u8 in batches:
-            pieces.append((code_of[channel], log_ns, gather(u8, starts, lens), lens))
+            batches = in_order(lambda c: _copied_out(_chunk_messages(fd, size, c, wanted, known, is_known=is_known,
+                                                                     is_wanted=is_wanted)), selected,
+                               workers=workers)
+        for channel, log_ns, data, lens in batches:
+            pieces.append((code_of[channel], log_ns, data, lens))
     return {t: _merge(p) for t, p in _by_topic(pieces, len(topics), topics).items()}
 
+
+def _copied_out(found: tuple[IntArray, IntArray, IntArray, IntArray, U8Array]
+                ) -> tuple[IntArray, IntArray, U8Array, IntArray]:
+    """A chunk's wanted messages (channel, log time, payload starts and lengths in ``u8``) -> the same with the
+    payloads packed into their own buffer: done in the thread that decompressed the chunk, so the reading thread only
+    collects, and the decompressed chunk is dropped where it was made."""
+    channel, log_ns, starts, lens, u8 = found
+    return channel, log_ns, gather(u8, starts, lens), lens
+
+
+#: up to this many messages in a chunk (by the summary), its records are stepped over without the index's hints
+#: (measured on 1 GB camera logs: ~25 records per chunk, 9 us stepped against 46 us with the hints read)
+_STEP_RECORDS = 128
 
 #: MCAP channel ids are u16
 _CHANNEL_IDS = 1 << 16
@@ -222,7 +236,10 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], know
     raw = _decompress(compressed, chunk.compression, usize, crc)
     del compressed
     u8 = np.frombuffer(raw, dtype=np.uint8)
-    pos, op, length = chunk_records(raw, _index_hints(fd, size, chunk, usize))
+    # the message index as hints only where the chunk holds many records: stepping over a few dozen records one by
+    # one costs less than reading and sorting the index (a hint never changes the walk's result)
+    many = sum(int(n) for n in chunk.channel_count.values()) > _STEP_RECORDS
+    pos, op, length = chunk_records(raw, _index_hints(fd, size, chunk, usize) if many else None)
     _parse_others(raw, pos, op, length, known)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]

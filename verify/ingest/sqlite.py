@@ -15,7 +15,8 @@ with C-level ``map``/``b"".join`` (no Python statement per row).
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
+from itertools import compress
 from operator import itemgetter
 from pathlib import Path
 from typing import Any
@@ -176,20 +177,24 @@ def read_sqlite_storage(storage: Sqlite3Reader, connections: Collection[Connecti
             return None
         log_ns = np.fromiter(stamps, dtype=np.int64, count=n)
         lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=n)
-        data = np.frombuffer(b"".join(payloads), dtype=np.uint8)
         topics = sorted(set(topic_of.values()))
         if len(topics) == 1:
-            return {topics[0]: _packed(log_ns, data, lengths)}
+            return {topics[0]: _packed(log_ns, _joined(payloads), lengths)}
         code = {tid: topics.index(t) for tid, t in topic_of.items()}
         codes = np.fromiter(map(code.__getitem__, map(itemgetter(0), rows)), dtype=np.int64, count=n)
     except (TypeError, OverflowError, ValueError, KeyError):
         return None
-    byte_codes = np.repeat(codes, lengths)  # the topic of every payload byte
     out: dict[str, TopicMessages] = {}
     for k, t in enumerate(topics):
         mine = codes == k
-        out[t] = _packed(log_ns[mine], data[byte_codes == k], lengths[mine])
+        # each topic's payloads joined from the fetched rows (C-level compress + join: every payload byte copied
+        # once, no per-byte index arrays)
+        out[t] = _packed(log_ns[mine], _joined(compress(payloads, mine.tolist())), lengths[mine])
     return out
+
+
+def _joined(payloads: Iterable[bytes]) -> U8Array:
+    return np.frombuffer(b"".join(payloads), dtype=np.uint8)
 
 
 def _packed(log_ns: IntArray, data: U8Array, lengths: IntArray) -> TopicMessages:
