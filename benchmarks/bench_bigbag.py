@@ -28,7 +28,9 @@ of that format), the certificate model's pydantic schema (built on first use), r
 (compiled on rosbags' first metadata.yaml). The project's modules are byte-compiled before any child runs
 (``_compile_project``), as an installed copy's are. Ours' child then certifies the same log a second time: "second call"
 is the per-log cost of a process that has certified a log before (a batch worker, a user's script); both are
-printed, with ours/floor for each.
+printed, with ours/floor for each. Last, the child times ours' reading alone (``verify.ingest.raw.read_raw`` of the
+wanted topics, warm: everything ours does before decoding), the part of ours that does the floor's work: what is left
+between it and the second call is decoding, judging and the certificate, a per-log cost the floor does not have.
 
 Each side runs ``--repeat`` times (default 3), the two sides alternating, and its fastest run is kept (the machine
 is shared: the fastest run is the least disturbed one); the CPU time (user + system, every thread, from the start
@@ -41,8 +43,9 @@ s / MB, ours s / MB, ratio = rosbags time / ours, and the same for ours + file d
 ``worst_ratio_vs_rosbags=<min ratio of ours> max_rss_mb=<max over ours> formats=<n>
 worst_ratio_file_digest=<min ratio of ours + file digest> worst_cpu_per_wall_uncompressed=<max CPU / wall of ours
 on ros1-none, mcap-none, sqlite3> worst_ratio_vs_floor=<max of ours' wall / the floor's>
-worst_ratio_vs_floor_second_call=<the same for ours' second call>``, after a second table (floor wall / CPU, ours
-wall / CPU and ours/floor for the first and the second call, ours' CPU per wall, ours' library import time).
+worst_ratio_vs_floor_second_call=<the same for ours' second call> worst_read_vs_floor=<the same for ours' reading
+alone>``, after a second table (floor wall / CPU, ours wall / CPU and ours/floor for the first and the second call,
+ours' reading alone and its ratio to the floor, ours' CPU per wall, ours' library import time).
 Targets: ratio >= 2 everywhere, ours' RSS <= 250 MB and within 10 % between --size-gb 1 and 3; ours <= 1.25x the
 floor; CPU <= 1.2x wall uncompressed.
 """
@@ -259,6 +262,14 @@ def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
     result, wall, work_cpu_s = once()  # the first call in the process: what one `tubempc certify` pays
     # the same log again: the per-log cost once the process has certified a log (a batch worker, a second log)
     second, wall2, cpu2 = once()
+    # and the log's reading alone (``read_raw``: open, index, chunks, the wanted records; no decoding, judging or
+    # certificate), warm as the second call: what of ours compares with the floor's work
+    from verify.ingest.log import wanted_topics
+    from verify.ingest.raw import read_raw
+
+    cpu0, t0 = _cpu_s(), time.perf_counter()
+    read_raw(path, wanted_topics(sc))
+    wall3, cpu3 = time.perf_counter() - t0, _cpu_s() - cpu0
     cert = result.certificate
     dq = cert["data_quality"]
     counts = {POSE: dq["pose"].get("count"), NOMINAL: dq["nominal"].get("count"), CMD: dq["cmd_vel"].get("count")}
@@ -267,6 +278,7 @@ def _child_ours(path: Path, digest: str | None = None) -> dict[str, Any]:
         raise SystemExit(f"{path}: a second certify_log of the same log gave another certificate")
     return {"wall_s": wall, "counts": counts, "verdict": cert["verdict"], "digest": digest,
             "setup_cpu_s": setup_cpu_s, "work_cpu_s": work_cpu_s, "wall2_s": wall2, "work2_cpu_s": cpu2,
+            "read_wall_s": wall3, "work3_cpu_s": cpu3,
             "import_s": import_s}
 
 
@@ -413,7 +425,8 @@ def measure(kind: str, path: Path) -> dict[str, Any]:
     got["cpu_s"] = got.pop("work_cpu_s")
     if "work2_cpu_s" in got:  # ours: the second call of certify_log (per log, once the process has certified one)
         got["cpu2_s"] = got.pop("work2_cpu_s")
-    got["exit_cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s") - got["cpu_s"] - got.get("cpu2_s", 0.0)
+    measured = got["cpu_s"] + got.get("cpu2_s", 0.0) + got.pop("work3_cpu_s", 0.0)
+    got["exit_cpu_s"] = usage.ru_utime + usage.ru_stime - got.pop("setup_cpu_s") - measured
     return got
 
 
@@ -422,7 +435,7 @@ def best_of(runs: list[dict[str, Any]]) -> dict[str, Any]:
     best = min(runs, key=lambda r: r["wall_s"])
     out = {**best, "rss_mb": max(r["rss_mb"] for r in runs), "cpu_s": min(r["cpu_s"] for r in runs),
            "exit_cpu_s": min(r["exit_cpu_s"] for r in runs)}
-    for key in ("wall2_s", "cpu2_s", "import_s"):
+    for key in ("wall2_s", "cpu2_s", "read_wall_s", "import_s"):
         if key in best:
             out[key] = min(r[key] for r in runs)
     return out
@@ -502,23 +515,27 @@ def main() -> None:
     print()
     print("| log | floor: wall s / CPU s | certify_log, first call: wall s / CPU s | ours/floor (wall) | "
           "ours CPU/wall | certify_log, second call: wall s / CPU s | ours/floor (wall), second call | "
+          "ours' reading alone (read_raw, warm): wall s / vs floor | "
           "library imports before the clock: ours s | ours: CPU s after the work (exit, not counted) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for fmt, _size, _base, ours, _whole in rows:
         fl = floors[fmt]
         print(f"| {fmt} | {fl['wall_s']:.3f} / {fl['cpu_s']:.3f} | {ours['wall_s']:.3f} / {ours['cpu_s']:.3f} | "
               f"{ours['wall_s'] / fl['wall_s']:.2f}x | {ours['cpu_s'] / ours['wall_s']:.2f} | "
               f"{ours['wall2_s']:.3f} / {ours['cpu2_s']:.3f} | {ours['wall2_s'] / fl['wall_s']:.2f}x | "
+              f"{ours['read_wall_s']:.3f} / {ours['read_wall_s'] / fl['wall_s']:.2f}x | "
               f"{ours['import_s']:.3f} | {ours['exit_cpu_s']:.2f} |")
     worst_floor = max(o["wall_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
     worst_floor2 = max(o["wall2_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
+    worst_read = max(o["read_wall_s"] / floors[f]["wall_s"] for f, _s, _b, o, _w in rows)
     plain = [o["cpu_s"] / o["wall_s"] for f, _s, _b, o, _w in rows if f in UNCOMPRESSED]
     worst = min(b["wall_s"] / o["wall_s"] for _f, _s, b, o, _w in rows)
     wholes = [b["wall_s"] / w["wall_s"] for _f, _s, b, _o, w in rows if w is not None]
     print(f"worst_ratio_vs_rosbags={worst:.2f} max_rss_mb={max(o['rss_mb'] for _f, _s, _b, o, _w in rows):.0f} "
           f"formats={len(rows)}" + (f" worst_ratio_file_digest={min(wholes):.2f}" if wholes else "") +
           (f" worst_cpu_per_wall_uncompressed={max(plain):.2f}" if plain else "") +
-          f" worst_ratio_vs_floor={worst_floor:.2f} worst_ratio_vs_floor_second_call={worst_floor2:.2f}")
+          f" worst_ratio_vs_floor={worst_floor:.2f} worst_ratio_vs_floor_second_call={worst_floor2:.2f}"
+          f" worst_read_vs_floor={worst_read:.2f}")
 
 
 if __name__ == "__main__":
