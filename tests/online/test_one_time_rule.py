@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from tubempc.scenario import builtin_scenario, load_scenario
+from tubempc.scenario import builtin_scenario, dump_scenario, load_scenario
 from verify import certify_log
 from verify.ingest.rules import ReadingRules
 from verify.online import OnlineMonitor
@@ -183,8 +183,9 @@ def test_watch_keeps_the_row_order_where_certify_reads_the_timestamp_index(tmp_p
 class _Polls:
     """A follower that delivers a complete MCAP log's messages 40 at a time, closed with the last poll."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wanted: object = None) -> None:
         self.path, self.format, self.finished, self.delivered = path, "mcap", False, 0
+        self.declared_topics: dict[str, str] = {}
         self._msgs = open_follower(path).poll()
 
     def poll(self) -> list[object]:
@@ -221,3 +222,61 @@ def test_a_log_time_beyond_int64_is_ordered_as_certify_orders_it() -> None:
 
     msgs = [SalvagedMessage("/p", "std_msgs/msg/Empty", True, t, b"") for t in (5, 2**63 + 7, 3, 2**64 - 1, 4)]
     assert [m.log_ns for m in _in_log_order(msgs)] == [3, 4, 5, 2**63 + 7, 2**64 - 1]
+
+
+def _db3_with_damaged_camera(tmp_path: Path, *, damaged: bool = True) -> Path:
+    """The clean run as a bare .db3 with a camera topic (10 KB images: their bytes on overflow pages) whose first
+    image's overflow chain points past the end of the file: its payload cannot be read ("database disk image is
+    malformed"), every other row can; and a row whose topic id no topic has, its timestamp beyond its cell."""
+    import sqlite3
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / ("run.db3" if damaged else "clean.db3"), "db3")
+    con = sqlite3.connect(log)
+    con.execute("INSERT INTO topics (id, name, type, serialization_format, offered_qos_profiles, "
+                "type_description_hash) VALUES (99, '/camera/image_raw', 'sensor_msgs/msg/Image', 'cdr', '', '')")
+    t0 = con.execute("SELECT min(timestamp) FROM messages").fetchone()[0]
+    con.executemany("INSERT INTO messages (topic_id, timestamp, data) VALUES (99, ?, ?)",
+                    [(t0 + k * 10**8, bytes([0xA0 + k]) * 10_000) for k in range(5)])
+    con.commit()
+    page = con.execute("PRAGMA page_size").fetchone()[0]
+    con.close()
+    if not damaged:
+        return log
+    data = bytearray(log.read_bytes())
+    # an overflow page of the first image: the page's 4-byte link to the next overflow page, then image bytes only
+    first = [p for p in range(page, len(data), page) if data[p + 4 : p + page] == bytes([0xA0]) * (page - 4)]
+    assert first, "no overflow page of the first image"
+    data[first[0] : first[0] + 4] = (2**31 - 1).to_bytes(4, "big")
+    log.write_bytes(bytes(data))
+    check = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
+    try:
+        with pytest.raises(sqlite3.DatabaseError, match="malformed"):
+            check.execute("SELECT data FROM messages WHERE topic_id = 99").fetchall()
+    finally:
+        check.close()
+    return log
+
+
+def test_watch_reads_a_sqlite3_storage_as_certify_does(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A .db3 whose damaged pages hold only another topic's payloads: certify reads the wanted topics' rows and
+    passes; watch read every row's payload and refused the log (exit 3, "database disk image is malformed": fault
+    campaign seed 68 case 584, seed 71 case 1401). Now both read the same rows, and watch names the log's topics as
+    certify does (its topics table), the camera's included."""
+    log, clean = _db3_with_damaged_camera(tmp_path), _db3_with_damaged_camera(tmp_path, damaged=False)
+    got = [run([cmd, str(p), "--scenario", "nexus-sml", "--spec", SPEC], capsys)[:2]
+           for p in (log, clean) for cmd in ("certify", "watch")]
+    # certify passes both; watch says of the damaged log what it says of the clean one (a bare .db3 has no mark of
+    # its recorder closing it: inconclusive, exit 2, read once), never a refusal
+    assert [g[0] for g in got] == [0, 2, 0, 2], got
+    assert got[1][1].replace(str(log), "LOG") == got[3][1].replace(str(clean), "LOG"), got
+    res = watch_log(log, OnlineMonitor(builtin_scenario(), spec=SPEC))
+    assert res.result.checks == watch_log(clean, OnlineMonitor(builtin_scenario(), spec=SPEC)).result.checks
+    assert certify_log(log, builtin_scenario(), spec=SPEC).certificate["verdict"] == "pass"
+    # a pose topic the log does not have: both name the log's topics, the camera's included (its topics table)
+    sc = builtin_scenario()
+    other = tmp_path / "other.yaml"
+    other.write_text(dump_scenario(sc.model_copy(update={"topics": sc.topics.model_copy(update={"pose": "/vicon"})})))
+    errs = [run([cmd, str(log), "--scenario", str(other), "--spec", SPEC], capsys) for cmd in ("certify", "watch")]
+    assert [e[0] for e in errs] == [3, 3], errs
+    lines = [e[2].strip().splitlines()[-1] for e in errs]
+    assert lines[0] == lines[1] and "/camera/image_raw" in lines[0], lines

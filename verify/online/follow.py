@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sqlite3
 import struct
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Protocol
 
@@ -42,6 +42,9 @@ class Follower(Protocol):
     format: str  # "mcap" | "ros1" | "sqlite3"
     finished: bool
     delivered: int
+    #: topics the log declares (name -> type) whose messages are not all delivered: a sqlite3 storage's topics table
+    #: (only the wanted topics' rows are read, as certify reads them); empty where every message is delivered
+    declared_topics: dict[str, str]
 
     def poll(self) -> list[SalvagedMessage]: ...
 
@@ -66,6 +69,7 @@ class McapFollower:
         self.format = "mcap"
         self.finished = False
         self.delivered = 0
+        self.declared_topics: dict[str, str] = {}
         self.pos = 0
         self.found = Scan({}, {})
 
@@ -120,6 +124,7 @@ class Ros1Follower:
         self.format = "ros1"
         self.finished = False
         self.delivered = 0
+        self.declared_topics: dict[str, str] = {}
         self.stream = Ros1Stream()
 
     def poll(self) -> list[SalvagedMessage]:
@@ -164,15 +169,20 @@ class Ros1Follower:
 
 
 class SqliteFollower:
-    """rosbag2 sqlite3 storage: the rows of ``messages`` with an id above the last one read (read-only)."""
+    """rosbag2 sqlite3 storage: the rows of ``messages`` with an id above the last one read (read-only). With
+    ``wanted`` (topic names), as certify reads a sqlite3 storage: only rows of the topics table's wanted topics are
+    delivered, and no other row's timestamp or payload is read (a damaged page holding another topic's data, or a
+    row whose topic id no topic has, is no part of the reading: certify's query never reads it)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wanted: Collection[str] | None = None) -> None:
         self.path = path
         self.format = "sqlite3"
         self.finished = False
         self.delivered = 0
         self.last_id = 0
         self.topic_names: set[str] = set()
+        self.declared_topics: dict[str, str] = {}
+        self.wanted = None if wanted is None else frozenset(wanted)
 
     def poll(self) -> list[SalvagedMessage]:
         try:
@@ -180,8 +190,10 @@ class SqliteFollower:
             try:
                 topics = {int(i): (str(n), str(t)) for i, n, t in con.execute("SELECT id, name, type FROM topics")}
                 self.topic_names = {n for n, _ in topics.values()}
-                rows = con.execute("SELECT id, topic_id, timestamp, data FROM messages WHERE id > ? ORDER BY id",
-                                   (self.last_id,)).fetchall()
+                for name, typ in topics.values():
+                    self.declared_topics.setdefault(name, typ)
+                read = sorted(i for i, (n, _t) in topics.items() if self.wanted is None or n in self.wanted)
+                rows = con.execute(_rows_query(read), (*read, *read, self.last_id)).fetchall()
             finally:
                 con.close()
         except sqlite3.OperationalError as err:
@@ -191,8 +203,9 @@ class SqliteFollower:
         except sqlite3.DatabaseError as err:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
         out = []
+        reading = set(read)
         for mid, tid, stamp, data in rows:
-            if tid in topics:
+            if tid in reading:
                 name, typ = topics[tid]
                 if not isinstance(stamp, int) or not isinstance(data, bytes):
                     # a damaged page can hold a row whose columns read as NULL (NOT NULL is checked on writes only)
@@ -207,15 +220,25 @@ class SqliteFollower:
         return []
 
 
+def _rows_query(ids: list[int]) -> str:
+    """The rows after a row id (the last parameter), in row order; timestamp and payload only of rows of topic
+    ``ids`` (the parameters before it, twice), NULL for every other row (their bytes are not read)."""
+    marks = ",".join("?" * len(ids)) or "NULL"
+    return (f"SELECT id, topic_id, CASE WHEN topic_id IN ({marks}) THEN timestamp END, "
+            f"CASE WHEN topic_id IN ({marks}) THEN data END FROM messages WHERE id > ? ORDER BY id")
+
+
 class FolderFollower:
     """A ROS2 bag folder: its storage files in name order (a split starts a new file); finished when the recorder
     has written ``metadata.yaml``."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wanted: Collection[str] | None = None) -> None:
         self.path = path
         self.format = "mcap"
         self.finished = False
         self.delivered = 0
+        self.declared_topics: dict[str, str] = {}
+        self.wanted = wanted
         self.files: dict[Path, McapFollower | SqliteFollower] = {}
 
     def _storage(self) -> list[Path]:
@@ -230,9 +253,11 @@ class FolderFollower:
         for f in self._storage():
             if f not in self.files:
                 check_log_path(f)  # a FIFO would block the poll for ever
-                self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f)
+                self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f, self.wanted)
                 self.format = self.files[f].format
             out.extend(self.files[f].poll())
+            for name, typ in self.files[f].declared_topics.items():
+                self.declared_topics.setdefault(name, typ)
         self.finished = done and all(f.finished or f.format == "sqlite3" for f in self.files.values())
         sqlite = [f for f in self.files.values() if isinstance(f, SqliteFollower)]
         if self.finished and sqlite and len(sqlite) == len(self.files):
@@ -264,16 +289,19 @@ def log_bytes(path: Path) -> tuple[int, int]:
     return (sum(st.st_size for st in stats), max((st.st_mtime_ns for st in stats), default=0))
 
 
-def open_follower(path: Path) -> McapFollower | Ros1Follower | SqliteFollower | FolderFollower:
-    """The follower for ``path`` by its kind (a folder is a ROS2 bag; files by extension)."""
+def open_follower(path: Path, wanted: Collection[str] | None = None
+                  ) -> McapFollower | Ros1Follower | SqliteFollower | FolderFollower:
+    """The follower for ``path`` by its kind (a folder is a ROS2 bag; files by extension). ``wanted``: the topics
+    the reading uses (``verify.ingest.log.wanted_topics``): a sqlite3 storage's other rows are not read (as certify
+    does not read them); None reads every row."""
     if path.is_dir():
-        return FolderFollower(path)
+        return FolderFollower(path, wanted)
     suffix = path.suffix.lower()
     if suffix == ".mcap":
         return McapFollower(path)
     if suffix == ".bag":
         return Ros1Follower(path)
     if suffix == ".db3":
-        return SqliteFollower(path)
+        return SqliteFollower(path, wanted)
     raise LogReadError(f"unrecognized log type {suffix or '(no extension)'!r}: expected .bag, .mcap, .db3 or a ROS2 "
                        f"bag folder", path=str(path))

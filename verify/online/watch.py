@@ -44,6 +44,7 @@ import numpy.typing as npt
 from verify.errors import LogReadError, MissingTopicError, UnusableInputError, VerifyError
 from verify.ingest.decode import PoseColumns, decode_pose, decode_twist
 from verify.ingest.fields import FieldSamples, decode_field
+from verify.ingest.log import wanted_topics
 from verify.ingest.raw import RawTopic, check_log_path
 from verify.ingest.readerrors import READ_ERRORS, in_words, one_type_per_topic
 from verify.ingest.rules import ReadingRules
@@ -136,6 +137,13 @@ class _Feeder:
             if self.time_base is None:
                 self.time_base = self._choose([m for m in messages if m.topic == self.pose_topic])
         self._feed(messages)
+
+    def declare(self, topics: Mapping[str, str]) -> None:
+        """Topics the log declares (name -> type) beside the messages delivered (``Follower.declared_topics``: a
+        sqlite3 storage's topics table, whose unwanted topics' rows are not read): the log's topics as certify's
+        reader lists them, for choosing the pose topic and for naming the log's topics."""
+        for name, typ in topics.items():
+            self.seen_topics.setdefault(name, typ)
 
     def _probe_done(self) -> bool:
         """follow: an explicit base is known at once, auto once ``probe`` pose messages are in."""
@@ -390,6 +398,8 @@ class _Reading:
         last_growth, last_bytes = time.monotonic(), log_bytes(p)
         while True:
             msgs = _read(p, follower.poll)
+            for feeder in self.feeders:
+                feeder.declare(follower.declared_topics)
             if msgs:
                 self.count += len(msgs)
                 for feeder in self.feeders:
@@ -473,7 +483,9 @@ def watch_log(path: str | Path, monitor: OnlineMonitor | FleetMonitor, *, follow
     _wait_for(p, follow=follow, idle_timeout_s=idle_timeout_s, poll_s=poll_s, time_base=time_base)
     rules = ReadingRules.of(monitor.scenario, time_base, clock_offsets)  # the offsets' ranges, before reading
     check_log_path(p)
-    follower = open_follower(p)
+    scenarios = ([monitor.robot_feed(name).scenario for name in monitor.scenario.robot_names]
+                 if isinstance(monitor, FleetMonitor) else [monitor.scenario])
+    follower = open_follower(p, set().union(*map(wanted_topics, scenarios)))  # the topics certify reads
     feeders = _feeders(monitor, rules, follower, p, follow=follow, time_base=time_base, clock_offsets=clock_offsets)
     reading = _Reading(p, follower, feeders, monitor, on_decision)
     reading.run(follow=follow, idle_timeout_s=idle_timeout_s, poll_s=poll_s)
