@@ -280,3 +280,38 @@ def test_watch_reads_a_sqlite3_storage_as_certify_does(tmp_path: Path, capsys: p
     assert [e[0] for e in errs] == [3, 3], errs
     lines = [e[2].strip().splitlines()[-1] for e in errs]
     assert lines[0] == lines[1] and "/camera/image_raw" in lines[0], lines
+
+
+def test_watch_reads_a_sqlite3_message_time_where_certify_reads_it(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag folder whose timestamp index holds another time for one nominal message than its table row: certify's
+    query (rosbags') walks the index and reads the message's time there (far beyond the run: no nominal sample for
+    the pose beside it, the tube undecided, exit 2); watch read the row's own time and passed (exit 0: fault campaign
+    seed 73 case 651). Both read the index's time now."""
+    import sqlite3
+
+    folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    (log,) = folder.glob("*.db3")
+    t_ns = FUZZ.TIME0_NS + 13_700_000_000
+    con = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
+    try:
+        (rid,) = con.execute("SELECT messages.id FROM messages JOIN topics ON topic_id = topics.id WHERE name = ? "
+                             "AND timestamp = ?", ("/nexus/nominal_pose", t_ns)).fetchone()
+    finally:
+        con.close()
+    data = bytearray(log.read_bytes())
+    # the index entry (its record header: 3 bytes, the timestamp an 8-byte integer, the row id a 2-byte one)
+    entry = b"\x03\x06\x02" + struct.pack(">q", t_ns) + struct.pack(">H", rid)
+    at = [k for k in range(len(data)) if data.startswith(entry, k)]
+    assert len(at) == 1, at
+    data[at[0] + 3 : at[0] + 11] = struct.pack(">q", 2_055_455_992_151_711_744)
+    log.write_bytes(bytes(data))
+    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", "log"]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [2, 2], got
+    cert = certify_log(folder, builtin_scenario(), spec=SPEC, time_base="log").certificate
+    res = watch_log(folder, OnlineMonitor(builtin_scenario(), spec=SPEC), time_base="log")
+    (tube,) = [c for c in cert["checks"] if c["name"] == "tube"]
+    assert tube["reason"].startswith("1 pose sample(s) without a usable nominal sample"), tube
+    (mine,) = [c for c in res.result.checks if c.name == "tube"]
+    assert mine.verdict == "inconclusive" and mine.details.get("reason") == tube["reason"], mine

@@ -194,6 +194,8 @@ class SqliteFollower:
                     self.declared_topics.setdefault(name, typ)
                 read = sorted(i for i, (n, _t) in topics.items() if self.wanted is None or n in self.wanted)
                 rows = con.execute(_rows_query(read), (*read, *read, self.last_id)).fetchall()
+                indexed = _index_times(con, {int(r[0]) for r in rows if r[1] in read},
+                                       min((r[2] for r in rows if isinstance(r[2], int)), default=None))
             finally:
                 con.close()
         except sqlite3.OperationalError as err:
@@ -204,9 +206,10 @@ class SqliteFollower:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
         out = []
         reading = set(read)
-        for mid, tid, stamp, data in rows:
-            if tid in reading:
+        for mid, tid, row_stamp, data in rows:
+            if tid in reading and (indexed is None or mid in indexed):  # (certify's reading yields no other row)
                 name, typ = topics[tid]
+                stamp = row_stamp if indexed is None else indexed[mid]
                 if not isinstance(stamp, int) or not isinstance(data, bytes):
                     # a damaged page can hold a row whose columns read as NULL (NOT NULL is checked on writes only)
                     raise LogReadError(f"damaged sqlite3 log: a message row on {name} has no log time or payload (a "
@@ -218,6 +221,28 @@ class SqliteFollower:
 
     def rest(self) -> list[SalvagedMessage]:
         return []
+
+
+def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dict[int, object] | None:
+    """Row id -> the timestamp the storage's timestamp index holds for it, for the rows ``rows`` (``lo``: the least
+    of their own timestamps, None when none is an integer); a row the index does not hold is left out. Certify's
+    query (rosbags') walks that index and reads each message's time there, so a damaged index entry is the
+    message's time for both, at the row's place in the index (the file order of a recorded log). None when the
+    storage has no timestamp index (certify's query then reads the rows' own times). The new rows' entries are
+    sought from their least time on; an entry not found so (a damaged index is out of order) has the whole index
+    walked."""
+    if not rows:
+        return {}
+    query = "SELECT id, timestamp FROM messages INDEXED BY timestamp_idx"
+    try:
+        got = {} if lo is None else {i: t for i, t in con.execute(f"{query} WHERE timestamp >= ?", (lo,)) if i in rows}
+        if len(got) < len(rows):
+            got = {i: t for i, t in con.execute(query) if i in rows}
+    except sqlite3.OperationalError as err:
+        if "no such index" in str(err):
+            return None
+        raise
+    return got
 
 
 def _rows_query(ids: list[int]) -> str:
