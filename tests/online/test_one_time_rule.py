@@ -315,3 +315,30 @@ def test_watch_reads_a_sqlite3_message_time_where_certify_reads_it(tmp_path: Pat
     assert tube["reason"].startswith("1 pose sample(s) without a usable nominal sample"), tube
     (mine,) = [c for c in res.result.checks if c.name == "tube"]
     assert mine.verdict == "inconclusive" and mine.details.get("reason") == tube["reason"], mine
+
+
+def test_watch_refuses_a_closed_bag_record_that_runs_past_its_index(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A closed ROS1 bag (its header names its index) whose index data record after a chunk has a damaged header
+    length: rosbags reads those records at fixed offsets and never uses that length, so certify judges the bag
+    (exit 0); watch walked the records, took the record for one still being written and waited, then judged the
+    records before it (exit 2 where certify said fail: fault campaign seed 73 case 469). In a closed bag no record
+    is still being written: watch refuses it with one line naming the record's byte, as it refuses other damage
+    certify's reader does not parse."""
+    from verify.ingest.ros1records import record_at
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", "bag-lz4")
+    data = bytearray(log.read_bytes())
+    pos, chunks, at = 13, 0, None
+    while at is None:
+        rec = record_at(data, pos, len(data), head_only=True)
+        chunks += rec.op == 0x05
+        if rec.op == 0x04 and chunks == 2:
+            at = pos  # the first index data record after the second chunk
+        pos = rec.end
+    data[at + 3] ^= 0x02  # the high byte of its header length: the record now runs far past the file's end
+    log.write_bytes(bytes(data))
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    (c_code, _, _), (w_code, _, w_err) = (run([cmd, *args], capsys) for cmd in ("certify", "watch"))
+    assert c_code == 0 and w_code == 3, (c_code, w_code, w_err)
+    assert f"malformed ROS1 record at byte {at} (the record at byte {at} runs past the bag's index" in w_err

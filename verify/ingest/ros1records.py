@@ -317,6 +317,16 @@ class Ros1Stream:
         except (CutError, MalformedError, struct.error):
             return
 
+    def check_not_cut(self, fed: int) -> None:
+        """``MalformedError`` when the top-level record at ``pos`` (where the last ``feed`` stopped, its bytes not
+        all there) cannot be a record still being written: the bag header names its index (the recorder closed the
+        bag), the bytes fed (up to file position ``fed``) reach it, and the record at ``pos`` lies before it, so it
+        runs past the index (a damaged length). ``feed`` alone cannot tell this from a recorder still writing."""
+        if self.closed or self.chunk is not None or not self.index_pos:
+            return
+        if self.pos < self.index_pos <= fed:
+            raise MalformedError(f"the record at byte {self.pos} runs past the bag's index at byte {self.index_pos}")
+
     def _chunk_indexed(self) -> None:
         if self.indexing is not None:
             self.indexing.complete()

@@ -147,22 +147,25 @@ class Ros1Follower:
             raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
                                path=str(self.path)) from err
         if not self.stream.closed:
-            self._recheck_header()
+            self._recheck_header(base + len(buf))
         self.finished = self.stream.closed
         out = [m for m in (ros1_message(self.stream, g) for g in got) if m is not None]
         self.delivered += len(out)
         return out
 
-    def _recheck_header(self) -> None:
-        """The recorder rewrites the bag header's index_pos when it closes the bag."""
+    def _recheck_header(self, fed: int) -> None:
+        """The recorder rewrites the bag header's index_pos when it closes the bag (``fed``: where the bytes this
+        poll read end)."""
         self.stream.reread_header(_read_from(self.path, 0)[:8192])
-        if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
-            at = self.stream.resume_at  # closed once the whole index is there (the stream checks it)
-            try:
+        try:
+            if self.stream.index_pos and self.stream.chunk is None and self.stream.pos >= self.stream.index_pos:
+                at = self.stream.resume_at  # closed once the whole index is there (the stream checks it)
                 self.stream.feed(_read_from(self.path, at), at, [])
-            except _ROS1_DAMAGE as err:
-                raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
-                                   path=str(self.path)) from err
+            else:  # a closed bag has no record still being written: one that does not end is damaged
+                self.stream.check_not_cut(fed)
+        except _ROS1_DAMAGE as err:
+            raise LogReadError(f"malformed ROS1 record at byte {self.stream.resume_at} ({err})",
+                               path=str(self.path)) from err
 
     def rest(self) -> list[SalvagedMessage]:
         return _rest_of_walk(walk_ros1(self.path).messages, self.delivered)
