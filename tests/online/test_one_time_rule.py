@@ -342,3 +342,35 @@ def test_watch_refuses_a_closed_bag_record_that_runs_past_its_index(tmp_path: Pa
     (c_code, _, _), (w_code, _, w_err) = (run([cmd, *args], capsys) for cmd in ("certify", "watch"))
     assert c_code == 0 and w_code == 3, (c_code, w_code, w_err)
     assert f"malformed ROS1 record at byte {at} (the record at byte {at} runs past the bag's index" in w_err
+
+
+def test_watch_checks_a_closed_mcap_logs_declared_counts_as_certify(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """An MCAP file whose Statistics record declares more pose messages than it holds: certify refuses it (exit 3,
+    "declares N messages on /qualisys/nexus/pose but only M can be read"); watch read the file to its footer and
+    passed (fault campaign seed 74 case 790). The closed file's counts are checked by the same rule now."""
+    from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
+    from verify.ingest.mcaprecords import Op, parse_channel, walk
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.mcap", "mcap")
+    data = bytearray(log.read_bytes())
+    pose_id, stats_at = None, None
+    for op, rec, nxt in walk(data, len(MCAP_MAGIC), len(data) - len(MCAP_MAGIC)):
+        start = nxt - len(rec)
+        if op == Op.CHANNEL and parse_channel(rec).topic == "/qualisys/nexus/pose":
+            pose_id = parse_channel(rec).id
+        elif op == Op.STATISTICS:
+            stats_at = start
+    assert pose_id is not None and stats_at is not None
+    pairs = stats_at + 46  # the (channel id u16, count u64) pairs after the fixed fields and the map's length
+    (length,) = struct.unpack_from("<I", data, pairs - 4)
+    for at in range(pairs, pairs + length, 10):
+        cid, n = struct.unpack_from("<HQ", data, at)
+        if cid == pose_id:
+            struct.pack_into("<Q", data, at + 2, n + 5)
+    log.write_bytes(bytes(data))
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
+    assert "declares 306 messages on /qualisys/nexus/pose but only 301 can be read" in got[1][2]

@@ -28,7 +28,7 @@ import os
 import stat
 import struct
 import tempfile
-from collections.abc import Callable, Collection, Iterable
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass
 from operator import itemgetter
 from pathlib import Path, PurePath
@@ -47,6 +47,7 @@ from verify.ingest.mcaprecords import (
     FOOTER_RECORD,
     MAGIC,
     RECORD_HEAD,
+    ChannelRecord,
     CutError,
     MalformedError,
     Op,
@@ -60,8 +61,8 @@ from verify.ingest.mcaprecords import (
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
-__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_topics", "read_bag_metadata", "read_mcap_log",
-           "regular_file"]
+__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_counts", "check_declared_topics", "declared_by_topic",
+           "read_bag_metadata", "read_mcap_log", "regular_file"]
 
 IntArray = npt.NDArray[np.int64]
 #: libyaml's safe loader when PyYAML has it, else the pure-Python one
@@ -258,15 +259,32 @@ def _read_files(path: Path, meta: BagMetadata | None, files: tuple[Path, ...], w
     if meta is not None:
         for topic, n in meta.counts.items():
             declared[topic] = max(declared.get(topic, 0), n)
-    for topic in sorted(want):
-        want_n = declared.get(topic, 0)
-        got_n = len(topics[topic].payloads) if topic in topics else 0
-        if want_n > got_n:
-            raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
-                                    f"can be read", path=shown)
+    check_declared_counts(declared, {t: len(m.payloads) for t, m in topics.items()}, want, shown)
     if meta is not None and meta.compression_mode == "message":
         _decompressed_messages(topics, shown)
     return McapLog(topics, available)
+
+
+def check_declared_counts(declared: Mapping[str, int], read: Mapping[str, int], want: Iterable[str], path: str
+                          ) -> None:
+    """Each wanted topic holds the messages the log declares (per topic: its files' Statistics summed, or a bag
+    folder's metadata.yaml where that says more): fewer read is damage, ``TruncatedLogError`` naming the topic.
+    The rule of every MCAP reading, ``watch``'s included."""
+    for topic in sorted(want):
+        want_n, got_n = declared.get(topic, 0), read.get(topic, 0)
+        if want_n > got_n:
+            raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
+                                    f"can be read", path=path)
+
+
+def declared_by_topic(counts: Mapping[int, int], channels: Mapping[int, ChannelRecord]) -> dict[str, int]:
+    """A file's Statistics (channel id -> messages) -> per topic, summed over its channels (as rosbags' connections
+    carry them); a channel the file does not declare counts for no topic."""
+    out: dict[str, int] = {}
+    for cid, n in counts.items():
+        if cid in channels:
+            out[channels[cid].topic] = out.get(channels[cid].topic, 0) + int(n)
+    return out
 
 
 def _short(got: tuple[McapLog, dict[str, int]] | None) -> bool:
@@ -489,11 +507,7 @@ def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tup
     for ch in found.channels.values():
         schema = found.schemas.get(ch.schema_id)
         available.setdefault(ch.topic, schema.name if schema is not None else "")
-    counts: dict[str, int] = {}
-    for cid, n in (found.declared or {}).items():
-        declared = found.channels.get(cid)
-        if declared is not None and declared.topic in want:
-            counts[declared.topic] = counts.get(declared.topic, 0) + n
+    counts = {t: n for t, n in declared_by_topic(found.declared or {}, found.channels).items() if t in want}
     return McapLog(topics, available), counts
 
 

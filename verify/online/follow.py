@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Protocol
 
 from verify.errors import LogReadError
-from verify.ingest.mcapfile import check_declared_topics, read_bag_metadata
+from verify.ingest.mcapfile import check_declared_counts, check_declared_topics, declared_by_topic, read_bag_metadata
 from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
@@ -64,7 +64,7 @@ class McapFollower:
     """Top-level MCAP records from a byte offset, through the record layer (``verify.ingest.mcaprecords``); a chunk
     is read once it is complete."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wanted: Collection[str] | None = None, *, in_folder: bool = False) -> None:
         self.path = path
         self.format = "mcap"
         self.finished = False
@@ -72,6 +72,9 @@ class McapFollower:
         self.declared_topics: dict[str, str] = {}
         self.pos = 0
         self.found = Scan({}, {})
+        self.wanted = wanted
+        self.in_folder = in_folder  # a bag folder's file: the folder checks its counts (summed over its files)
+        self.read_counts: dict[str, int] = {}  # messages delivered per topic
 
     def poll(self) -> list[SalvagedMessage]:
         out: list[SalvagedMessage] = []
@@ -102,7 +105,17 @@ class McapFollower:
             raise LogReadError(f"malformed MCAP record at byte {self.pos + pos} ({err})", path=str(self.path)) from err
         self.pos += pos
         self.delivered += len(out)
+        for m in out:
+            self.read_counts[m.topic] = self.read_counts.get(m.topic, 0) + 1
+        if self.finished and not self.in_folder:  # closed: the messages its Statistics declare, as certify reads it
+            check_declared_counts(self.declared_counts(), self.read_counts,
+                                  self.read_counts.keys() | self.declared_counts().keys()
+                                  if self.wanted is None else self.wanted, str(self.path))
         return out
+
+    def declared_counts(self) -> dict[str, int]:
+        """Per topic, the messages the file's Statistics declare (empty without Statistics)."""
+        return declared_by_topic(self.found.declared or {}, self.found.channels)
 
     def rest(self) -> list[SalvagedMessage]:
         return _rest_of_walk(walk_mcap(self.path).messages, self.delivered)
@@ -281,7 +294,8 @@ class FolderFollower:
         for f in self._storage():
             if f not in self.files:
                 check_log_path(f)  # a FIFO would block the poll for ever
-                self.files[f] = McapFollower(f) if f.suffix == ".mcap" else SqliteFollower(f, self.wanted)
+                self.files[f] = (McapFollower(f, self.wanted, in_folder=True) if f.suffix == ".mcap"
+                                 else SqliteFollower(f, self.wanted))
                 self.format = self.files[f].format
             out.extend(self.files[f].poll())
             for name, typ in self.files[f].declared_topics.items():
@@ -296,8 +310,31 @@ class FolderFollower:
                 self.finished = False
             if meta is not None:  # the recorder closed it: certify's rule for its topics
                 check_declared_topics(self.path, meta, {n for f in sqlite for n in f.topic_names})
+        mcaps = [f for f in self.files.values() if isinstance(f, McapFollower)]
+        if self.finished and mcaps and len(mcaps) == len(self.files):
+            self._check_counts(mcaps)
         self.delivered += len(out)
         return out
+
+    def _check_counts(self, mcaps: list[McapFollower]) -> None:
+        """A closed folder of MCAP files: the messages its files' Statistics (summed) and its metadata.yaml declare
+        per topic, as certify reads it (``check_declared_counts``)."""
+        try:
+            meta = read_bag_metadata(self.path)
+        except LogReadError:
+            self.finished = False  # certify's readers report an unreadable metadata.yaml; here not closed yet
+            return
+        declared: dict[str, int] = {}
+        read: dict[str, int] = {}
+        for f in mcaps:
+            for topic, n in f.declared_counts().items():
+                declared[topic] = declared.get(topic, 0) + n
+            for topic, n in f.read_counts.items():
+                read[topic] = read.get(topic, 0) + n
+        for topic, n in meta.counts.items():
+            declared[topic] = max(declared.get(topic, 0), n)
+        check_declared_counts(declared, read, declared.keys() | read.keys() if self.wanted is None else self.wanted,
+                              str(self.path))
 
     def rest(self) -> list[SalvagedMessage]:
         return [m for f in self.files.values() for m in f.rest()]
@@ -326,7 +363,7 @@ def open_follower(path: Path, wanted: Collection[str] | None = None
         return FolderFollower(path, wanted)
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return McapFollower(path)
+        return McapFollower(path, wanted)
     if suffix == ".bag":
         return Ros1Follower(path)
     if suffix == ".db3":
