@@ -58,11 +58,11 @@ from verify.ingest.mcaprecords import (
     scan,
     zstd,
 )
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
-__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_counts", "check_declared_topics", "declared_by_topic",
-           "read_bag_metadata", "read_mcap_log", "regular_file"]
+__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_topics", "declared_by_topic", "read_bag_metadata",
+           "read_mcap_log", "regular_file"]
 
 IntArray = npt.NDArray[np.int64]
 #: libyaml's safe loader when PyYAML has it, else the pure-Python one
@@ -259,22 +259,10 @@ def _read_files(path: Path, meta: BagMetadata | None, files: tuple[Path, ...], w
     if meta is not None:
         for topic, n in meta.counts.items():
             declared[topic] = max(declared.get(topic, 0), n)
-    check_declared_counts(declared, {t: len(m.payloads) for t, m in topics.items()}, want, shown)
+    check_declared_counts(declared, {t: len(m.payloads) for t, m in topics.items()}, want, shown, fmt="mcap")
     if meta is not None and meta.compression_mode == "message":
         _decompressed_messages(topics, shown)
     return McapLog(topics, available)
-
-
-def check_declared_counts(declared: Mapping[str, int], read: Mapping[str, int], want: Iterable[str], path: str
-                          ) -> None:
-    """Each wanted topic holds the messages the log declares (per topic: its files' Statistics summed, or a bag
-    folder's metadata.yaml where that says more): fewer read is damage, ``TruncatedLogError`` naming the topic.
-    The rule of every MCAP reading, ``watch``'s included."""
-    for topic in sorted(want):
-        want_n, got_n = declared.get(topic, 0), read.get(topic, 0)
-        if want_n > got_n:
-            raise TruncatedLogError(f"damaged mcap log: it declares {want_n} messages on {topic} but only {got_n} "
-                                    f"can be read", path=path)
 
 
 def declared_by_topic(counts: Mapping[int, int], channels: Mapping[int, ChannelRecord]) -> dict[str, int]:

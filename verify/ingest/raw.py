@@ -44,7 +44,13 @@ from rosbags.serde import SerdeError
 
 from runkit.gcpause import gc_paused
 from verify.errors import LogReadError, TruncatedLogError
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, in_words, one_type_per_topic, rosbag2_errors
+from verify.ingest.readerrors import (
+    DECOMPRESS_ERRORS,
+    check_declared_counts,
+    in_words,
+    one_type_per_topic,
+    rosbag2_errors,
+)
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.ros1records import BagState, bag_state
 
@@ -405,11 +411,7 @@ def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[st
     declared: dict[str, int] = {}
     for c in selected:
         declared[c.topic] = declared.get(c.topic, 0) + int(getattr(c, "msgcount", 0) or 0)
-    for topic, want in declared.items():
-        got = len(out[topic].payloads) if topic in out else 0
-        if want > 0 and got < want:
-            raise TruncatedLogError(f"damaged {fmt} log: it declares {want} messages on {topic} but only {got} can "
-                                    f"be read", path=str(path))
+    check_declared_counts(declared, {t: len(r.payloads) for t, r in out.items()}, declared, str(path), fmt=fmt)
 
 
 def _read_sqlite_quick(path: Path, wanted: set[str], notes: list[str]) -> RawLog | None:

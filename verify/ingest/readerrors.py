@@ -15,18 +15,18 @@ import sqlite3
 import struct
 import sys
 import zlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import apsw  # rosbags' sqlite3 driver
 from rosbags.rosbag1 import ReaderError as ReaderError1
 from rosbags.serde import SerdeError
 
-from verify.errors import LogReadError
+from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcaprecords import zstd
 
 __all__ = [
-    "DECOMPRESS_ERRORS", "DESERIALIZE_ERRORS", "LibraryError", "deserialize", "in_words",
+    "DECOMPRESS_ERRORS", "DESERIALIZE_ERRORS", "LibraryError", "check_declared_counts", "deserialize", "in_words",
     "one_type_per_topic", "read_errors", "rosbag2_errors"]
 
 #: what the decompressors raise on a damaged chunk: zlib/bz2 (zlib.error, OSError), lz4 (RuntimeError), zstd
@@ -147,3 +147,16 @@ def one_type_per_topic(pairs: Iterable[tuple[str, str]], path: str | None = None
             raise LogReadError(f"topic {topic} is carried by connections of two message types, {first} and "
                                f"{msgtype}: one topic must have one type (the messages of one would be decoded as "
                                f"the other)", path=path)
+
+
+def check_declared_counts(declared: Mapping[str, int], read: Mapping[str, int], want: Iterable[str], path: str, *,
+                          fmt: str) -> None:
+    """Each wanted topic holds the messages the log declares (MCAP Statistics summed over a folder's files, or a bag
+    folder's metadata.yaml where that says more; the ROS1 index; per topic): fewer read is damage (a damaged index or
+    chunk can make a reader stop early without an error, silently dropping samples), ``TruncatedLogError`` naming
+    the topic. The rule of every reading: certify's readers and ``watch``'s followers."""
+    for topic in sorted(want):
+        want_n, got_n = declared.get(topic, 0), read.get(topic, 0)
+        if want_n > got_n:
+            raise TruncatedLogError(f"damaged {fmt} log: it declares {want_n} messages on {topic} but only {got_n} "
+                                    f"can be read", path=path)

@@ -19,13 +19,13 @@ from pathlib import Path
 from typing import Protocol
 
 from verify.errors import LogReadError
-from verify.ingest.mcapfile import check_declared_counts, check_declared_topics, declared_by_topic, read_bag_metadata
+from verify.ingest.mcapfile import check_declared_topics, declared_by_topic, read_bag_metadata
 from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.raw import check_log_path
-from verify.ingest.readerrors import DECOMPRESS_ERRORS
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts
 from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
 from verify.ingest.ros1records import Ros1Message, Ros1Stream
@@ -110,7 +110,7 @@ class McapFollower:
         if self.finished and not self.in_folder:  # closed: the messages its Statistics declare, as certify reads it
             check_declared_counts(self.declared_counts(), self.read_counts,
                                   self.read_counts.keys() | self.declared_counts().keys()
-                                  if self.wanted is None else self.wanted, str(self.path))
+                                  if self.wanted is None else self.wanted, str(self.path), fmt="mcap")
         return out
 
     def declared_counts(self) -> dict[str, int]:
@@ -334,7 +334,7 @@ class FolderFollower:
         for topic, n in meta.counts.items():
             declared[topic] = max(declared.get(topic, 0), n)
         check_declared_counts(declared, read, declared.keys() | read.keys() if self.wanted is None else self.wanted,
-                              str(self.path))
+                              str(self.path), fmt="mcap")
 
     def rest(self) -> list[SalvagedMessage]:
         return [m for f in self.files.values() for m in f.rest()]
