@@ -503,18 +503,22 @@ def _read_file(f: _File, wanted: set[str]) -> Ros1Index | None:
                 plan.append(((compression, size, start, dlen), mine, total))
         records = _records_uncompressed(f, plan) if plan else _joined([])
     else:
-        # chunk by chunk: here the index records are parsed and the wanted records copied out (Python work), while
-        # threads read and decompress the next chunks (I/O and decompression release the GIL)
+        # chunk by chunk: here the index records are parsed (Python work), while threads read and decompress the
+        # next chunks (I/O and decompression release the GIL) and copy their wanted records out, so a decompressed
+        # chunk is freed in the thread that made it and its memory reused there (a first call faulted in ~10 MB
+        # more when the chunks were copied here: 8,574 -> 6,180 page faults on 1 GB of lz4, first call 187 -> 176 ms)
         def planned() -> Iterator[tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]]:
             for (compression, size, start, dlen, after), n_conns, ids in heads:
                 mine, total = _wanted_index(f, after, n_conns, ids, selected)
                 if mine:
                     yield (compression, size, start, dlen), mine, total
 
-        pieces = [piece if isinstance(piece, tuple) else _copy_records(piece, mine)
-                  for (_head, mine, _total), piece in in_order(lambda item: (item, _fetch(f.fork(), *item)),
-                                                                planned(), workers=WORKERS)]
-        records = _joined(pieces)
+        def fetched(item: tuple[tuple[str, int, int, int], dict[int, npt.NDArray[np.void]], int]
+                    ) -> tuple[U8Array, IntArray, IntArray, IntArray]:
+            piece = _fetch(f.fork(), *item)
+            return piece if isinstance(piece, tuple) else _copy_records(piece, item[1])
+
+        records = _joined(list(in_order(fetched, planned(), workers=WORKERS)))
     _parse_records(records, selected, parts)
     out: dict[str, tuple[str, bool, IntArray, PayloadBuffer]] = {}
     for topic, p in parts.items():
