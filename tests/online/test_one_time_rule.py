@@ -374,3 +374,24 @@ def test_watch_checks_a_closed_mcap_logs_declared_counts_as_certify(tmp_path: Pa
     assert [g[0] for g in got] == [3, 3], got
     assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
     assert "declares 306 messages on /qualisys/nexus/pose but only 301 can be read" in got[1][2]
+
+
+def test_watch_reads_no_column_of_a_row_certify_does_not_read(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """A .db3 with a row whose topic id is text that is not UTF-8 (a damaged record header): certify's query selects
+    the wanted topics' rows and never reads it (exit 0); watch's follower read every row's topic id and refused the
+    log ("Could not decode to UTF-8 column 'topic_id'", exit 3: fault campaign seed 80 case 850). Now it selects the
+    same rows as certify, and says of the log what it says of the clean one."""
+    import sqlite3
+
+    clean = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "clean.db3", "db3")
+    log = tmp_path / "run.db3"
+    log.write_bytes(clean.read_bytes())
+    con = sqlite3.connect(log)
+    con.execute("INSERT INTO messages (topic_id, timestamp, data) VALUES (CAST(x'1886725536' AS TEXT), 1, x'00')")
+    con.commit()
+    con.close()
+    got = [run([cmd, str(p), "--scenario", "nexus-sml", "--spec", SPEC], capsys)[:2]
+           for p in (log, clean) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [0, 2, 0, 2], got
+    assert got[1][1].replace(str(log), "LOG") == got[3][1].replace(str(clean), "LOG"), got

@@ -186,9 +186,9 @@ class Ros1Follower:
 
 class SqliteFollower:
     """rosbag2 sqlite3 storage: the rows of ``messages`` with an id above the last one read (read-only). With
-    ``wanted`` (topic names), as certify reads a sqlite3 storage: only rows of the topics table's wanted topics are
-    delivered, and no other row's timestamp or payload is read (a damaged page holding another topic's data, or a
-    row whose topic id no topic has, is no part of the reading: certify's query never reads it)."""
+    ``wanted`` (topic names), as certify reads a sqlite3 storage: only the rows of the topics table's wanted topics
+    are selected, and no column of any other row is read (a damaged page holding another topic's data, or a row
+    whose topic id is no topic's, is no part of the reading: certify's query never reads it)."""
 
     def __init__(self, path: Path, wanted: Collection[str] | None = None) -> None:
         self.path = path
@@ -209,8 +209,9 @@ class SqliteFollower:
                 for name, typ in topics.values():
                     self.declared_topics.setdefault(name, typ)
                 read = sorted(i for i, (n, _t) in topics.items() if self.wanted is None or n in self.wanted)
-                rows = con.execute(_rows_query(read), (*read, *read, self.last_id)).fetchall()
-                indexed = _index_times(con, {int(r[0]) for r in rows if r[1] in read},
+                con.text_factory = bytes  # a damaged text value is a wrong type below (as certify sees it), not UTF-8
+                rows = con.execute(_rows_query(read), (self.last_id, *read)).fetchall()
+                indexed = _index_times(con, {int(r[0]) for r in rows},
                                        min((r[2] for r in rows if isinstance(r[2], int)), default=None))
             finally:
                 con.close()
@@ -221,9 +222,8 @@ class SqliteFollower:
         except sqlite3.DatabaseError as err:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
         out = []
-        reading = set(read)
         for mid, tid, row_stamp, data in rows:
-            if tid in reading and (indexed is None or mid in indexed):  # (certify's reading yields no other row)
+            if indexed is None or mid in indexed:  # (certify's reading yields no other row)
                 name, typ = topics[tid]
                 stamp = row_stamp if indexed is None else indexed[mid]
                 if not isinstance(stamp, int) or not isinstance(data, bytes):
@@ -262,11 +262,11 @@ def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dic
 
 
 def _rows_query(ids: list[int]) -> str:
-    """The rows after a row id (the last parameter), in row order; timestamp and payload only of rows of topic
-    ``ids`` (the parameters before it, twice), NULL for every other row (their bytes are not read)."""
+    """The rows of topic ``ids`` (the parameters after the first) after a row id (the first parameter), in row
+    order: no other row's columns are read (a damaged row of another topic, even its topic id, is no part of the
+    reading, as in certify's query)."""
     marks = ",".join("?" * len(ids)) or "NULL"
-    return (f"SELECT id, topic_id, CASE WHEN topic_id IN ({marks}) THEN timestamp END, "
-            f"CASE WHEN topic_id IN ({marks}) THEN data END FROM messages WHERE id > ? ORDER BY id")
+    return f"SELECT id, topic_id, timestamp, data FROM messages WHERE id > ? AND topic_id IN ({marks}) ORDER BY id"
 
 
 class FolderFollower:
