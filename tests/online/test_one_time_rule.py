@@ -395,3 +395,39 @@ def test_watch_reads_no_column_of_a_row_certify_does_not_read(tmp_path: Path,
            for p in (log, clean) for cmd in ("certify", "watch")]
     assert [g[0] for g in got] == [0, 2, 0, 2], got
     assert got[1][1].replace(str(log), "LOG") == got[3][1].replace(str(clean), "LOG"), got
+
+
+def test_watch_reads_a_closed_bags_index_by_certifys_rules(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A closed ROS1 bag whose index holds a chunk info record without its end time: rosbags refuses the index
+    (certify exit 3); watch read its chunks as they complete and passed it (fault campaign seed 82 case 114). The
+    chunk info rule is the record layer's (``chunk_info_of``), read by the fast reader and by watch at the close."""
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", "bag-lz4")
+    data = bytearray(log.read_bytes())
+    at = data.rindex(b"end_time=")  # a field of the bag index's last chunk info record
+    data[at : at + 8] = b"end_tima"
+    log.write_bytes(bytes(data))
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert "a chunk info record without its time fields" in got[1][2], got
+
+
+def test_watch_checks_a_closed_sqlite3_folders_declared_counts(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A sqlite3 bag folder whose metadata.yaml declares one command message more than its database holds: certify
+    refuses it (exit 3, "declares 302 messages on /nexus/cmd_vel but only 301 can be read"); watch passed it (fault
+    campaign seed 82 case 111). The same rule (``check_declared_counts``) at the folder's close now."""
+    import yaml
+
+    folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    meta_path = folder / "metadata.yaml"
+    meta = yaml.safe_load(meta_path.read_text())
+    for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == "/nexus/cmd_vel":
+            entry["message_count"] += 1
+    meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
+    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
+    assert "declares 302 messages on /nexus/cmd_vel but only 301 can be read" in got[1][2], got

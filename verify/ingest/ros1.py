@@ -50,6 +50,7 @@ from verify.ingest.ros1records import (
     CutError,
     MalformedError,
     Op,
+    chunk_info_of,
     connection_of,
     decompress,
     header_fields,
@@ -209,15 +210,10 @@ def _chunk_infos(f: _File, pos: int, count: int) -> list[tuple[int, int, frozens
     for _ in range(count):
         header, start, dlen, pos = f.record(pos)
         _op(header, _OP_CHUNK_INFO)
-        if _u32(header.get("ver", b""), "ver") != 1:
-            raise _UnusualError("chunk info version")
-        n = _u32(header["count"], "count")
-        if n and any(len(header.get(name, b"")) != 8 for name in ("start_time", "end_time")):
-            raise _UnusualError("chunk info without its time fields")  # rosbags refuses its index
-        if dlen != 8 * n:
-            raise _UnusualError("chunk info length")
-        ids = frozenset(np.frombuffer(f.read(start, dlen), dtype="<u4")[0::2].tolist())
-        out.append((_u64(header["chunk_pos"], "chunk_pos"), n, ids))
+        try:  # the record layer's rule (rosbags refuses an index it breaks; then rosbags decides)
+            out.append(chunk_info_of(header, f.read(start, dlen)))
+        except MalformedError as err:
+            raise _UnusualError(str(err)) from None
     out.sort()
     return out
 

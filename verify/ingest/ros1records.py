@@ -38,6 +38,7 @@ __all__ = [
     "Ros1Message",
     "Ros1Stream",
     "bag_state",
+    "chunk_info_of",
     "connection_of",
     "decompress",
     "header_fields",
@@ -174,6 +175,22 @@ def connection_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[i
     has_def = bool(fields.get("message_definition", b"").strip())
     # ROS1 names are pkg/Name; rosbags names them pkg/msg/Name (its own rule, so every reader names a type alike)
     return cid, topic_name(topic.decode()), normalize_msgtype(typ) if typ else typ, has_def
+
+
+def chunk_info_of(header: dict[str, bytes], data: bytes | memoryview) -> tuple[int, int, frozenset[int]]:
+    """A chunk info record of the bag index, checked as rosbags reads it -> (its chunk's position, how many
+    connections it lists, their ids): version 1, a u32 count, the u64 start and end times when it lists any
+    connection, and exactly count (connection, message count) u32 pairs; else ``MalformedError`` (rosbags refuses
+    the bag's index). The one rule for every reader of the index (the fast reader, and the stream at a bag's
+    close)."""
+    if _u32(header, "ver") != 1:
+        raise MalformedError("a chunk info record of a version other than 1")
+    n = _u32(header, "count")
+    if n and any(len(header.get(name, b"")) != 8 for name in ("start_time", "end_time")):
+        raise MalformedError("a chunk info record without its time fields")
+    if len(data) != 8 * n:
+        raise MalformedError(f"a chunk info record of {len(data)} bytes for {n} connections")
+    return _u64(header, "chunk_pos"), n, frozenset(np.frombuffer(data, dtype="<u4")[0::2].tolist())
 
 
 def topic_name(name: str) -> str:
@@ -348,8 +365,10 @@ class Ros1Stream:
                 raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
             if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8)
                 connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
-            elif (at := _u64(rec.header, "chunk_pos")) not in self.chunk_positions:  # the indexed readers go there
-                raise MalformedError(f"the bag's index names a chunk at byte {at}, where the bag has none")
+            else:
+                at, _n, _ids = chunk_info_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
+                if at not in self.chunk_positions:  # the indexed readers go there
+                    raise MalformedError(f"the bag's index names a chunk at byte {at}, where the bag has none")
             pos = rec.end
         return True
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sqlite3
 import struct
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Protocol
 
@@ -199,6 +199,7 @@ class SqliteFollower:
         self.topic_names: set[str] = set()
         self.declared_topics: dict[str, str] = {}
         self.wanted = None if wanted is None else frozenset(wanted)
+        self.read_counts: dict[str, int] = {}  # messages delivered per topic
 
     def poll(self) -> list[SalvagedMessage]:
         try:
@@ -231,6 +232,7 @@ class SqliteFollower:
                     raise LogReadError(f"damaged sqlite3 log: a message row on {name} has no log time or payload (a "
                                        f"damaged database page)", path=str(self.path))
                 out.append(SalvagedMessage(name, typ, False, stamp, data))
+                self.read_counts[name] = self.read_counts.get(name, 0) + 1
             self.last_id = max(self.last_id, int(mid))
         self.delivered += len(out)
         return out
@@ -308,8 +310,11 @@ class FolderFollower:
             except LogReadError:
                 meta = None  # certify's readers report an unreadable metadata.yaml; here the folder is not closed
                 self.finished = False
-            if meta is not None:  # the recorder closed it: certify's rule for its topics
+            if meta is not None:  # the recorder closed it: certify's rules for its topics and their counts
                 check_declared_topics(self.path, meta, {n for f in sqlite for n in f.topic_names})
+                check_declared_counts(meta.counts, _summed(s.read_counts for s in sqlite),
+                                      meta.counts.keys() if self.wanted is None else self.wanted, str(self.path),
+                                      fmt="sqlite3")
         mcaps = [f for f in self.files.values() if isinstance(f, McapFollower)]
         if self.finished and mcaps and len(mcaps) == len(self.files):
             self._check_counts(mcaps)
@@ -324,13 +329,8 @@ class FolderFollower:
         except LogReadError:
             self.finished = False  # certify's readers report an unreadable metadata.yaml; here not closed yet
             return
-        declared: dict[str, int] = {}
-        read: dict[str, int] = {}
-        for f in mcaps:
-            for topic, n in f.declared_counts().items():
-                declared[topic] = declared.get(topic, 0) + n
-            for topic, n in f.read_counts.items():
-                read[topic] = read.get(topic, 0) + n
+        declared = _summed(f.declared_counts() for f in mcaps)
+        read = _summed(f.read_counts for f in mcaps)
         for topic, n in meta.counts.items():
             declared[topic] = max(declared.get(topic, 0), n)
         check_declared_counts(declared, read, declared.keys() | read.keys() if self.wanted is None else self.wanted,
@@ -338,6 +338,15 @@ class FolderFollower:
 
     def rest(self) -> list[SalvagedMessage]:
         return [m for f in self.files.values() for m in f.rest()]
+
+
+def _summed(parts: Iterable[Mapping[str, int]]) -> dict[str, int]:
+    """Per-topic counts of a folder's files, summed."""
+    out: dict[str, int] = {}
+    for part in parts:
+        for topic, n in part.items():
+            out[topic] = out.get(topic, 0) + n
+    return out
 
 
 def log_bytes(path: Path) -> tuple[int, int]:
