@@ -433,3 +433,30 @@ def test_watch_checks_a_closed_sqlite3_folders_declared_counts(tmp_path: Path,
     assert [g[0] for g in got] == [3, 3], got
     assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
     assert "declares 302 messages on /nexus/cmd_vel but only 301 can be read" in got[1][2], got
+
+
+def test_watch_refuses_a_closed_sqlite3_folder_certifys_query_cannot_read(tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """A sqlite3 bag folder whose timestamp index has a garbled leaf page: certify's query walks that index and
+    the database is unreadable to it (exit 3); watch read the rows in row order and judged them (fault campaign seed
+    82 case 90, where the walk met a garbled row cell). At the folder's close watch now reads the wanted rows as
+    certify's query does, and refuses it too."""
+    import sqlite3
+
+    folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    (log,) = folder.glob("*.db3")
+    con = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
+    try:
+        page = con.execute("PRAGMA page_size").fetchone()[0]
+    finally:
+        con.close()
+    data = bytearray(log.read_bytes())
+    leaves = [p for p in range(page, len(data), page) if data[p] == 0x0A]  # index b-tree leaf pages (not page 1)
+    assert leaves
+    at = leaves[len(leaves) // 2]
+    data[at + 8 : at + page] = b"\xff" * (page - 8)  # its cell pointers and cells garbled, its header kept
+    log.write_bytes(bytes(data))
+    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert "sqlite3" in got[1][2] and ("unreadable" in got[1][2] or "malformed" in got[1][2]), got

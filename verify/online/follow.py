@@ -18,14 +18,14 @@ from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Protocol
 
-from verify.errors import LogReadError
+from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcapfile import check_declared_topics, declared_by_topic, read_bag_metadata
 from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.raw import check_log_path
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts
+from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts, in_words
 from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
 from verify.ingest.ros1records import Ros1Message, Ros1Stream
@@ -200,12 +200,14 @@ class SqliteFollower:
         self.declared_topics: dict[str, str] = {}
         self.wanted = None if wanted is None else frozenset(wanted)
         self.read_counts: dict[str, int] = {}  # messages delivered per topic
+        self.topics: dict[int, tuple[str, str]] = {}  # the topics table: id -> (name, type)
 
     def poll(self) -> list[SalvagedMessage]:
         try:
             con = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=1.0)
             try:
                 topics = {int(i): (str(n), str(t)) for i, n, t in con.execute("SELECT id, name, type FROM topics")}
+                self.topics = topics
                 self.topic_names = {n for n, _ in topics.values()}
                 for name, typ in topics.values():
                     self.declared_topics.setdefault(name, typ)
@@ -236,6 +238,26 @@ class SqliteFollower:
             self.last_id = max(self.last_id, int(mid))
         self.delivered += len(out)
         return out
+
+    def check_as_certify_reads(self) -> None:
+        """At the close of its folder: the wanted rows read by certify's query (rosbags': the timestamp index walked,
+        each row looked up) must be readable; a damaged page on that path (where the rows read here, in row order,
+        are not) makes certify refuse the log, and watch refuses it too (``TruncatedLogError``, as certify's)."""
+        from verify.ingest.sqlite import rosbags_query  # a closed sqlite3 folder only
+
+        ids = tuple(sorted(i for i, (n, _t) in self.topics.items() if self.wanted is None or n in self.wanted))
+        if not ids:
+            return
+        try:
+            con = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, timeout=1.0)
+            try:
+                con.text_factory = bytes
+                for _row in con.execute(rosbags_query(ids), ids):
+                    pass
+            finally:
+                con.close()
+        except sqlite3.DatabaseError as err:
+            raise TruncatedLogError(f"unreadable sqlite3 database: {in_words(err)}", path=str(self.path)) from err
 
     def rest(self) -> list[SalvagedMessage]:
         return []
@@ -315,6 +337,8 @@ class FolderFollower:
                 check_declared_counts(meta.counts, _summed(s.read_counts for s in sqlite),
                                       meta.counts.keys() if self.wanted is None else self.wanted, str(self.path),
                                       fmt="sqlite3")
+                for db in sqlite:
+                    db.check_as_certify_reads()
         mcaps = [f for f in self.files.values() if isinstance(f, McapFollower)]
         if self.finished and mcaps and len(mcaps) == len(self.files):
             self._check_counts(mcaps)
