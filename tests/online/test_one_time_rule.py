@@ -460,3 +460,28 @@ def test_watch_refuses_a_closed_sqlite3_folder_certifys_query_cannot_read(tmp_pa
     got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
     assert [g[0] for g in got] == [3, 3], got
     assert "sqlite3" in got[1][2] and ("unreadable" in got[1][2] or "malformed" in got[1][2]), got
+
+
+def test_watch_reads_a_closed_sqlite3_folders_topics_as_rosbags_matches_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A sqlite3 bag folder whose metadata.yaml gives the pose topic another type hash than its database: rosbags'
+    folder reader matches metadata.yaml's connections to the storage's by topic, type, serialization, QoS and type
+    hash, reads no pose row, and certify refuses the log ("declares 301 messages ... but only 0 can be read"); watch
+    read the rows by the database's topic names and passed (fault campaign seed 82 case 497). At the close watch
+    counts only the rows certify's readers read (``read_topics_by_storage``, the readers' own matching)."""
+    import yaml
+
+    folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    meta_path = folder / "metadata.yaml"
+    meta = yaml.safe_load(meta_path.read_text())
+    for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        tm = entry["topic_metadata"]
+        if tm["name"] == "/qualisys/nexus/pose":
+            assert tm.get("type_description_hash"), tm
+            tm["type_description_hash"] = tm["type_description_hash"][:-1] + "0"
+    meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
+    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
+    assert "declares 301 messages on /qualisys/nexus/pose but only 0 can be read" in got[1][2], got

@@ -26,7 +26,7 @@ import os
 import sqlite3
 import stat
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import attrgetter, itemgetter
@@ -466,6 +466,28 @@ def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connec
         f"WHERE topics.id IN ({','.join('?' * len(ids))}) GROUP BY topics.id", ids).fetchall()
     counts = {int(cid): int(n) for cid, n in rows if isinstance(cid, int) and isinstance(n, int)}
     return [c._replace(msgcount=counts.get(int(c.id), 0)) for c in selected]
+
+
+def read_topics_by_storage(folder: Path, wanted: Collection[str]) -> dict[str, set[str]] | None:
+    """A closed bag folder: per storage file (by name), the topics whose rows rosbags' reader reads for the wanted
+    topics (metadata.yaml's connections matched to the storage's own by topic, type, serialization and QoS and type
+    hash: ``_storage_plan``, the rule certify's readers read by). None when the folder does not open that way
+    (certify's readers then report the problem)."""
+    from verify.ingest.sqlite import QuickReader  # ROS2 bag folders only (module docstring)
+
+    try:
+        reader = QuickReader(folder)
+        reader.open()
+    except _read_errors():
+        return None
+    try:
+        plan = _storage_plan(reader, [c for c in reader.connections if c.topic in wanted])
+        if plan is None:
+            return None
+        return {Path(str(getattr(st, "path", ""))).name: {c.topic for c in conns} for st, conns in plan}
+    finally:
+        with contextlib.suppress(*_read_errors()):
+            reader.close()
 
 
 def _storage_plan(reader: Reader2, selected: list[Connection]) -> list[tuple[object, list[Connection]]] | None:
