@@ -485,3 +485,20 @@ def test_watch_reads_a_closed_sqlite3_folders_topics_as_rosbags_matches_them(
     assert [g[0] for g in got] == [3, 3], got
     assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
     assert "declares 301 messages on /qualisys/nexus/pose but only 0 can be read" in got[1][2], got
+
+
+def test_watch_never_passes_a_folder_certifys_readers_do_not_open(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A sqlite3 bag folder whose metadata.yaml lacks a key rosbags requires (a topic's serialization_format):
+    certify refuses it (exit 3); watch's own metadata reading did not need the key and passed the log (fault
+    campaign seed 83 case 1140, seed 84 case 350). A folder certify's readers do not open is not closed for watch
+    either: judged as --salvage judges it, never a pass."""
+    folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    meta_path = folder / "metadata.yaml"
+    text = meta_path.read_text()
+    assert "serialization_format:" in text
+    meta_path.write_text(text.replace("serialization_format:", "smrialization_format:", 1))
+    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 2], got
+    assert "not closed by its recorder" in got[1][1], got

@@ -468,11 +468,17 @@ def _with_counts(reader: QuickReader, selected: list[Connection]) -> list[Connec
     return [c._replace(msgcount=counts.get(int(c.id), 0)) for c in selected]
 
 
+#: ``read_topics_by_storage``: the folder opens, but its storages are not read storage by storage (per-message
+#: compression): every wanted topic's rows are read
+EVERY_STORAGE: dict[str, set[str]] = {}
+
+
 def read_topics_by_storage(folder: Path, wanted: Collection[str]) -> dict[str, set[str]] | None:
     """A closed bag folder: per storage file (by name), the topics whose rows rosbags' reader reads for the wanted
     topics (metadata.yaml's connections matched to the storage's own by topic, type, serialization and QoS and type
-    hash: ``_storage_plan``, the rule certify's readers read by). None when the folder does not open that way
-    (certify's readers then report the problem)."""
+    hash: ``_storage_plan``, the rule certify's readers read by); ``EVERY_STORAGE`` where the readers do not go
+    storage by storage. None when the folder does not open as certify's readers open it (rosbags' metadata.yaml and
+    storage checks: certify refuses such a folder)."""
     from verify.ingest.sqlite import QuickReader  # ROS2 bag folders only (module docstring)
 
     try:
@@ -483,7 +489,7 @@ def read_topics_by_storage(folder: Path, wanted: Collection[str]) -> dict[str, s
     try:
         plan = _storage_plan(reader, [c for c in reader.connections if c.topic in wanted])
         if plan is None:
-            return None
+            return EVERY_STORAGE
         return {Path(str(getattr(st, "path", ""))).name: {c.topic for c in conns} for st, conns in plan}
     finally:
         with contextlib.suppress(*_read_errors()):

@@ -24,7 +24,7 @@ from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
-from verify.ingest.raw import check_log_path, read_topics_by_storage
+from verify.ingest.raw import EVERY_STORAGE, check_log_path, read_topics_by_storage
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts, in_words
 from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
@@ -338,11 +338,15 @@ class FolderFollower:
                 # the rows certify's readers read: a storage topic metadata.yaml's connection does not match (its
                 # type, serialization, QoS or type hash) is not read for that topic
                 plan = read_topics_by_storage(self.path, want)
-                check_declared_counts(meta.counts, _summed(
-                    {t: n for t, n in db.read_counts.items() if plan is None or t in plan.get(db.path.name, set())}
-                    for db in sqlite), want, str(self.path), fmt="sqlite3")
-                for db in sqlite:
-                    db.check_as_certify_reads()
+                if plan is None:  # a folder certify's readers do not open: not closed as they read a closed one
+                    self.finished = False
+                else:
+                    check_declared_counts(meta.counts, _summed(
+                        {t: n for t, n in db.read_counts.items()
+                         if plan is EVERY_STORAGE or t in plan.get(db.path.name, set())}
+                        for db in sqlite), want, str(self.path), fmt="sqlite3")
+                    for db in sqlite:
+                        db.check_as_certify_reads()
         mcaps = [f for f in self.files.values() if isinstance(f, McapFollower)]
         if self.finished and mcaps and len(mcaps) == len(self.files):
             self._check_counts(mcaps)
@@ -356,6 +360,9 @@ class FolderFollower:
             meta = read_bag_metadata(self.path)
         except LogReadError:
             self.finished = False  # certify's readers report an unreadable metadata.yaml; here not closed yet
+            return
+        if read_topics_by_storage(self.path, meta.counts.keys() if self.wanted is None else self.wanted) is None:
+            self.finished = False  # a folder certify's readers do not open (rosbags' metadata.yaml checks)
             return
         declared = _summed(f.declared_counts() for f in mcaps)
         read = _summed(f.read_counts for f in mcaps)
