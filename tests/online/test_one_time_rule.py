@@ -502,3 +502,21 @@ def test_watch_never_passes_a_folder_certifys_readers_do_not_open(tmp_path: Path
     got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
     assert [g[0] for g in got] == [3, 2], got
     assert "not closed by its recorder" in got[1][1], got
+
+
+def test_watch_names_a_closed_bags_connections_as_its_index_does(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A ROS1 bag whose copy of the nominal pose's connection record inside a chunk names another topic: rosbags
+    takes connections from the bag's index and reads the nominal stream (certify: pass); watch named the messages
+    by the chunk's copy, saw no nominal stream and left the tube undecided (fault campaign seed 84 case 1196). At
+    the index the stream now names its connections as the index does."""
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", "bag")
+    data = bytearray(log.read_bytes())
+    field = b"topic=/nexus/nominal_pose"
+    first, last = data.find(field), data.rfind(field)
+    assert 0 < first < last  # the chunk's copy first, the index's record last
+    data[first + len(b"topic=/nexus/") : first + len(b"topic=/nexus/") + 1] = b"l"
+    log.write_bytes(bytes(data))
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [0, 0], got

@@ -363,8 +363,9 @@ class Ros1Stream:
             rec = record_at(buf, pos, len(buf))  # CutError: not all written yet
             if rec.op not in (Op.CONNECTION, Op.CHUNK_INFO):
                 raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
-            if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8)
-                connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
+            if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8), and the
+                # connection as they name it: theirs is the index's record, not the copy inside a chunk
+                self._connection(rec, buf)
             else:
                 try:
                     at, _n, _ids = chunk_info_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
