@@ -520,3 +520,27 @@ def test_watch_names_a_closed_bags_connections_as_its_index_does(tmp_path: Path,
     args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
     got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
     assert [g[0] for g in got] == [0, 0], got
+
+
+def test_watch_reads_a_sqlite3_table_its_scan_cannot_walk_as_certify_does(tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """A .db3 (fault campaign seed 86 case 1211, kept as it was damaged: four flipped bytes) whose table a scan in
+    row order cannot walk ("database disk image is malformed") while certify's query, which walks the timestamp
+    index and looks each row up, reads every row (certify: pass). watch refused it (exit 3); where its scan meets
+    the damage it now reads the rows as certify's query does (and on such a table SQLite reads ``id`` as NULL through
+    the index: the rows are keyed by ``rowid``), and says what it says of a bare .db3 (not closed: inconclusive)."""
+    import shutil
+    import sqlite3
+
+    log = tmp_path / "damaged.db3"
+    shutil.copyfile(Path(__file__).parent / "data" / "table_scan_damaged.db3", log)
+    con = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
+    try:
+        with pytest.raises(sqlite3.DatabaseError, match="malformed"):
+            con.execute("SELECT id, topic_id, timestamp, data FROM messages WHERE id > 0 ORDER BY id").fetchall()
+    finally:
+        con.close()
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [0, 2], got
+    assert "inconclusive (read once (no --follow); 301 pose samples)" in got[1][1], got

@@ -16,7 +16,7 @@ import sqlite3
 import struct
 from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from verify.errors import LogReadError, TruncatedLogError
 from verify.ingest.mcapfile import check_declared_topics, declared_by_topic, read_bag_metadata
@@ -213,7 +213,7 @@ class SqliteFollower:
                     self.declared_topics.setdefault(name, typ)
                 read = sorted(i for i, (n, _t) in topics.items() if self.wanted is None or n in self.wanted)
                 con.text_factory = bytes  # a damaged text value is a wrong type below (as certify sees it), not UTF-8
-                rows = con.execute(_rows_query(read), (self.last_id, *read)).fetchall()
+                rows = _rows(con, read, self.last_id)
                 indexed = _index_times(con, {int(r[0]) for r in rows},
                                        min((r[2] for r in rows if isinstance(r[2], int)), default=None))
             finally:
@@ -273,7 +273,7 @@ def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dic
     walked."""
     if not rows:
         return {}
-    query = "SELECT id, timestamp FROM messages INDEXED BY timestamp_idx"
+    query = "SELECT rowid, timestamp FROM messages INDEXED BY timestamp_idx"  # rowid: see _rows
     try:
         got = {} if lo is None else {i: t for i, t in con.execute(f"{query} WHERE timestamp >= ?", (lo,)) if i in rows}
         if len(got) < len(rows):
@@ -285,12 +285,24 @@ def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dic
     return got
 
 
-def _rows_query(ids: list[int]) -> str:
-    """The rows of topic ``ids`` (the parameters after the first) after a row id (the first parameter), in row
-    order: no other row's columns are read (a damaged row of another topic, even its topic id, is no part of the
-    reading, as in certify's query)."""
+def _rows(con: sqlite3.Connection, ids: list[int], after: int) -> list[tuple[Any, ...]]:
+    """The rows of topic ``ids`` after row id ``after``, in row order: no other row's columns are read (a damaged
+    row of another topic, even its topic id, is no part of the reading, as in certify's query). Read by a scan of
+    the table; where that meets a damaged page, as certify's query reads (the timestamp index walked, each row looked
+    up), which may not meet it; the scan's error when that fails too."""
     marks = ",".join("?" * len(ids)) or "NULL"
-    return f"SELECT id, topic_id, timestamp, data FROM messages WHERE id > ? AND topic_id IN ({marks}) ORDER BY id"
+    where = f"WHERE id > ? AND topic_id IN ({marks}) ORDER BY id"
+    try:
+        return con.execute(f"SELECT id, topic_id, timestamp, data FROM messages {where}", (after, *ids)).fetchall()
+    except sqlite3.DatabaseError as err:
+        if isinstance(err, sqlite3.OperationalError):
+            raise  # not damage (a lock, a table not created yet): the poll decides
+        try:  # (the row id as rowid, filtered here: on such a damaged table SQLite has read ``id`` as NULL there)
+            rows = con.execute(f"SELECT rowid, topic_id, timestamp, data FROM messages INDEXED BY timestamp_idx "
+                               f"WHERE topic_id IN ({marks})", ids).fetchall()
+        except sqlite3.DatabaseError:
+            raise err from None
+        return sorted((r for r in rows if isinstance(r[0], int) and r[0] > after), key=lambda r: r[0])
 
 
 class FolderFollower:
