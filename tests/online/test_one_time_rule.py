@@ -544,3 +544,31 @@ def test_watch_reads_a_sqlite3_table_its_scan_cannot_walk_as_certify_does(tmp_pa
     got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
     assert [g[0] for g in got] == [0, 2], got
     assert "inconclusive (read once (no --follow); 301 pose samples)" in got[1][1], got
+
+
+def test_watch_refuses_a_closed_mcap_message_of_a_channel_never_declared(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A closed MCAP file with a message whose channel id no channel record declares (a damaged id): the scan refuses
+    it (certify exit 3, "a message refers to channel N, which the file never declares"); watch dropped the message
+    and passed (fault campaign seed 86 case 1034). At the close watch applies the scan's rule
+    (``check_channels_declared``)."""
+    from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
+    from verify.ingest.mcaprecords import Op, walk
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.mcap", "mcap")
+    data = bytearray(log.read_bytes())
+    chunk = next(nxt - len(rec) for op, rec, nxt in walk(data, len(MCAP_MAGIC), len(data) - len(MCAP_MAGIC))
+                 if op == Op.CHUNK)
+    (name_len,) = struct.unpack_from("<I", data, chunk + 28)  # start, end, size, crc; then the compression's name
+    assert name_len == 0  # uncompressed: its records follow the stored size
+    records = chunk + 28 + 4 + 8
+    pos = records
+    while data[pos] != Op.MESSAGE:
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    struct.pack_into("<H", data, pos + 9, 77)  # the first message's channel id: a channel the file never declares
+    struct.pack_into("<I", data, chunk + 24, 0)  # the chunk's CRC: 0, "not computed"
+    log.write_bytes(bytes(data))
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert "a message refers to channel 77, which the file never declares" in got[1][2], got

@@ -61,8 +61,8 @@ from verify.ingest.mcaprecords import (
 from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts, in_words, one_type_per_topic
 from verify.ingest.ros1 import PayloadBuffer
 
-__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_declared_topics", "declared_by_topic", "read_bag_metadata",
-           "read_mcap_log", "regular_file"]
+__all__ = ["BagMetadata", "McapLog", "McapTopic", "check_channels_declared", "check_declared_topics",
+           "declared_by_topic", "read_bag_metadata", "read_mcap_log", "regular_file"]
 
 IntArray = npt.NDArray[np.int64]
 #: libyaml's safe loader when PyYAML has it, else the pure-Python one
@@ -480,14 +480,20 @@ def _same_channels(found: Scan, storage: McapReader) -> bool:
     return True
 
 
+def check_channels_declared(channel_ids: Iterable[int], found: Scan, shown: str, where: str = "") -> None:
+    """Every channel a message of a whole file refers to is declared in it (a damaged channel id): else
+    ``LogReadError`` naming the channel. The scan's rule, ``watch``'s at a file's close too."""
+    for cid in sorted(set(channel_ids) - set(found.channels)):
+        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
+                           f"declares", path=shown)
+
+
 def _read_scanned(file: Path, want: set[str], shown: str, *, named: bool) -> tuple[McapLog, dict[str, int]]:
     """The wanted topics of one storage file by a scan of all its records (module docstring)."""
     where = f"storage file {file.name}: " if named else ""
     found, kept, channel_ids = _scan_file(file, want, shown, where)
     _refuse_stop(found, shown, where)
-    for cid in sorted(channel_ids - set(found.channels)):
-        raise LogReadError(f"unreadable mcap log: {where}a message refers to channel {cid}, which the file never "
-                           f"declares", path=shown)
+    check_channels_declared(channel_ids, found, shown, where)
     one_type_per_topic(((ch.topic, found.schemas[ch.schema_id].name) for ch in found.channels.values()
                         if ch.topic in want and ch.schema_id in found.schemas), path=shown)
     topics = _scanned_topics(found, kept, want, shown, where)

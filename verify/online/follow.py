@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from verify.errors import LogReadError, TruncatedLogError
-from verify.ingest.mcapfile import check_declared_topics, declared_by_topic, read_bag_metadata
+from verify.ingest.mcapfile import check_channels_declared, check_declared_topics, declared_by_topic, read_bag_metadata
 from verify.ingest.mcaprecords import MAGIC as MCAP_MAGIC
 from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_messages
 from verify.ingest.mcaprecords import Op as McapOp
@@ -75,6 +75,7 @@ class McapFollower:
         self.wanted = wanted
         self.in_folder = in_folder  # a bag folder's file: the folder checks its counts (summed over its files)
         self.read_counts: dict[str, int] = {}  # messages delivered per topic
+        self.channel_ids: set[int] = set()  # every channel a message referred to
 
     def poll(self) -> list[SalvagedMessage]:
         out: list[SalvagedMessage] = []
@@ -94,6 +95,7 @@ class McapFollower:
                     self.finished = True
                 else:
                     for msg in record_messages(op, rec, self.found):  # a chunk's CRC checked, as the scan does
+                        self.channel_ids.add(msg.channel_id)
                         if (got := mcap_message(self.found, msg)) is not None:
                             out.append(got)
                 pos = nxt
@@ -107,6 +109,10 @@ class McapFollower:
         self.delivered += len(out)
         for m in out:
             self.read_counts[m.topic] = self.read_counts.get(m.topic, 0) + 1
+        if self.finished:  # closed: every message's channel declared, as the scan requires
+            shown = self.path.parent if self.in_folder else self.path
+            check_channels_declared(self.channel_ids, self.found, str(shown),
+                                    f"storage file {self.path.name}: " if self.in_folder else "")
         if self.finished and not self.in_folder:  # closed: the messages its Statistics declare, as certify reads it
             check_declared_counts(self.declared_counts(), self.read_counts,
                                   self.read_counts.keys() | self.declared_counts().keys()
