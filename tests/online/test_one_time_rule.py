@@ -6,7 +6,9 @@ construction; following, each poll is timed with the samples before it and the w
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,6 +25,26 @@ from verify.online.watch import AUTO_PROBE, _Feeder, watch_log
 from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tests is not a package)
 
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
+
+
+def _same_refusal(args: list[str], capsys: pytest.CaptureFixture[str], text: str) -> None:
+    """certify and watch on ``args`` both refuse the log (exit 3) with the same line, which holds ``text``."""
+    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    assert [g[0] for g in got] == [3, 3], got
+    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
+    assert text in got[1][2], got
+
+
+def _edit_topic_metadata(folder: Path, topic: str, edit: Callable[[dict[str, Any]], None]) -> None:
+    """A bag folder's metadata.yaml with ``edit`` applied to ``topic``'s topics_with_message_count entry."""
+    import yaml
+
+    meta_path = folder / "metadata.yaml"
+    meta = yaml.safe_load(meta_path.read_text())
+    for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == topic:
+            edit(entry)
+    meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
 LATE_S = 527.5  # the log time one nominal message is moved by (its header stamp and file position unchanged)
 
 
@@ -369,11 +391,8 @@ def test_watch_checks_a_closed_mcap_logs_declared_counts_as_certify(tmp_path: Pa
         if cid == pose_id:
             struct.pack_into("<Q", data, at + 2, n + 5)
     log.write_bytes(bytes(data))
-    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
-    assert [g[0] for g in got] == [3, 3], got
-    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
-    assert "declares 306 messages on /qualisys/nexus/pose but only 301 can be read" in got[1][2]
+    _same_refusal([str(log), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+                  "declares 306 messages on /qualisys/nexus/pose but only 301 can be read")
 
 
 def test_watch_reads_no_column_of_a_row_certify_does_not_read(tmp_path: Path,
@@ -419,20 +438,14 @@ def test_watch_checks_a_closed_sqlite3_folders_declared_counts(tmp_path: Path,
     """A sqlite3 bag folder whose metadata.yaml declares one command message more than its database holds: certify
     refuses it (exit 3, "declares 302 messages on /nexus/cmd_vel but only 301 can be read"); watch passed it (fault
     campaign seed 82 case 111). The same rule (``check_declared_counts``) at the folder's close now."""
-    import yaml
-
     folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
-    meta_path = folder / "metadata.yaml"
-    meta = yaml.safe_load(meta_path.read_text())
-    for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
-        if entry["topic_metadata"]["name"] == "/nexus/cmd_vel":
-            entry["message_count"] += 1
-    meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
-    assert [g[0] for g in got] == [3, 3], got
-    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
-    assert "declares 302 messages on /nexus/cmd_vel but only 301 can be read" in got[1][2], got
+
+    def one_more(entry: dict[str, Any]) -> None:
+        entry["message_count"] += 1
+
+    _edit_topic_metadata(folder, "/nexus/cmd_vel", one_more)
+    _same_refusal([str(folder), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+                  "declares 302 messages on /nexus/cmd_vel but only 301 can be read")
 
 
 def test_watch_refuses_a_closed_sqlite3_folder_certifys_query_cannot_read(tmp_path: Path,
@@ -469,22 +482,16 @@ def test_watch_reads_a_closed_sqlite3_folders_topics_as_rosbags_matches_them(
     hash, reads no pose row, and certify refuses the log ("declares 301 messages ... but only 0 can be read"); watch
     read the rows by the database's topic names and passed (fault campaign seed 82 case 497). At the close watch
     counts only the rows certify's readers read (``read_topics_by_storage``, the readers' own matching)."""
-    import yaml
-
     folder = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
-    meta_path = folder / "metadata.yaml"
-    meta = yaml.safe_load(meta_path.read_text())
-    for entry in meta["rosbag2_bagfile_information"]["topics_with_message_count"]:
+
+    def other_hash(entry: dict[str, Any]) -> None:
         tm = entry["topic_metadata"]
-        if tm["name"] == "/qualisys/nexus/pose":
-            assert tm.get("type_description_hash"), tm
-            tm["type_description_hash"] = tm["type_description_hash"][:-1] + "0"
-    meta_path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
-    assert [g[0] for g in got] == [3, 3], got
-    assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
-    assert "declares 301 messages on /qualisys/nexus/pose but only 0 can be read" in got[1][2], got
+        assert tm.get("type_description_hash"), tm
+        tm["type_description_hash"] = tm["type_description_hash"][:-1] + "0"
+
+    _edit_topic_metadata(folder, "/qualisys/nexus/pose", other_hash)
+    _same_refusal([str(folder), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+                  "declares 301 messages on /qualisys/nexus/pose but only 0 can be read")
 
 
 def test_watch_never_passes_a_folder_certifys_readers_do_not_open(tmp_path: Path,
