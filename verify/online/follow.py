@@ -345,31 +345,35 @@ class FolderFollower:
         self.finished = done and all(f.finished or f.format == "sqlite3" for f in self.files.values())
         sqlite = [f for f in self.files.values() if isinstance(f, SqliteFollower)]
         if self.finished and sqlite and len(sqlite) == len(self.files):
-            try:
-                meta = read_bag_metadata(self.path)
-            except LogReadError:
-                meta = None  # certify's readers report an unreadable metadata.yaml; here the folder is not closed
-                self.finished = False
-            if meta is not None:  # the recorder closed it: certify's rules for its topics and their counts
-                check_declared_topics(self.path, meta, {n for f in sqlite for n in f.topic_names})
-                want = meta.counts.keys() if self.wanted is None else self.wanted
-                # the rows certify's readers read: a storage topic metadata.yaml's connection does not match (its
-                # type, serialization, QoS or type hash) is not read for that topic
-                plan = read_topics_by_storage(self.path, want)
-                if plan is None:  # a folder certify's readers do not open: not closed as they read a closed one
-                    self.finished = False
-                else:
-                    check_declared_counts(meta.counts, _summed(
-                        {t: n for t, n in db.read_counts.items()
-                         if plan is EVERY_STORAGE or t in plan.get(db.path.name, set())}
-                        for db in sqlite), want, str(self.path), fmt="sqlite3")
-                    for db in sqlite:
-                        db.check_as_certify_reads()
+            self._check_sqlite(sqlite)
         mcaps = [f for f in self.files.values() if isinstance(f, McapFollower)]
         if self.finished and mcaps and len(mcaps) == len(self.files):
             self._check_counts(mcaps)
         self.delivered += len(out)
         return out
+
+    def _check_sqlite(self, sqlite: list[SqliteFollower]) -> None:
+        """A folder of sqlite3 storage whose recorder wrote metadata.yaml, read by certify's rules: its declared
+        topics held, its declared counts read (only the rows certify's readers match to metadata.yaml's connections:
+        a storage topic whose type, serialization, QoS or type hash differs is not read for that topic), the wanted
+        rows readable by certify's query; a folder its readers do not open (or whose metadata.yaml is unreadable)
+        is not closed as they read a closed one."""
+        try:
+            meta = read_bag_metadata(self.path)
+        except LogReadError:
+            self.finished = False  # certify's readers report an unreadable metadata.yaml; here not closed
+            return
+        check_declared_topics(self.path, meta, {n for f in sqlite for n in f.topic_names})
+        want = meta.counts.keys() if self.wanted is None else self.wanted
+        plan = read_topics_by_storage(self.path, want)
+        if plan is None:
+            self.finished = False
+            return
+        read = _summed({t: n for t, n in db.read_counts.items()
+                        if plan is EVERY_STORAGE or t in plan.get(db.path.name, set())} for db in sqlite)
+        check_declared_counts(meta.counts, read, want, str(self.path), fmt="sqlite3")
+        for db in sqlite:
+            db.check_as_certify_reads()
 
     def _check_counts(self, mcaps: list[McapFollower]) -> None:
         """A closed folder of MCAP files: the messages its files' Statistics (summed) and its metadata.yaml declare
