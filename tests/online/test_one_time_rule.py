@@ -27,12 +27,31 @@ from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tes
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
 
 
-def _same_refusal(args: list[str], capsys: pytest.CaptureFixture[str], text: str) -> None:
-    """certify and watch on ``args`` both refuse the log (exit 3) with the same line, which holds ``text``."""
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+def _certify_and_watch(log: Path, capsys: pytest.CaptureFixture[str], *more: str) -> list[tuple[int, str, str]]:
+    """``tubempc certify`` and ``tubempc watch`` on ``log`` (built-in scenario, SPEC, then ``more``): (exit code,
+    stdout, stderr) of each."""
+    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC, *more]
+    return [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+
+
+def _same_refusal(log: Path, capsys: pytest.CaptureFixture[str], text: str) -> None:
+    """certify and watch on ``log`` both refuse it (exit 3) with the same line, which holds ``text``."""
+    got = _certify_and_watch(log, capsys)
     assert [g[0] for g in got] == [3, 3], got
     assert got[0][2].strip().splitlines()[-1] == got[1][2].strip().splitlines()[-1], got
     assert text in got[1][2], got
+
+
+def _assert_malformed(db: Path, query: str) -> None:
+    """``query`` on the sqlite3 file ``db`` meets its damage ("database disk image is malformed")."""
+    import sqlite3
+
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    try:
+        with pytest.raises(sqlite3.DatabaseError, match="malformed"):
+            con.execute(query).fetchall()
+    finally:
+        con.close()
 
 
 def _edit_topic_metadata(folder: Path, topic: str, edit: Callable[[dict[str, Any]], None]) -> None:
@@ -270,12 +289,7 @@ def _db3_with_damaged_camera(tmp_path: Path, *, damaged: bool = True) -> Path:
     assert first, "no overflow page of the first image"
     data[first[0] : first[0] + 4] = (2**31 - 1).to_bytes(4, "big")
     log.write_bytes(bytes(data))
-    check = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
-    try:
-        with pytest.raises(sqlite3.DatabaseError, match="malformed"):
-            check.execute("SELECT data FROM messages WHERE topic_id = 99").fetchall()
-    finally:
-        check.close()
+    _assert_malformed(log, "SELECT data FROM messages WHERE topic_id = 99")
     return log
 
 
@@ -285,8 +299,7 @@ def test_watch_reads_a_sqlite3_storage_as_certify_does(tmp_path: Path, capsys: p
     campaign seed 68 case 584, seed 71 case 1401). Now both read the same rows, and watch names the log's topics as
     certify does (its topics table), the camera's included."""
     log, clean = _db3_with_damaged_camera(tmp_path), _db3_with_damaged_camera(tmp_path, damaged=False)
-    got = [run([cmd, str(p), "--scenario", "nexus-sml", "--spec", SPEC], capsys)[:2]
-           for p in (log, clean) for cmd in ("certify", "watch")]
+    got = [g[:2] for p in (log, clean) for g in _certify_and_watch(p, capsys)]
     # certify passes both; watch says of the damaged log what it says of the clean one (a bare .db3 has no mark of
     # its recorder closing it: inconclusive, exit 2, read once), never a refusal
     assert [g[0] for g in got] == [0, 2, 0, 2], got
@@ -328,8 +341,7 @@ def test_watch_reads_a_sqlite3_message_time_where_certify_reads_it(tmp_path: Pat
     assert len(at) == 1, at
     data[at[0] + 3 : at[0] + 11] = struct.pack(">q", 2_055_455_992_151_711_744)
     log.write_bytes(bytes(data))
-    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", "log"]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    got = _certify_and_watch(folder, capsys, "--time-base", "log")
     assert [g[0] for g in got] == [2, 2], got
     cert = certify_log(folder, builtin_scenario(), spec=SPEC, time_base="log").certificate
     res = watch_log(folder, OnlineMonitor(builtin_scenario(), spec=SPEC), time_base="log")
@@ -360,8 +372,7 @@ def test_watch_refuses_a_closed_bag_record_that_runs_past_its_index(tmp_path: Pa
         pos = rec.end
     data[at + 3] ^= 0x02  # the high byte of its header length: the record now runs far past the file's end
     log.write_bytes(bytes(data))
-    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
-    (c_code, _, _), (w_code, _, w_err) = (run([cmd, *args], capsys) for cmd in ("certify", "watch"))
+    (c_code, _, _), (w_code, _, w_err) = _certify_and_watch(log, capsys)
     assert c_code == 0 and w_code == 3, (c_code, w_code, w_err)
     assert f"malformed ROS1 record at byte {at} (the record at byte {at} runs past the bag's index" in w_err
 
@@ -391,7 +402,7 @@ def test_watch_checks_a_closed_mcap_logs_declared_counts_as_certify(tmp_path: Pa
         if cid == pose_id:
             struct.pack_into("<Q", data, at + 2, n + 5)
     log.write_bytes(bytes(data))
-    _same_refusal([str(log), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+    _same_refusal(log, capsys,
                   "declares 306 messages on /qualisys/nexus/pose but only 301 can be read")
 
 
@@ -410,8 +421,7 @@ def test_watch_reads_no_column_of_a_row_certify_does_not_read(tmp_path: Path,
     con.execute("INSERT INTO messages (topic_id, timestamp, data) VALUES (CAST(x'1886725536' AS TEXT), 1, x'00')")
     con.commit()
     con.close()
-    got = [run([cmd, str(p), "--scenario", "nexus-sml", "--spec", SPEC], capsys)[:2]
-           for p in (log, clean) for cmd in ("certify", "watch")]
+    got = [g[:2] for p in (log, clean) for g in _certify_and_watch(p, capsys)]
     assert [g[0] for g in got] == [0, 2, 0, 2], got
     assert got[1][1].replace(str(log), "LOG") == got[3][1].replace(str(clean), "LOG"), got
 
@@ -444,7 +454,7 @@ def test_watch_checks_a_closed_sqlite3_folders_declared_counts(tmp_path: Path,
         entry["message_count"] += 1
 
     _edit_topic_metadata(folder, "/nexus/cmd_vel", one_more)
-    _same_refusal([str(folder), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+    _same_refusal(folder, capsys,
                   "declares 302 messages on /nexus/cmd_vel but only 301 can be read")
 
 
@@ -469,8 +479,7 @@ def test_watch_refuses_a_closed_sqlite3_folder_certifys_query_cannot_read(tmp_pa
     at = leaves[len(leaves) // 2]
     data[at + 8 : at + page] = b"\xff" * (page - 8)  # its cell pointers and cells garbled, its header kept
     log.write_bytes(bytes(data))
-    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    got = _certify_and_watch(folder, capsys)
     assert [g[0] for g in got] == [3, 3], got
     assert "sqlite3" in got[1][2] and ("unreadable" in got[1][2] or "malformed" in got[1][2]), got
 
@@ -490,7 +499,7 @@ def test_watch_reads_a_closed_sqlite3_folders_topics_as_rosbags_matches_them(
         tm["type_description_hash"] = tm["type_description_hash"][:-1] + "0"
 
     _edit_topic_metadata(folder, "/qualisys/nexus/pose", other_hash)
-    _same_refusal([str(folder), "--scenario", "nexus-sml", "--spec", SPEC], capsys,
+    _same_refusal(folder, capsys,
                   "declares 301 messages on /qualisys/nexus/pose but only 0 can be read")
 
 
@@ -505,8 +514,7 @@ def test_watch_never_passes_a_folder_certifys_readers_do_not_open(tmp_path: Path
     text = meta_path.read_text()
     assert "serialization_format:" in text
     meta_path.write_text(text.replace("serialization_format:", "smrialization_format:", 1))
-    args = [str(folder), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    got = _certify_and_watch(folder, capsys)
     assert [g[0] for g in got] == [3, 2], got
     assert "not closed by its recorder" in got[1][1], got
 
@@ -524,8 +532,7 @@ def test_watch_names_a_closed_bags_connections_as_its_index_does(tmp_path: Path,
     assert 0 < first < last  # the chunk's copy first, the index's record last
     data[first + len(b"topic=/nexus/") : first + len(b"topic=/nexus/") + 1] = b"l"
     log.write_bytes(bytes(data))
-    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    got = _certify_and_watch(log, capsys)
     assert [g[0] for g in got] == [0, 0], got
 
 
@@ -537,18 +544,11 @@ def test_watch_reads_a_sqlite3_table_its_scan_cannot_walk_as_certify_does(tmp_pa
     the damage it now reads the rows as certify's query does (and on such a table SQLite reads ``id`` as NULL through
     the index: the rows are keyed by ``rowid``), and says what it says of a bare .db3 (not closed: inconclusive)."""
     import shutil
-    import sqlite3
 
     log = tmp_path / "damaged.db3"
     shutil.copyfile(Path(__file__).parent / "data" / "table_scan_damaged.db3", log)
-    con = sqlite3.connect(f"file:{log}?mode=ro", uri=True)
-    try:
-        with pytest.raises(sqlite3.DatabaseError, match="malformed"):
-            con.execute("SELECT id, topic_id, timestamp, data FROM messages WHERE id > 0 ORDER BY id").fetchall()
-    finally:
-        con.close()
-    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    _assert_malformed(log, "SELECT id, topic_id, timestamp, data FROM messages WHERE id > 0 ORDER BY id")
+    got = _certify_and_watch(log, capsys)
     assert [g[0] for g in got] == [0, 2], got
     assert "inconclusive (read once (no --follow); 301 pose samples)" in got[1][1], got
 
@@ -575,7 +575,6 @@ def test_watch_refuses_a_closed_mcap_message_of_a_channel_never_declared(tmp_pat
     struct.pack_into("<H", data, pos + 9, 77)  # the first message's channel id: a channel the file never declares
     struct.pack_into("<I", data, chunk + 24, 0)  # the chunk's CRC: 0, "not computed"
     log.write_bytes(bytes(data))
-    args = [str(log), "--scenario", "nexus-sml", "--spec", SPEC]
-    got = [run([cmd, *args], capsys) for cmd in ("certify", "watch")]
+    got = _certify_and_watch(log, capsys)
     assert [g[0] for g in got] == [3, 3], got
     assert "a message refers to channel 77, which the file never declares" in got[1][2], got

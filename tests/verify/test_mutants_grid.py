@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Iterator
 from fractions import Fraction
+from itertools import product
 
 import numpy as np
 import pytest
@@ -104,11 +105,8 @@ _ROOTS: tuple[Callable[[Formula], Formula], ...] = (
 
 
 def test_root_bounds_of_formulas_around_windows_equal_the_engine() -> None:
-    for iv in _SOME:
-        for inner in _INNER:
-            for op in _TEMPORAL:
-                for root in _ROOTS:
-                    _agree(root(op(iv, inner)))
+    for iv, inner, op, root in product(_SOME, _INNER, _TEMPORAL, _ROOTS):
+        _agree(root(op(iv, inner)))
 
 
 #: sub-formulas below a window whose gap values are explicit: a negated window, an and/or of windows and Nexts
@@ -120,11 +118,8 @@ _EXPLICIT: tuple[Formula, ...] = (Not(Eventually(_ns(0, 4), Q)), Not(Next(_ns(0,
 
 
 def test_windows_over_explicit_gap_values_equal_the_engine() -> None:
-    for iv in _SOME:
-        for inner in _EXPLICIT:
-            for op in _TEMPORAL:
-                for wrap in _WRAPS:
-                    _agree(wrap(op(iv, inner)))
+    for iv, inner, op, wrap in product(_SOME, _EXPLICIT, _TEMPORAL, _WRAPS):
+        _agree(wrap(op(iv, inner)))
 
 
 def test_a_value_whose_gap_bounds_were_half_computed_negates_as_the_engine() -> None:
