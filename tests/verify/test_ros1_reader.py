@@ -256,3 +256,48 @@ def test_index_headers_seen_before_are_still_checked(tmp_path: Path, compression
     bad.write_bytes(bytes(damaged))
     assert bytes(damaged[pos + 4 : pos + 4 + hlen]) in _INDEX_HEADS  # known: its data length is checked all the same
     assert read_ros1_fast(bad, {"/pose", "/status"}) is None
+
+
+def _chunk_infos_reversed(data: bytes) -> bytes:
+    """The bag with its index's chunk info records in reverse order (a writer may list chunks in any order; readers
+    order messages by (time, chunk position, offset) all the same)."""
+    bag = record_at(data, len(MAGIC), len(data))
+    pos = int.from_bytes(bag.header["index_pos"], "little")
+    infos: list[bytes] = []
+    start = None
+    while pos < len(data):
+        rec = record_at(data, pos, len(data))
+        if rec.op == Op.CHUNK_INFO:
+            start = pos if start is None else start
+            infos.append(data[pos : rec.end])
+        pos = rec.end
+    assert start is not None and len(infos) > 3
+    return data[:start] + b"".join(reversed(infos)) + data[start + sum(map(len, infos)) :]
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_chunks_listed_out_of_file_order(tmp_path: Path, compression: str | None) -> None:
+    """Two connections on one topic, log times tied across them and across chunks (60 messages per time, as a
+    simulation's clock gives), the bag as written and with its index listing the chunks last to first: the messages
+    come in rosbags' order (time; then connection, as the index lists them; then the chunk's place in the index's
+    list; then the record's place in its index data record), whether the chunks are read in one pass (uncompressed)
+    or one by one in threads (lz4). That order is not the writing order, nor file order among equal times."""
+    times = 1_700_000_000 * 10**9 + (np.arange(900, dtype=np.int64) // 60) * 10_000_000  # 60 messages per time
+    path = tmp_path / "run.bag"
+    writer = Writer(path)
+    if compression == "lz4":
+        writer.set_compression(Writer.CompressionFormat.LZ4)
+    writer.chunk_threshold = 2048
+    with writer as w:
+        pose_a = w.add_connection("/pose", POSE, callerid="/a", typestore=STORE)
+        pose_b = w.add_connection("/pose", POSE, callerid="/b", typestore=STORE)
+        for k, t in enumerate(times.tolist()):
+            w.write(pose_a if k % 2 else pose_b, t, _pose(t, 0.001 * k, "world"))
+    flipped = tmp_path / "flipped.bag"
+    flipped.write_bytes(_chunk_infos_reversed(path.read_bytes()))
+    fast = read_ros1_fast(flipped, {"/pose"})
+    assert fast is not None
+    xs = [STORE.deserialize_ros1(p, POSE).pose.position.x for p in fast.topics["/pose"][3]]
+    assert xs != sorted(xs)  # the test has teeth: rosbags' order among ties is neither writing nor file order
+    _same_as_rosbags(path, {"/pose"})
+    _same_as_rosbags(flipped, {"/pose"})
