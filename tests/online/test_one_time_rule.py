@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 
 from tubempc.scenario import builtin_scenario, dump_scenario, load_scenario
 from verify import certify_log
+from verify.ingest.ros1records import MAGIC, Op, record_at
 from verify.ingest.rules import ReadingRules
 from verify.online import OnlineMonitor
 from verify.online.follow import open_follower
@@ -108,6 +109,78 @@ def test_watch_reads_a_closed_log_in_certifys_order(tmp_path: Path, capsys: pyte
     codes = [run([cmd, str(log), "--scenario", "nexus-sml", "--spec", SPEC, "--time-base", "header"],
                  capsys)[0] for cmd in ("certify", "watch")]
     assert codes == [2, 2]
+
+
+def _late_nominal_bag(tmp_path: Path) -> Path:
+    """The clean run as a ROS1 bag (uncompressed chunks) whose nominal message at 7.8 s has a log time 527.5 s later,
+    in its message record and its index entry alike (a bag rewritten by a tool, or a clock that jumped): rosbags'
+    reader yields it last (each connection's index sorted by time), the file holds it in its place."""
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.bag", "bag")
+    nominal = builtin_scenario().topics.nominal
+    data = bytearray(log.read_bytes())
+    old = struct.pack("<II", *divmod(FUZZ.TIME0_NS + 7_800_000_000, 10**9))
+    new = struct.pack("<II", *divmod(FUZZ.TIME0_NS + 7_800_000_000 + round(LATE_S * 1e9), 10**9))
+    pos, cid, done = len(MAGIC), None, []
+    while pos < len(data):
+        rec = record_at(data, pos, len(data))
+        inner = [rec]
+        if rec.op == Op.CHUNK:  # uncompressed: its records in place
+            inner, at = [], rec.data_start
+            while at < rec.end:
+                inner.append(record_at(data, at, rec.end))
+                at = inner[-1].end
+        for r in inner:
+            if r.op == Op.CONNECTION and r.header["topic"].decode() == nominal:
+                cid = r.header["conn"]
+            elif r.op == Op.MESSAGE_DATA and r.header["conn"] == cid and r.header["time"] == old:
+                at = data.index(b"time=" + old, r.data_start - 64, r.data_start) + 5
+                data[at : at + 8] = new
+                done.append("record")
+            elif r.op == Op.INDEX_DATA and r.header["conn"] == cid:
+                for e in range(r.data_start, r.end, 12):
+                    if data[e : e + 8] == old:
+                        data[e : e + 8] = new
+                        done.append("index")
+        pos = rec.end
+    assert sorted(done) == ["index", "record"]
+    log.write_bytes(bytes(data))
+    return log
+
+
+def _late_nominal_folder(tmp_path: Path) -> Path:
+    """The clean run as a sqlite3 bag folder whose nominal row at 7.8 s has a timestamp 527.5 s later: the query of
+    every reader orders the rows by timestamp, the row id keeps it in its place."""
+    import sqlite3
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run", "dir")
+    (db,) = log.glob("*.db3")
+    con = sqlite3.connect(db)
+    try:
+        (tid,) = con.execute("SELECT id FROM topics WHERE name = ?", (builtin_scenario().topics.nominal,)).fetchone()
+        t_ns = FUZZ.TIME0_NS + 7_800_000_000
+        moved = con.execute("UPDATE messages SET timestamp = ? WHERE topic_id = ? AND timestamp = ?",
+                            (t_ns + round(LATE_S * 1e9), tid, t_ns)).rowcount
+        con.commit()
+    finally:
+        con.close()
+    assert moved == 1
+    return log
+
+
+@pytest.mark.parametrize("make", [_late_nominal_log, _late_nominal_bag, _late_nominal_folder],
+                         ids=["mcap", "ros1", "sqlite3-folder"])
+def test_watch_reads_every_closed_log_by_log_time(tmp_path: Path, make: Callable[[Path], Path]) -> None:
+    """Every indexed reader yields a closed log's messages by log time, whatever the format: certify re-times the
+    late nominal stamp and leaves the tube undecided. watch read a closed ROS1 bag and a closed sqlite3 bag folder in
+    file order and passed them (only MCAP was read by log time)."""
+    log = make(tmp_path)
+    sc = builtin_scenario()
+    for base in ("header", "auto"):
+        cert = certify_log(log, sc, spec=SPEC, time_base=base).certificate
+        assert cert["verdict"] == "inconclusive" and cert["samples"]["nominal"]["retimed"] == 1
+        res = watch_log(log, OnlineMonitor(sc, spec=SPEC), time_base=base)
+        assert res.finished and res.result.verdict == "inconclusive", (base, res.result.verdict_reason)
+        assert [(c.name, c.verdict) for c in res.result.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
 
 
 def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:

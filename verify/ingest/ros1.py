@@ -10,7 +10,8 @@ are read; each chunk record (compression none / bz2 / lz4, uncompressed size) is
 per connection listing ``(time, offset)`` of its messages inside the uncompressed chunk. For the wanted connections
 the message data records are located at those offsets and checked with numpy (same header layout, ``op`` = 2, the
 right connection id, time equal to the index), and the payloads are copied out with strided views (no per-message
-Python object). Messages are ordered as ``rosbags`` yields them: by (time, chunk position, offset). The file is
+Python object). Messages are ordered as ``rosbags`` yields them (``_ordered``: by time, then connection, chunk
+and index entry as rosbags lists them). The file is
 opened read-only and read with positioned reads; chunks without a wanted connection are not read. When every
 chunk with a wanted connection is uncompressed, the wanted records of all chunks are read in one pass at their file
 positions (``verify.ingest.records.read_records``: nothing else of the chunks is read or kept). Otherwise chunks

@@ -12,8 +12,8 @@ stream's time base, ``TwistStamped`` commands, clock corrections: the scenario's
 ``clock_offsets``, as ``--clock-offset`` gives them).
 
 Time rule: one for every stream (pose, nominal, commands, every signal topic), applied as certify applies it: to
-the whole stream, in certify's reading order (by log time for an MCAP log its recorder closed, else the file order;
-``verify.online.streamtimes``, ``_Reading.by_log_time``):
+the whole stream, in certify's reading order (by log time for a log its recorder closed, whatever its format, else
+the file order; ``verify.online.streamtimes``, ``_Reading.by_log_time``):
 - without ``follow`` (a log read once, complete or not) the messages are held until the end of the reading and
   pushed at once, each stream in certify's order: the rule sees each whole stream as certify does (the same time
   base for the pose -- ``auto``: ``verify.ingest.timebase.choose_time_base`` on the whole pose stream -- and the
@@ -81,7 +81,7 @@ class WatchResult:
 
 
 def _in_log_order(messages: list[SalvagedMessage]) -> list[SalvagedMessage]:
-    """certify's reading order of a closed MCAP log: by log time, the file order breaking ties (a stable sort)."""
+    """certify's reading order of a closed log: by log time, the file order breaking ties (a stable sort)."""
     # log times are u64 (a damaged one may be 2**63 or more: certify's reader then sorts as rosbags does, unsigned)
     log_ns = np.fromiter((m.log_ns for m in messages), dtype=np.uint64, count=len(messages))
     if bool(np.all(log_ns[1:] >= log_ns[:-1])):  # a recorded log: already in that order
@@ -380,11 +380,16 @@ class _Reading:
 
     @property
     def by_log_time(self) -> bool:
-        """Whether certify reads this log's streams by log time: a closed MCAP log (its indexed reader sorts each
-        chunk's message records by the log time they hold, the one the follower reads). A ROS1 bag is read in the
-        order of its index's times and a sqlite3 storage in that of its timestamp index, which are the file order
-        of a recorded log, and hold their own copies of the times: there, as for a salvaged log, the file order."""
-        return self.follower.finished and self.follower.format == "mcap"
+        """Whether certify reads this log's streams by log time: a log its recorder closed, whatever its format.
+        Every indexed reader yields messages by log time, not in file order: an MCAP log's sorts each chunk's
+        message records by the log time they hold and merges the chunks; a ROS1 bag's sorts each connection's index
+        entries by time (the time each message record holds: the readers check they agree) and merges the
+        connections; a sqlite3 storage's query orders the rows by their timestamp column. A message recorded with a
+        log time out of its file place (a tool that rewrote a bag, a clock that jumped) is read there. Among equal
+        log times the file order stands (MCAP: chunk position, then record; sqlite3: row id, the timestamp index's
+        order; ROS1: rosbags breaks such ties by connection first -- see ``verify.ingest.ros1``). A salvaged log
+        (not closed) is read in file order, by certify's ``--salvage`` walk as here."""
+        return self.follower.finished
 
     def report(self, new: list[Decision]) -> None:
         for d in new:
