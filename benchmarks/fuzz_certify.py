@@ -25,7 +25,8 @@ non-regular log paths (also inside a bag folder), huge windows; stamp faults on 
 nominal, ``TwistStamped`` commands), two types on one topic, option values at and past their limits,
 symlinks in output folders, signal data outside the pose's span; constant and degenerate formulas (``true``,
 ``false``, ``G !true``, windows past the log's end: the exact verdict is required), all-infinite and NaN-only
-streams (poses, a signal, commands), scenario values at and past the validator's limits. Every certify case is run
+streams (poses, a signal, commands), scenario values at and past the validator's limits, log times moved out of
+file order (any stream, any format: every indexed reader yields a closed log by log time). Every certify case is run
 again on the other ingest path and under ``tubempc watch`` (same formula, checks, time base, clock offsets). The
 last line is ``cases=N crashes=N hangs=N false_pass=N path_disagreements=N watch_disagreements=N``.
 """
@@ -100,6 +101,9 @@ class Run:
     nominal_stamp_ns: np.ndarray | None = None
     nominal_xy: np.ndarray | None = None
     cmd_stamp_ns: np.ndarray | None = None
+    # log times moved after the messages are placed in the file: (topic, k-th message of the topic, new log time
+    # ns); the message keeps its file place and its header stamp (a tool that rewrote the log, a clock that jumped)
+    log_moves: list[tuple[str, int, int]] = field(default_factory=list)
 
 
 #: the signal topic of the campaign's signal families: a motor temperature (sensor_msgs/Temperature, in ROS1 and 2)
@@ -221,6 +225,9 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
         meta = {"generator": "fuzz_certify", "scenario_sha256": SCENARIO.sha256(), "time0_ns": TIME0_NS}
         msgs.append((TIME0_NS, topics.metadata, STRING, bytes(ser(ty[STRING](data=json.dumps(meta)), STRING))))
     msgs.sort(key=lambda m: m[0])
+    for topic, k, new_ns in run.log_moves:
+        at = [i for i, m in enumerate(msgs) if m[1] == topic][k]
+        msgs[at] = (new_ns, *msgs[at][1:])
 
     def write_all(writer: Any, close_chunk: Callable[[], None] | None = None) -> None:
         conns: dict[tuple[str, str], Any] = {}
@@ -763,6 +770,41 @@ def stream_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: P
     return Case("streams", f"{fmt}:{stream}:{kind}", argv, "violating", inputs)
 
 
+#: where a message's log time is moved while it keeps its file place (s after its own log time; None: 1 s before
+#: the log's first message)
+LOG_MOVES = (0.004, 0.5, 3.0, 527.5, -2.0, None)
+
+
+def order_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """Log times out of file order: 1-3 messages of one stream (pose, nominal, commands, a signal) keep their place
+    in the file and their header stamps while their log times move (a few ms, 0.5 s, 3 s or 527.5 s later, 2 s
+    earlier, or before the log's first message). Every indexed reader yields a closed log's messages by log time;
+    certify on either ingest path and watch must read them in that order (no requirement on the verdict: the
+    disagreement checks decide; the violating seed must not pass)."""
+    fmt = rng.choice(FORMATS)
+    violating = rng.random() < 0.5
+    run = base_run(violating=violating)
+    stream = rng.choice(["pose", "nominal", "cmd_vel", "signal"])
+    topic = TEMP_TOPIC if stream == "signal" else getattr(SCENARIO.topics, stream)
+    run.extra = temperature_stream(run) if stream == "signal" else []
+    start = rng.randrange(5, 290)
+    for k in range(start, start + rng.choice([1, 2, 3])):
+        move = rng.choice(LOG_MOVES)
+        t_ns = int(run.t_ns[k]) - (5_000_000 if stream == "signal" else 0)
+        run.log_moves.append((topic, k, TIME0_NS - 10**9 if move is None else t_ns + round(move * 1e9)))
+    path = write_run(run, work / f"order_{stream}{SUFFIX[fmt]}", fmt)
+    inputs = [path]
+    if stream == "signal":
+        scenario = work / "signal.yaml"
+        scenario.write_text(signal_scenario_text())
+        inputs.append(scenario)
+        argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok & " + SPEC]
+    else:
+        argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    return Case("order", f"{fmt}:{stream}", argv, "violating" if violating else "any", inputs)
+
+
 def _pose_builder(msgtype: str, stamp_ns: int, x: float, y: float) -> Callable[[Any, bool], Any]:
     def build(ty: Any, ros1: bool) -> Any:
         sec, nsec = divmod(stamp_ns, 10**9)
@@ -1018,7 +1060,7 @@ FAMILIES: list[tuple[str, float, Callable[[random.Random, dict[tuple[str, bool],
     ("scenario", 0.06, scenario_case), ("paths", 0.04, path_case), ("streams", 0.07, stream_case),
     ("types", 0.05, types_case), ("limits", 0.05, limits_case), ("outputs", 0.04, outputs_case),
     ("span", 0.04, span_case), ("constant", 0.06, constant_case), ("infinite", 0.06, infinite_case),
-    ("scenario_limits", 0.04, scenario_limits_case)]
+    ("scenario_limits", 0.04, scenario_limits_case), ("order", 0.05, order_case)]
 
 
 @contextlib.contextmanager
