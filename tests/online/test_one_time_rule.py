@@ -183,6 +183,24 @@ def test_watch_reads_every_closed_log_by_log_time(tmp_path: Path, make: Callable
         assert [(c.name, c.verdict) for c in res.result.checks] == [(c["name"], c["verdict"]) for c in cert["checks"]]
 
 
+def test_watch_reads_a_bare_sqlite3_storage_by_timestamp(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bare ``.db3`` (no bag folder: never closed for watch, which judges it as partial) of the clean run, three of
+    whose pose rows (24.1-24.3 s) keep their place while their log times move 4 ms and 3 s later and to before the
+    log's start: certify reads every sqlite3 storage by timestamp (there is no salvage walk of one), re-times the
+    pose sample logged 3 s late and fails the tube there (28.2 s); watch read the rows by id, found the same tube
+    violation, and still said inconclusive: its time rule, applied again in certify's order at the end, gave the
+    moved samples other times (fault campaign seed 102 cases 157 and 442)."""
+    run0 = FUZZ.base_run(violating=False)
+    pose = builtin_scenario().topics.pose
+    run0.log_moves = [(pose, 241, int(run0.t_ns[241]) + 4_000_000), (pose, 242, int(run0.t_ns[242]) + 3_000_000_000),
+                      (pose, 243, FUZZ.TIME0_NS - 1_000_000_000)]
+    log = FUZZ.write_run(run0, tmp_path / "run.db3", "db3")
+    for base in ("header", "auto"):
+        got = _certify_and_watch(log, capsys, "--time-base", base)
+        assert [g[0] for g in got] == [1, 1], (base, got)
+        assert "judged at other times than certify gives them" not in got[1][2], got
+
+
 def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:
     """Followed poll by poll in file order, the nominal message keeps its stamp; at the end the rule applied to the
     whole nominal stream in certify's order gives it another time: a note names the topic, and the run's verdict is

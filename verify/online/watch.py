@@ -387,9 +387,10 @@ class _Reading:
         connections; a sqlite3 storage's query orders the rows by their timestamp column. A message recorded with a
         log time out of its file place (a tool that rewrote a bag, a clock that jumped) is read there. Among equal
         log times the file order stands (MCAP: chunk position, then record; sqlite3: row id, the timestamp index's
-        order; ROS1: rosbags breaks such ties by connection first -- see ``verify.ingest.ros1``). A salvaged log
-        (not closed) is read in file order, by certify's ``--salvage`` walk as here."""
-        return self.follower.finished
+        order; ROS1: rosbags breaks such ties by connection first -- see ``verify.ingest.ros1``). A ROS1 or MCAP log
+        not closed is read in file order, by certify's ``--salvage`` walk as here; a sqlite3 storage has no such
+        walk -- certify reads its rows by timestamp, closed or not (a bare ``.db3``, a folder still written)."""
+        return self.follower.finished or self.follower.format == "sqlite3"
 
     def report(self, new: list[Decision]) -> None:
         for d in new:
@@ -435,7 +436,7 @@ class _Reading:
         extra = _read(self.p, self.follower.rest)  # a cut uncompressed chunk's complete records
         self.count += len(extra)
         for feeder in self.feeders:
-            feeder.feed(extra, final=True)
+            feeder.feed(extra, final=True, by_log_time=self.by_log_time)
         return ["the log was not closed by its recorder: judged as --salvage judges it (partial)"]
 
 
