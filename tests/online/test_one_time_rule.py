@@ -201,6 +201,26 @@ def test_watch_reads_a_bare_sqlite3_storage_by_timestamp(tmp_path: Path, capsys:
         assert "judged at other times than certify gives them" not in got[1][2], got
 
 
+def test_a_negative_sqlite3_timestamp_is_refused_by_every_reader(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A bare ``.db3`` whose pose row at 12 s holds a negative timestamp (sqlite3 stores a signed INTEGER; a damaged
+    byte makes one, 236 years before the others): on ``--time-base log`` certify stopped with an internal error (the
+    run's time span overflowed), and watch, sorting the log times as the unsigned u64 of MCAP and ROS1, stopped with
+    one on every base (fault campaign seed 103 case 617). The row is damage, as a NULL one is: one line, exit 3, from
+    certify on either ingest path and from watch."""
+    run0 = FUZZ.base_run(violating=False)
+    pose = builtin_scenario().topics.pose
+    run0.log_moves = [(pose, 120, -7_456_146_430_654_775_808)]
+    log = FUZZ.write_run(run0, tmp_path / "run.db3", "db3")
+    for base in ("header", "auto", "log"):
+        got = _certify_and_watch(log, capsys, "--time-base", base)
+        assert [g[0] for g in got] == [3, 3], (base, got)
+        assert all("has no log time (NULL or negative)" in g[2] and "internal error" not in g[2] for g in got), got
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TUBEMPC_FAST_INGEST", "0")
+        assert _certify_and_watch(log, capsys)[0][0] == 3
+
+
 def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:
     """Followed poll by poll in file order, the nominal message keeps its stamp; at the end the rule applied to the
     whole nominal stream in certify's order gives it another time: a note names the topic, and the run's verdict is

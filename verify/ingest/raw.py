@@ -50,6 +50,8 @@ from verify.ingest.readerrors import (
     in_words,
     one_type_per_topic,
     rosbag2_errors,
+    sqlite_row_readable,
+    unreadable_row,
 )
 from verify.ingest.ros1 import PayloadBuffer, read_ros1_fast
 from verify.ingest.ros1records import BagState, bag_state
@@ -398,11 +400,11 @@ def _check_rows(path: Path, fmt: str, rows: list[tuple[Connection, int, bytes | 
         raise LogReadError(f"damaged {fmt} log: reading the wanted topics yields messages of {min(stray)}, which was "
                            f"not asked for (a damaged index or message record)", path=str(path))
     if all(map(int.__instancecheck__, map(itemgetter(1), rows))) and \
-            all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))):
+            all(map(isinstance, map(itemgetter(2), rows), repeat(bytes | memoryview))) and \
+            min(map(itemgetter(1), rows), default=0) >= 0:
         return
-    bad = next(r for r in rows if not isinstance(r[1], int) or not isinstance(r[2], bytes | memoryview))
-    raise LogReadError(f"damaged {fmt} log: a message row on {bad[0].topic} has no log time or payload (a damaged "
-                       f"database page)", path=str(path))
+    bad = next(r for r in rows if not sqlite_row_readable(r[1], r[2]))
+    raise unreadable_row(fmt, bad[0].topic, str(path))
 
 
 def _check_counts(path: Path, fmt: str, selected: list[Connection], out: dict[str, RawTopic]) -> None:

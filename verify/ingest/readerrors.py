@@ -16,7 +16,7 @@ import struct
 import sys
 import zlib
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import Any, TypeGuard
 
 import apsw  # rosbags' sqlite3 driver
 from rosbags.rosbag1 import ReaderError as ReaderError1
@@ -160,3 +160,17 @@ def check_declared_counts(declared: Mapping[str, int], read: Mapping[str, int], 
         if want_n > got_n:
             raise TruncatedLogError(f"damaged {fmt} log: it declares {want_n} messages on {topic} but only {got_n} "
                                     f"can be read", path=path)
+
+
+def sqlite_row_readable(stamp: object, payload: object) -> TypeGuard[int]:
+    """Whether a sqlite3 message row's columns are what every reader of it needs: an integer log time that is not
+    negative (nanoseconds since 1970; a damaged page can hold a row whose columns read as NULL -- NOT NULL is checked
+    on writes only -- or a timestamp turned negative, 236 years before the others, which no time span of the run can
+    hold) and a payload. The one rule of certify's readers and of watch's follower."""
+    return isinstance(stamp, int) and stamp >= 0 and isinstance(payload, bytes | memoryview)
+
+
+def unreadable_row(fmt: str, topic: str, path: str) -> LogReadError:
+    """The error for a message row that ``sqlite_row_readable`` refuses."""
+    return LogReadError(f"damaged {fmt} log: a message row on {topic} has no log time (NULL or negative) or no "
+                        f"payload (a damaged database page)", path=path)

@@ -173,8 +173,9 @@ def read_sqlite_storage(storage: Sqlite3Reader, connections: Collection[Connecti
     try:
         stamps = list(map(itemgetter(1), rows))  # (zip(*rows) is five times slower on 200,000 rows)
         payloads = list(map(itemgetter(2), rows))
-        if not all(map(int.__instancecheck__, stamps)) or not all(map(bytes.__instancecheck__, payloads)):
-            return None
+        if not all(map(int.__instancecheck__, stamps)) or not all(map(bytes.__instancecheck__, payloads)) or \
+                min(stamps, default=0) < 0:
+            return None  # rosbags' reading, checked by verify.ingest.readerrors.sqlite_row_readable, says why
         log_ns = np.fromiter(stamps, dtype=np.int64, count=n)
         lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=n)
         topics = sorted(set(topic_of.values()))

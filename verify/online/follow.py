@@ -25,7 +25,13 @@ from verify.ingest.mcaprecords import CutError, MalformedError, Scan, record_mes
 from verify.ingest.mcaprecords import Op as McapOp
 from verify.ingest.mcaprecords import walk as mcap_walk
 from verify.ingest.raw import EVERY_STORAGE, check_log_path, read_topics_by_storage
-from verify.ingest.readerrors import DECOMPRESS_ERRORS, check_declared_counts, in_words
+from verify.ingest.readerrors import (
+    DECOMPRESS_ERRORS,
+    check_declared_counts,
+    in_words,
+    sqlite_row_readable,
+    unreadable_row,
+)
 from verify.ingest.ros1records import DAMAGE as _ROS1_DAMAGE
 from verify.ingest.ros1records import MAGIC as ROS1_MAGIC
 from verify.ingest.ros1records import Ros1Message, Ros1Stream
@@ -235,10 +241,8 @@ class SqliteFollower:
             if indexed is None or mid in indexed:  # (certify's reading yields no other row)
                 name, typ = topics[tid]
                 stamp = row_stamp if indexed is None else indexed[mid]
-                if not isinstance(stamp, int) or not isinstance(data, bytes):
-                    # a damaged page can hold a row whose columns read as NULL (NOT NULL is checked on writes only)
-                    raise LogReadError(f"damaged sqlite3 log: a message row on {name} has no log time or payload (a "
-                                       f"damaged database page)", path=str(self.path))
+                if not sqlite_row_readable(stamp, data):  # certify's readers refuse the row alike
+                    raise unreadable_row("sqlite3", name, str(self.path))
                 out.append(SalvagedMessage(name, typ, False, stamp, data))
                 self.read_counts[name] = self.read_counts.get(name, 0) + 1
             self.last_id = max(self.last_id, int(mid))
