@@ -221,6 +221,42 @@ def test_a_negative_sqlite3_timestamp_is_refused_by_every_reader(tmp_path: Path,
         assert _certify_and_watch(log, capsys)[0][0] == 3
 
 
+def _index_entry_renamed(db: Path, topic: str, at_s: float, to_s: float) -> None:
+    """In the sqlite3 file ``db``, the timestamp index entry of ``topic``'s row logged at ``at_s`` made to name the
+    row logged at ``to_s`` (its row id field rewritten in place, as a damaged byte of the index page does): an index
+    record is (header 3, serial types 6 and 2: an 8-byte timestamp and a 2-byte row id, big-endian)."""
+    import sqlite3
+
+    con = sqlite3.connect(db)
+    try:
+        (tid,) = con.execute("SELECT id FROM topics WHERE name = ?", (topic,)).fetchone()
+        ids = [con.execute("SELECT id FROM messages WHERE topic_id = ? AND timestamp = ?",
+                           (tid, FUZZ.TIME0_NS + round(t * 1e9))).fetchone()[0] for t in (at_s, to_s)]
+    finally:
+        con.close()
+    data = bytearray(db.read_bytes())
+    entry = bytes([3, 6, 2]) + struct.pack(">qH", FUZZ.TIME0_NS + round(at_s * 1e9), ids[0])
+    assert data.count(entry) == 1
+    at = data.index(entry) + len(entry) - 2
+    data[at : at + 2] = struct.pack(">H", ids[1])
+    db.write_bytes(bytes(data))
+
+
+def test_a_row_named_by_two_index_entries_is_read_twice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bare ``.db3`` whose timestamp index entry of the nominal row at 21.1 s names the nominal row at 24.1 s (a
+    damaged row id): certify's query walks the index and reads the 24.1 s row twice -- its payload at 21.1 s, whose
+    stamp is then re-timed, and the tube fails there -- and never the 21.1 s row. watch keyed the index entries by
+    row id, read each row once and missed the nominal sample at 21.1 s: the tube undecided (fault campaign seed 87
+    case 1224, seed 103 case 1083)."""
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / "run.db3", "db3")
+    _index_entry_renamed(log, builtin_scenario().topics.nominal, 21.1, 24.1)
+    for base in ("header", "auto"):
+        got = _certify_and_watch(log, capsys, "--time-base", base)
+        assert [g[0] for g in got] == [1, 1], (base, got)
+        cert = certify_log(log, builtin_scenario(), spec=SPEC, time_base=base).certificate
+        assert cert["samples"]["nominal"]["read"] == 301 and cert["samples"]["nominal"]["retimed"] == 1
+
+
 def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:
     """Followed poll by poll in file order, the nominal message keeps its stamp; at the end the rule applied to the
     whole nominal stream in certify's order gives it another time: a note names the topic, and the run's verdict is

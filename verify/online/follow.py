@@ -238,9 +238,10 @@ class SqliteFollower:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
         out = []
         for mid, tid, row_stamp, data in rows:
-            if indexed is None or mid in indexed:  # (certify's reading yields no other row)
+            # once per index entry that names the row (none: certify's reading yields no other row; two, where a
+            # damaged entry names a row another entry names: certify's query reads it twice, at both entries' times)
+            for stamp in [row_stamp] if indexed is None else indexed.get(mid, []):
                 name, typ = topics[tid]
-                stamp = row_stamp if indexed is None else indexed[mid]
                 if not sqlite_row_readable(stamp, data):  # certify's readers refuse the row alike
                     raise unreadable_row("sqlite3", name, str(self.path))
                 out.append(SalvagedMessage(name, typ, False, stamp, data))
@@ -273,21 +274,30 @@ class SqliteFollower:
         return []
 
 
-def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dict[int, object] | None:
-    """Row id -> the timestamp the storage's timestamp index holds for it, for the rows ``rows`` (``lo``: the least
-    of their own timestamps, None when none is an integer); a row the index does not hold is left out. Certify's
-    query (rosbags') walks that index and reads each message's time there, so a damaged index entry is the
-    message's time for both, at the row's place in the index (the file order of a recorded log). None when the
-    storage has no timestamp index (certify's query then reads the rows' own times). The new rows' entries are
-    sought from their least time on; an entry not found so (a damaged index is out of order) has the whole index
-    walked."""
+def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dict[int, list[object]] | None:
+    """Row id -> the timestamps the storage's timestamp index holds for it (one per entry that names it, in index
+    order), for the rows ``rows`` (``lo``: the least of their own timestamps, None when none is an integer); a row
+    the index does not hold is left out. Certify's query (rosbags') walks that index and reads each message's time
+    there, so a damaged index entry is the message's time for both, at the row's place in the index; an entry whose
+    row id a damaged byte turned into another row's names that row a second time, and the query reads it twice.
+    None when the storage has no timestamp index (certify's query then reads the rows' own times). The new rows'
+    entries are sought from their least time on; a row not found so (a damaged index is out of order) has the
+    whole index walked."""
     if not rows:
         return {}
     query = "SELECT rowid, timestamp FROM messages INDEXED BY timestamp_idx"  # rowid: see _rows
+
+    def entries(cursor: Iterable[tuple[Any, object]]) -> dict[int, list[object]]:
+        got: dict[int, list[object]] = {}
+        for i, t in cursor:
+            if i in rows:
+                got.setdefault(i, []).append(t)
+        return got
+
     try:
-        got = {} if lo is None else {i: t for i, t in con.execute(f"{query} WHERE timestamp >= ?", (lo,)) if i in rows}
+        got = {} if lo is None else entries(con.execute(f"{query} WHERE timestamp >= ?", (lo,)))
         if len(got) < len(rows):
-            got = {i: t for i, t in con.execute(query) if i in rows}
+            got = entries(con.execute(query))
     except sqlite3.OperationalError as err:
         if "no such index" in str(err):
             return None
