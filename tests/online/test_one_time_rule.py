@@ -257,6 +257,48 @@ def test_a_row_named_by_two_index_entries_is_read_twice(tmp_path: Path, capsys: 
         assert cert["samples"]["nominal"]["read"] == 301 and cert["samples"]["nominal"]["retimed"] == 1
 
 
+@pytest.mark.parametrize("compression", ["none", "lz4"])
+def test_a_closed_bag_is_held_in_certifys_order_among_equal_log_times(tmp_path: Path, compression: str) -> None:
+    """Two connections on one topic with log times tied across them (60 messages per time, as a simulation's clock
+    gives): certify's readers yield them by log time, then by connection as the bag's index lists them (rosbags merges
+    its connections' lists), not in file order; watch, reading the closed bag once, holds its messages in that
+    order too (the fast reader, the plain path and watch: one order)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from verify.ingest.raw import read_raw
+    from verify.online.watch import _in_log_order
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    ty = store.types
+    path = tmp_path / "tied.bag"
+    writer = Writer(path)
+    if compression == "lz4":
+        writer.set_compression(Writer.CompressionFormat.LZ4)
+    writer.chunk_threshold = 2048
+    with writer as w:
+        conns = [w.add_connection("/pose", "geometry_msgs/msg/PoseStamped", callerid=c, typestore=store)
+                 for c in ("/b", "/a")]
+        for k in range(900):
+            t = FUZZ.TIME0_NS + (k // 60) * 10_000_000
+            hdr = ty["std_msgs/msg/Header"](seq=k, stamp=ty["builtin_interfaces/msg/Time"](sec=t // 10**9,
+                                                                                          nanosec=t % 10**9),
+                                            frame_id="world")
+            msg = ty["geometry_msgs/msg/PoseStamped"](header=hdr, pose=ty["geometry_msgs/msg/Pose"](
+                position=ty["geometry_msgs/msg/Point"](x=float(k), y=0.0, z=0.0),
+                orientation=ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+            w.write(conns[k % 2], t, bytes(store.serialize_ros1(msg, "geometry_msgs/msg/PoseStamped")))
+    follower = open_follower(path)
+    held = [m.payload for m in _in_log_order(follower.poll()) if m.topic == "/pose"]
+    assert follower.finished
+    for fast in ("1", "0"):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setenv("TUBEMPC_FAST_INGEST", fast)
+            certify_order = list(read_raw(path, {"/pose"}).topics["/pose"].payloads)
+        assert held == certify_order, fast
+    assert held != sorted(held, key=lambda b: struct.unpack_from("<d", b, len(b) - 56)[0])  # not the file order
+
+
 def test_following_checks_every_stream_against_certifys_times(tmp_path: Path) -> None:
     """Followed poll by poll in file order, the nominal message keeps its stamp; at the end the rule applied to the
     whole nominal stream in certify's order gives it another time: a note names the topic, and the run's verdict is

@@ -271,6 +271,9 @@ class Ros1Stream:
     chunk: _Chunk | None = None
     indexing: _ChunkIndex | None = None  # the last closed chunk, while its index data records are read
     chunk_positions: set[int] = field(default_factory=set)  # every chunk record read (the bag index must name them)
+    #: connection id -> its rank in the bag index's list of connections (read at the close): the indexed readers'
+    #: order among messages of equal log time (``verify.ingest.ros1``)
+    index_rank: dict[int, int] = field(default_factory=dict)
 
     @property
     def resume_at(self) -> int:
@@ -365,7 +368,8 @@ class Ros1Stream:
                 raise MalformedError("the bag's index holds a record that is not a connection or chunk info")
             if rec.op == Op.CONNECTION:  # read as the indexed readers read it (its text fields UTF-8), and the
                 # connection as they name it: theirs is the index's record, not the copy inside a chunk
-                self._connection(rec, buf)
+                cid = self._connection(rec, buf)
+                self.index_rank.setdefault(cid, len(self.index_rank))
             else:
                 try:
                     at, _n, _ids = chunk_info_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
@@ -378,9 +382,10 @@ class Ros1Stream:
             pos = rec.end
         return True
 
-    def _connection(self, rec: Record, buf: bytes | memoryview) -> None:
+    def _connection(self, rec: Record, buf: bytes | memoryview) -> int:
         cid, topic, typ, has_def = connection_of(rec.header, memoryview(buf)[rec.data_start : rec.end])
         self.connections[cid] = (topic, typ, has_def)
+        return cid
 
     def _in_chunk(self, chunk: _Chunk, buf: bytes | memoryview, base: int, end: int,
                   out: list[Ros1Message] | None) -> bool:

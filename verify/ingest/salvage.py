@@ -28,6 +28,10 @@ class SalvagedMessage:
     has_definition: bool
     log_ns: int
     payload: bytes
+    #: its place among messages of equal log time in certify's reading of the closed log, before the file order: a
+    #: ROS1 message's connection's rank in the bag index's list of connections (rosbags merges its connections'
+    #: lists, each sorted by time); 0 elsewhere
+    tie: int = 0
 
 
 @dataclass(slots=True)
@@ -52,7 +56,7 @@ def ros1_message(stream: Ros1Stream, msg: Ros1Message) -> SalvagedMessage | None
     if conn is None:
         return None
     topic, typ, has_def = conn
-    return SalvagedMessage(topic, typ, has_def, msg.log_ns, msg.payload)
+    return SalvagedMessage(topic, typ, has_def, msg.log_ns, msg.payload, stream.index_rank.get(msg.conn, 0))
 
 
 def walk_ros1(path: Path) -> Walk:

@@ -81,15 +81,17 @@ class WatchResult:
 
 
 def _in_log_order(messages: list[SalvagedMessage]) -> list[SalvagedMessage]:
-    """certify's reading order of a closed log: by log time, the file order breaking ties (a stable sort)."""
+    """certify's reading order of a closed log: by log time; among equal ones by ``SalvagedMessage.tie`` (a ROS1
+    message's connection, as rosbags orders them), then the file order (a stable sort)."""
     # log times as the format stores them: u64 in MCAP and ROS1 (a damaged one may be 2**63 or more: certify's reader
     # then sorts as rosbags does, unsigned), a signed INTEGER in sqlite3 (a damaged one may be negative: its query
     # sorts it first) -- only a signed source yields a negative one
     signed = any(m.log_ns < 0 for m in messages)
     log_ns = np.fromiter((m.log_ns for m in messages), dtype=np.int64 if signed else np.uint64, count=len(messages))
-    if bool(np.all(log_ns[1:] >= log_ns[:-1])):  # a recorded log: already in that order
-        return messages
-    return [messages[k] for k in np.argsort(log_ns, kind="stable").tolist()]
+    ties = np.fromiter((m.tie for m in messages), dtype=np.int64, count=len(messages))
+    if bool(np.all(log_ns[1:] > log_ns[:-1])) or (bool(np.all(log_ns[1:] >= log_ns[:-1])) and not ties.any()):
+        return messages  # a recorded log: already in that order
+    return [messages[k] for k in np.lexsort((ties, log_ns)).tolist()]
 
 
 class _Feeder:
