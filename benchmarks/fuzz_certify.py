@@ -26,7 +26,8 @@ nominal, ``TwistStamped`` commands), two types on one topic, option values at an
 symlinks in output folders, signal data outside the pose's span; constant and degenerate formulas (``true``,
 ``false``, ``G !true``, windows past the log's end: the exact verdict is required), all-infinite and NaN-only
 streams (poses, a signal, commands), scenario values at and past the validator's limits, log times moved out of
-file order (any stream, any format: every indexed reader yields a closed log by log time). Every certify case is run
+file order (any stream, any format: every indexed reader yields a closed log by log time), a second publisher on a
+stream at the first's log times (same or violating content). Every certify case is run
 again on the other ingest path and under ``tubempc watch`` (same formula, checks, time base, clock offsets). The
 last line is ``cases=N crashes=N hangs=N false_pass=N path_disagreements=N watch_disagreements=N``.
 """
@@ -55,6 +56,7 @@ from types import FrameType
 from typing import Any
 
 import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
@@ -104,6 +106,9 @@ class Run:
     # log times moved after the messages are placed in the file: (topic, k-th message of the topic, new log time
     # ns); the message keeps its file place and its header stamp (a tool that rewrote the log, a clock that jumped)
     log_moves: list[tuple[str, int, int]] = field(default_factory=list)
+    # messages of a second publisher on their topic (a connection of its own: another caller id in ROS1, another
+    # QoS profile in ROS2): (log time ns, topic, type, builder)
+    second: list[tuple[int, str, str, Callable[[Any, bool], Any]]] = field(default_factory=list)
 
 
 #: the signal topic of the campaign's signal families: a motor temperature (sensor_msgs/Temperature, in ROS1 and 2)
@@ -221,6 +226,8 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
             msgs.append((int(run.t_ns[i]), topics.solver, STRING, data))
     for t_ns, topic, msgtype, build in run.extra:
         msgs.append((t_ns, topic, msgtype, bytes(ser(build(ty, ros1), msgtype))))
+    for t_ns, topic, msgtype, build in run.second:
+        msgs.append((t_ns, topic, msgtype + SECOND, bytes(ser(build(ty, ros1), msgtype))))
     if "metadata" in run.topics:
         meta = {"generator": "fuzz_certify", "scenario_sha256": SCENARIO.sha256(), "time0_ns": TIME0_NS}
         msgs.append((TIME0_NS, topics.metadata, STRING, bytes(ser(ty[STRING](data=json.dumps(meta)), STRING))))
@@ -233,7 +240,11 @@ def write_run(run: Run, path: Path, fmt: str) -> Path:
         conns: dict[tuple[str, str], Any] = {}
         for k, (t, topic, msgtype, data) in enumerate(msgs):
             if (topic, msgtype) not in conns:  # a topic written with two types gets two connections
-                conns[topic, msgtype] = writer.add_connection(topic, msgtype, typestore=store)
+                real = msgtype.removesuffix(SECOND)
+                kw: dict[str, Any] = {}
+                if real != msgtype:  # a second publisher of the topic: a connection of its own
+                    kw = {"callerid": "/second"} if ros1 else {"offered_qos_profiles": [SECOND_QOS]}
+                conns[topic, msgtype] = writer.add_connection(topic, real, typestore=store, **kw)
             writer.write(conns[topic, msgtype], t, data)
             if close_chunk is not None and k % 40 == 39:
                 close_chunk()
@@ -770,6 +781,65 @@ def stream_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: P
     return Case("streams", f"{fmt}:{stream}:{kind}", argv, "violating", inputs)
 
 
+#: the type suffix that marks a second publisher's messages while the run is written (never a type's name)
+SECOND = "#second"
+#: the second publisher's QoS profile in ROS2 (rosbags tells two connections of one topic and type by it)
+SECOND_QOS = Qos(QosHistory.KEEP_LAST, 7, QosReliability.BEST_EFFORT, QosDurability.VOLATILE, QosTime(0, 0),
+                 QosTime(0, 0), QosLiveliness.AUTOMATIC, QosTime(0, 0), False)
+
+
+def publishers_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Path) -> Case:
+    """A second publisher on one stream (pose, nominal, commands, a signal), each of its messages at the log time of
+    one of the first's (as a simulation's clock gives): 1-20 of them, the same content (duplicates certify merges)
+    or a violating one (the pose at an obstacle, the nominal 0.5 m off, 5 m/s commands, 95 degC), their header
+    stamps the first's or 3 ms later. Readers yield equal log times in each format's own order (ROS1: by
+    connection); certify on either ingest path and watch must agree; a violating one must not pass (a nominal
+    sample 3 ms after the first one may: the tube judges a pose sample against its nearest nominal sample)."""
+    fmt = rng.choice(FORMATS)
+    run = base_run(violating=False)
+    stream = rng.choice(["pose", "nominal", "cmd_vel", "signal"])
+    conflict = rng.random() < 0.6
+    start, count = rng.randrange(5, 280), rng.choice([1, 3, 20])
+    late_ns = rng.choice([0, 0, 3_000_000])
+    run.extra = temperature_stream(run) if stream == "signal" else []
+    obs = SCENARIO.unsafe_regions[0].center
+    for k in range(start, min(start + count, run.t_ns.size)):
+        t = int(run.t_ns[k])
+        if stream == "signal":
+            t -= 5_000_000
+            run.second.append((t, TEMP_TOPIC, TEMPERATURE, temperature(t + late_ns, 95.0 if conflict else 40.0)))
+        elif stream == "cmd_vel":
+            v = 5.0 if conflict else 0.0
+            run.second.append((t, SCENARIO.topics.cmd_vel, TWIST, _twist_builder(v)))
+        else:
+            x, y = (obs[0], obs[1]) if conflict and stream == "pose" else (float(run.xy[k, 0]), float(run.xy[k, 1]))
+            if conflict and stream == "nominal":
+                x += 0.5
+            run.second.append((t, getattr(SCENARIO.topics, stream), POSE, _pose_builder(POSE, t + late_ns, x, y)))
+    path = write_run(run, work / f"second_{stream}{SUFFIX[fmt]}", fmt)
+    inputs = [path]
+    if stream == "signal":
+        scenario = work / "signal.yaml"
+        scenario.write_text(signal_scenario_text())
+        inputs.append(scenario)
+        argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok & " + SPEC]
+    else:
+        argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
+    argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    # a conflicting second sample stamped 3 ms after the first is no violation where the rule judges it (the tube:
+    # a pose sample against its nearest nominal sample, the first one); at the same stamp it is a conflict that
+    # must not pass
+    truth = "violating" if conflict and (late_ns == 0 or stream != "nominal") else "any"
+    return Case("publishers", f"{fmt}:{stream}:{'conflict' if conflict else 'same'}", argv, truth, inputs)
+
+
+def _twist_builder(vx: float) -> Callable[[Any, bool], Any]:
+    def build(ty: Any, ros1: bool) -> Any:
+        v3 = ty["geometry_msgs/msg/Vector3"]
+        return ty[TWIST](linear=v3(x=vx, y=0.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0))
+    return build
+
+
 #: where a message's log time is moved while it keeps its file place (s after its own log time; None: 1 s before
 #: the log's first message)
 LOG_MOVES = (0.004, 0.5, 3.0, 527.5, -2.0, None)
@@ -1060,7 +1130,8 @@ FAMILIES: list[tuple[str, float, Callable[[random.Random, dict[tuple[str, bool],
     ("scenario", 0.06, scenario_case), ("paths", 0.04, path_case), ("streams", 0.07, stream_case),
     ("types", 0.05, types_case), ("limits", 0.05, limits_case), ("outputs", 0.04, outputs_case),
     ("span", 0.04, span_case), ("constant", 0.06, constant_case), ("infinite", 0.06, infinite_case),
-    ("scenario_limits", 0.04, scenario_limits_case), ("order", 0.05, order_case)]
+    ("scenario_limits", 0.04, scenario_limits_case), ("order", 0.05, order_case),
+    ("publishers", 0.05, publishers_case)]
 
 
 @contextlib.contextmanager
