@@ -44,8 +44,8 @@ from verify.ingest.records import (
     in_order,
     read_records,
     read_scratch,
-    record_size_at,
     retain_freed_memory,
+    ros1_records_back_to_back,
 )
 from verify.ingest.ros1records import (
     INDEX_ENTRY,
@@ -75,6 +75,7 @@ _OP_MSG, _OP_BAG, _OP_INDEX = int(Op.MESSAGE_DATA), int(Op.BAG_HEADER), int(Op.I
 _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONN = int(Op.CHUNK), int(Op.CHUNK_INFO), int(Op.CONNECTION)
 _BATCH = 4  # chunks a thread reads, decompresses and copies from per task
 _PARSE_BLOCK = 8192  # records parsed together: index temporaries of at most a few MB
+_ENTRY_FORMAT = "<3I"  # an index entry (``INDEX_ENTRY``): time sec, time nsec, offset in the chunk
 
 
 class PayloadBuffer(Sequence[bytes]):
@@ -163,6 +164,19 @@ class _File:
         if len(data) != n:
             raise _UnusualError("short read")
         return data
+
+    def block(self, pos: int, n: int) -> tuple[bytes, int]:
+        """(bytes, where they start in the file) holding the ``n`` bytes at ``pos``: the read-ahead block when it
+        does, else a new one read from ``pos`` (at least ``n`` bytes)."""
+        rel = pos - self._block_pos
+        if rel < 0 or rel + n > len(self._block):
+            if pos < 0 or n < 0 or pos + n > self.size:
+                raise _UnusualError("read past the end of the file")
+            self._block = os.pread(self.fd, min(max(n, self.BLOCK_B), self.size - pos), pos)
+            self._block_pos = pos
+            if len(self._block) < n:
+                raise _UnusualError("short read")
+        return self._block, self._block_pos
 
     def record(self, pos: int) -> tuple[dict[str, bytes], int, int, int]:
         """Record at ``pos`` -> (header fields, data start, data length, next position); data not read. The record
@@ -253,14 +267,14 @@ def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) ->
     return bytes(inner)
 
 
-def _entries(plan_item: dict[int, npt.NDArray[np.void]], start: int = 0
-             ) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+def _entries(plan_item: dict[int, bytes], start: int = 0) -> tuple[IntArray, IntArray, IntArray, IntArray]:
     """A chunk's wanted index entries by offset: (offset + ``start``, connection id, log time, rank in its
     connection's index data record)."""
-    offs = np.concatenate([x["offset"].astype(np.int64) for x in plan_item.values()]) + start
-    cid = np.concatenate([np.full(x.shape[0], c, dtype=np.int64) for c, x in plan_item.items()])
-    times = np.concatenate([_index_times(x) for x in plan_item.values()])
-    rank = np.concatenate([np.arange(x.shape[0], dtype=np.int64) for x in plan_item.values()])
+    rows = {c: np.frombuffer(x, dtype=INDEX_ENTRY) for c, x in plan_item.items()}
+    offs = np.concatenate([x["offset"].astype(np.int64) for x in rows.values()]) + start
+    cid = np.concatenate([np.full(x.shape[0], c, dtype=np.int64) for c, x in rows.items()])
+    times = np.concatenate([_index_times(x) for x in rows.values()])
+    rank = np.concatenate([np.arange(x.shape[0], dtype=np.int64) for x in rows.values()])
     order = np.argsort(offs, kind="stable")
     offs, cid, times, rank = offs[order], cid[order], times[order], rank[order]
     if offs.shape[0] > 1 and np.any(np.diff(offs) == 0):
@@ -268,12 +282,12 @@ def _entries(plan_item: dict[int, npt.NDArray[np.void]], start: int = 0
     return offs, cid, times, rank
 
 
-def _fetch(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArray[np.void]], total: int
+def _fetch(f: _File, head: tuple[str, int, int, int], mine: dict[int, bytes], total: int
            ) -> Records | bytes:
     """A chunk's wanted records read one by one (an uncompressed chunk whose records are not all wanted), else the
     whole chunk read and decompressed (bytes; the caller copies the records out)."""
     compression, size, start, dlen = head
-    if compression == "none" and dlen == size and sum(len(x) for x in mine.values()) < total:
+    if compression == "none" and dlen == size and sum(len(x) for x in mine.values()) // INDEX_ENTRY.itemsize < total:
         offs, cid, times, rank = _entries(mine)
         try:
             u8, pos = read_records(f.fd, start, size, offs, ROS1)
@@ -284,31 +298,26 @@ def _fetch(f: _File, head: tuple[str, int, int, int], mine: dict[int, npt.NDArra
     return _chunk_body(f, compression, size, start, dlen)
 
 
-def _copy_records(chunk: bytes, mine: dict[int, npt.NDArray[np.void]]) -> Records:
-    """The wanted records copied out of a whole chunk, by offset: a plain loop (a chunk holds a few dozen wanted
+def _copy_records(chunk: bytes, mine: dict[int, bytes]) -> Records:
+    """The wanted records copied out of a whole chunk, by offset: plain Python (a chunk holds a few dozen wanted
     records; numpy's per-call cost would exceed the work). Each record must end before the next wanted one (or the
-    chunk) ends."""
+    chunk) ends (``verify.ingest.records.ros1_records_back_to_back``)."""
     entries = sorted((o, sec * 1_000_000_000 + nsec, cid, k) for cid, index in mine.items()
-                     for k, (sec, nsec, o) in enumerate(index.tolist()))
-    size = len(chunk)
-    pieces: list[bytes] = []
-    lengths: list[int] = []
-    for i, (o, _t, _cid, _k) in enumerate(entries):
-        room = (entries[i + 1][0] if i + 1 < len(entries) else size) - o
-        try:
-            n = record_size_at(chunk, ROS1, o, room)
-        except SpanError:
-            n = None
-        if n is None:
-            raise _UnusualError("index offset outside its chunk or records overlap")
-        pieces.append(chunk[o : o + n])
-        lengths.append(n)
-    pos = np.zeros(len(lengths), dtype=np.int64)
-    if len(lengths) > 1:
-        np.cumsum(lengths[:-1], out=pos[1:])
-    _o, times, cids, ranks = zip(*entries, strict=True) if entries else ((), (), (), ())
-    return (np.frombuffer(b"".join(pieces), dtype=np.uint8), pos, np.array(cids, dtype=np.int64),
-            np.array(times, dtype=np.int64), np.array(ranks, dtype=np.int64))
+                     for k, (sec, nsec, o) in enumerate(struct.iter_unpack(_ENTRY_FORMAT, index)))
+    if not entries:
+        empty = np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.uint8), empty, empty, empty, empty
+    offs, times, cids, ranks = zip(*entries, strict=True)
+    try:
+        sizes = ros1_records_back_to_back(chunk, list(offs))
+    except SpanError:
+        raise _UnusualError("index offset outside its chunk or records overlap") from None
+    pos = np.zeros(len(sizes), dtype=np.int64)
+    if len(sizes) > 1:
+        np.cumsum(sizes[:-1], out=pos[1:])
+    data = b"".join([chunk[o : o + n] for o, n in zip(offs, sizes, strict=True)])
+    return (np.frombuffer(data, dtype=np.uint8), pos, np.array(cids, dtype=np.int64), np.array(times, dtype=np.int64),
+            np.array(ranks, dtype=np.int64))
 
 
 def _joined(pieces: list[Records]) -> Records:
@@ -409,14 +418,46 @@ def _messages_varied(chunk: U8Array, cid: int | IntArray, offs: IntArray, times:
 
 
 def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selected: dict[int, _Conn]
-                  ) -> tuple[dict[int, npt.NDArray[np.void]], int]:
-    """A chunk's index records (right after the chunk record) -> the wanted connections' entries and the number of
-    records in the chunk; the connections must be those its chunk info names."""
-    indexes, _ = _index_records(f, after, n_conns)
-    if set(indexes) != ids:
+                  ) -> tuple[dict[int, bytes], int]:
+    """A chunk's index data records (right after the chunk record; the record layer's ``index_data``) -> the wanted
+    connections' entries and the number of records in the chunk; the connections must be those its chunk info
+    names, each once. A header seen before (the same bytes) is not parsed again: what its fields decide (op,
+    version, connection, count) is known; the data length, the record's end and the entries' size are checked for
+    every record, as ``index_data`` does (read from the read-ahead block: a chunk's index records are a few hundred
+    bytes)."""
+    mine: dict[int, bytes] = {}
+    seen: set[int] = set()
+    total, pos = 0, after
+    for _ in range(n_conns):
+        buf, base = f.block(pos, 4)
+        (hlen,) = struct.unpack_from("<I", buf, pos - base)
+        buf, base = f.block(pos, hlen + 8)
+        rel = pos - base
+        known = _INDEX_HEADS.get(buf[rel + 4 : rel + 4 + hlen])
+        if known is None:
+            cid, entries, pos = _index_record(f, pos)
+            n = len(entries) // INDEX_ENTRY.itemsize
+        else:
+            cid, n = known
+            (dlen,) = struct.unpack_from("<I", buf, rel + 4 + hlen)
+            start = pos + 8 + hlen
+            if start + dlen > f.size:
+                raise _UnusualError("cut record")
+            if dlen != INDEX_ENTRY.itemsize * n:
+                raise _UnusualError(f"an index data record of connection {cid} holds {dlen} bytes for {n} entries")
+            if cid in selected:
+                buf, base = f.block(start, dlen)
+                entries = buf[start - base : start - base + dlen]
+            pos = start + dlen
+        if cid in seen:
+            raise _UnusualError("two index records for one connection in a chunk")
+        seen.add(cid)
+        total += n
+        if cid in selected:
+            mine[cid] = entries
+    if seen != ids:
         raise _UnusualError("chunk info and index records disagree")
-    mine = {conn_id: index for conn_id, index in indexes.items() if conn_id in selected}
-    return mine, sum(len(x) for x in indexes.values())
+    return mine, total
 
 
 #: index data record header bytes -> (connection id, entry count), for headers that passed ``_index_record``'s
@@ -425,43 +466,20 @@ _INDEX_HEADS: dict[bytes, tuple[int, int]] = {}
 _INDEX_HEADS_MAX = 4096
 
 
-def _index_records(f: _File, pos: int, count: int) -> tuple[dict[int, npt.NDArray[np.void]], int]:
-    """A chunk's index data records (the record layer's ``index_data``) -> per connection its entries."""
-    out: dict[int, npt.NDArray[np.void]] = {}
-    for _ in range(count):
-        cid, entries, pos = _index_record(f, pos)
-        if cid in out:
-            raise _UnusualError("two index records for one connection in a chunk")
-        out[cid] = entries
-    return out, pos
-
-
-def _index_record(f: _File, pos: int) -> tuple[int, npt.NDArray[np.void], int]:
-    """The index data record at ``pos`` -> (connection id, its entries, next position). A header seen before (the
-    same bytes) is not parsed again: what its fields decide (op, version, connection, count) is known; the data
-    length, the record's end and the entries are checked and read for every record, as ``index_data`` does."""
+def _index_record(f: _File, pos: int) -> tuple[int, bytes, int]:
+    """The index data record at ``pos``, its header parsed (the record layer's ``index_data``) -> (connection id,
+    its entries' bytes, next position); its header bytes are then known (``_INDEX_HEADS``)."""
+    header, start, dlen, nxt = f.record(pos)
+    _op(header, _OP_INDEX)
+    try:
+        cid, entries = index_data(header, f.read(start, dlen))
+    except MalformedError as err:
+        raise _UnusualError(str(err)) from None
     (hlen,) = struct.unpack("<I", f.read(pos, 4))
-    head = f.read(pos, hlen + 8)
-    known = _INDEX_HEADS.get(head[4 : 4 + hlen])
-    if known is None:
-        header, start, dlen, nxt = f.record(pos)
-        _op(header, _OP_INDEX)
-        try:
-            cid, entries = index_data(header, f.read(start, dlen))
-        except MalformedError as err:
-            raise _UnusualError(str(err)) from None
-        if len(_INDEX_HEADS) >= _INDEX_HEADS_MAX:
-            _INDEX_HEADS.clear()
-        _INDEX_HEADS[head[4 : 4 + hlen]] = (cid, entries.shape[0])
-        return cid, entries, nxt
-    cid, n = known
-    (dlen,) = struct.unpack("<I", head[4 + hlen :])
-    start = pos + 8 + hlen
-    if start + dlen > f.size:
-        raise _UnusualError("cut record")
-    if dlen != INDEX_ENTRY.itemsize * n:
-        raise _UnusualError(f"an index data record of connection {cid} holds {dlen} bytes for {n} entries")
-    return cid, np.frombuffer(f.read(start, dlen), dtype=INDEX_ENTRY), start + dlen
+    if len(_INDEX_HEADS) >= _INDEX_HEADS_MAX:
+        _INDEX_HEADS.clear()
+    _INDEX_HEADS[f.read(pos + 4, hlen)] = (cid, entries.shape[0])
+    return cid, entries.tobytes(), nxt
 
 
 @dataclass(frozen=True, slots=True)
@@ -471,7 +489,7 @@ class _Plan:
 
     pos: int
     head: tuple[str, int, int, int]
-    mine: dict[int, npt.NDArray[np.void]]
+    mine: dict[int, bytes]  # per wanted connection, its index entries (``INDEX_ENTRY`` rows)
     total: int
 
 
@@ -571,8 +589,8 @@ def _records_uncompressed(f: _File, plan: list[_Plan]) -> Records:
     (one concatenation and sort for the file), the records read at them (``verify.ingest.records``: one ``pread``
     per cluster of nearby records, each record bounded by the end of its chunk) -> as ``_copy_records``, for the
     whole file (in file order; each record's order key as ``_joined`` makes it)."""
-    items = [(item.head[2], item.head[2] + item.head[1], cid, index, rank) for rank, item in enumerate(plan)
-             for cid, index in item.mine.items()]
+    items = [(item.head[2], item.head[2] + item.head[1], cid, np.frombuffer(index, dtype=INDEX_ENTRY), rank)
+             for rank, item in enumerate(plan) for cid, index in item.mine.items()]
     counts = np.array([len(x[3]) for x in items], dtype=np.int64)
     index = np.concatenate([x[3] for x in items])
     at = index["offset"].astype(np.int64) + np.repeat(np.array([x[0] for x in items], dtype=np.int64), counts)
