@@ -816,16 +816,7 @@ def publishers_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], wor
             if conflict and stream == "nominal":
                 x += 0.5
             run.second.append((t, getattr(SCENARIO.topics, stream), POSE, _pose_builder(POSE, t + late_ns, x, y)))
-    path = write_run(run, work / f"second_{stream}{SUFFIX[fmt]}", fmt)
-    inputs = [path]
-    if stream == "signal":
-        scenario = work / "signal.yaml"
-        scenario.write_text(signal_scenario_text())
-        inputs.append(scenario)
-        argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok & " + SPEC]
-    else:
-        argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
-    argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    argv, inputs = _stream_certify(rng, run, stream, work / f"second_{stream}{SUFFIX[fmt]}", fmt)
     # a conflicting second sample stamped 3 ms after the first is no violation where the rule judges it (the tube:
     # a pose sample against its nearest nominal sample, the first one); at the same stamp it is a conflict that
     # must not pass
@@ -838,6 +829,21 @@ def _twist_builder(vx: float) -> Callable[[Any, bool], Any]:
         v3 = ty["geometry_msgs/msg/Vector3"]
         return ty[TWIST](linear=v3(x=vx, y=0.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0))
     return build
+
+
+def _stream_certify(rng: random.Random, run: Run, stream: str, path: Path, fmt: str) -> tuple[list[str], list[Path]]:
+    """``run`` written to ``path`` -> (the certify argv, its inputs) of a case about ``stream``: the signal scenario
+    and ``G motor_ok`` beside the obstacle formula for a signal, else the built-in scenario; a random time base."""
+    log = write_run(run, path, fmt)
+    inputs = [log]
+    if stream == "signal":
+        scenario = path.parent / "signal.yaml"
+        scenario.write_text(signal_scenario_text())
+        inputs.append(scenario)
+        argv = ["certify", str(log), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok & " + SPEC]
+    else:
+        argv = ["certify", str(log), "--scenario", "nexus-sml", "--spec", SPEC]
+    return [*argv, "--time-base", rng.choice(["auto", "header", "log"])], inputs
 
 
 #: where a message's log time is moved while it keeps its file place (s after its own log time; None: 1 s before
@@ -862,16 +868,7 @@ def order_case(rng: random.Random, seeds: dict[tuple[str, bool], Path], work: Pa
         move = rng.choice(LOG_MOVES)
         t_ns = int(run.t_ns[k]) - (5_000_000 if stream == "signal" else 0)
         run.log_moves.append((topic, k, TIME0_NS - 10**9 if move is None else t_ns + round(move * 1e9)))
-    path = write_run(run, work / f"order_{stream}{SUFFIX[fmt]}", fmt)
-    inputs = [path]
-    if stream == "signal":
-        scenario = work / "signal.yaml"
-        scenario.write_text(signal_scenario_text())
-        inputs.append(scenario)
-        argv = ["certify", str(path), "--scenario", str(scenario), "--spec", "G[0,inf) motor_ok & " + SPEC]
-    else:
-        argv = ["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC]
-    argv += ["--time-base", rng.choice(["auto", "header", "log"])]
+    argv, inputs = _stream_certify(rng, run, stream, work / f"order_{stream}{SUFFIX[fmt]}", fmt)
     return Case("order", f"{fmt}:{stream}", argv, "violating" if violating else "any", inputs)
 
 

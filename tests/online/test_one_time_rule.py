@@ -23,7 +23,7 @@ from verify.online.follow import open_follower
 from verify.online.streamtimes import StreamTimes, reading_order
 from verify.online.watch import AUTO_PROBE, _Feeder, watch_log
 
-from ..verify.support import FUZZ, run  # noqa: TID252  (the shared helpers; tests is not a package)
+from ..verify.support import FUZZ, run, tied_publishers_bag  # noqa: TID252  (the shared helpers; tests is not a package)
 
 SPEC = "G[0,inf) !(obs_1 | obs_2 | obs_3 | obs_4)"
 
@@ -263,31 +263,10 @@ def test_a_closed_bag_is_held_in_certifys_order_among_equal_log_times(tmp_path: 
     gives): certify's readers yield them by log time, then by connection as the bag's index lists them (rosbags merges
     its connections' lists), not in file order; watch, reading the closed bag once, holds its messages in that
     order too (the fast reader, the plain path and watch: one order)."""
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
     from verify.ingest.raw import read_raw
     from verify.online.watch import _in_log_order
 
-    store = get_typestore(Stores.ROS1_NOETIC)
-    ty = store.types
-    path = tmp_path / "tied.bag"
-    writer = Writer(path)
-    if compression == "lz4":
-        writer.set_compression(Writer.CompressionFormat.LZ4)
-    writer.chunk_threshold = 2048
-    with writer as w:
-        conns = [w.add_connection("/pose", "geometry_msgs/msg/PoseStamped", callerid=c, typestore=store)
-                 for c in ("/b", "/a")]
-        for k in range(900):
-            t = FUZZ.TIME0_NS + (k // 60) * 10_000_000
-            hdr = ty["std_msgs/msg/Header"](seq=k, stamp=ty["builtin_interfaces/msg/Time"](sec=t // 10**9,
-                                                                                          nanosec=t % 10**9),
-                                            frame_id="world")
-            msg = ty["geometry_msgs/msg/PoseStamped"](header=hdr, pose=ty["geometry_msgs/msg/Pose"](
-                position=ty["geometry_msgs/msg/Point"](x=float(k), y=0.0, z=0.0),
-                orientation=ty["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
-            w.write(conns[k % 2], t, bytes(store.serialize_ros1(msg, "geometry_msgs/msg/PoseStamped")))
+    path = tied_publishers_bag(tmp_path / "tied.bag", None if compression == "none" else compression)
     follower = open_follower(path)
     held = [m.payload for m in _in_log_order(follower.poll()) if m.topic == "/pose"]
     assert follower.finished

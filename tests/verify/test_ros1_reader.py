@@ -20,6 +20,8 @@ from verify.ingest.raw import _read_indexed, read_raw
 from verify.ingest.ros1 import _INDEX_HEADS, PayloadBuffer, read_ros1_fast
 from verify.ingest.ros1records import MAGIC, Op, record_at
 
+from .support import tied_publishers_bag
+
 STORE = get_typestore(Stores.ROS1_NOETIC)
 T = STORE.types
 POSE = "geometry_msgs/msg/PoseStamped"
@@ -282,17 +284,7 @@ def test_chunks_listed_out_of_file_order(tmp_path: Path, compression: str | None
     come in rosbags' order (time; then connection, as the index lists them; then the chunk's place in the index's
     list; then the record's place in its index data record), whether the chunks are read in one pass (uncompressed)
     or one by one in threads (lz4). That order is not the writing order, nor file order among equal times."""
-    times = 1_700_000_000 * 10**9 + (np.arange(900, dtype=np.int64) // 60) * 10_000_000  # 60 messages per time
-    path = tmp_path / "run.bag"
-    writer = Writer(path)
-    if compression == "lz4":
-        writer.set_compression(Writer.CompressionFormat.LZ4)
-    writer.chunk_threshold = 2048
-    with writer as w:
-        pose_a = w.add_connection("/pose", POSE, callerid="/a", typestore=STORE)
-        pose_b = w.add_connection("/pose", POSE, callerid="/b", typestore=STORE)
-        for k, t in enumerate(times.tolist()):
-            w.write(pose_a if k % 2 else pose_b, t, _pose(t, 0.001 * k, "world"))
+    path = tied_publishers_bag(tmp_path / "run.bag", compression)
     flipped = tmp_path / "flipped.bag"
     flipped.write_bytes(_chunk_infos_reversed(path.read_bytes()))
     fast = read_ros1_fast(flipped, {"/pose"})
