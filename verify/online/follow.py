@@ -236,17 +236,19 @@ class SqliteFollower:
             raise LogReadError(f"cannot read the sqlite3 storage ({err})", path=str(self.path)) from err
         except sqlite3.DatabaseError as err:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
-        out = []
+        placed: list[tuple[tuple[object, ...], SalvagedMessage]] = []
         for mid, tid, row_stamp, data in rows:
             # once per index entry that names the row (none: certify's reading yields no other row; two, where a
             # damaged entry names a row another entry names: certify's query reads it twice, at both entries' times)
-            for stamp in [row_stamp] if indexed is None else indexed.get(mid, []):
+            for place, stamp in [((row_stamp, mid), row_stamp)] if indexed is None else indexed.get(mid, []):
                 name, typ = topics[tid]
                 if not sqlite_row_readable(stamp, data):  # certify's readers refuse the row alike
                     raise unreadable_row("sqlite3", name, str(self.path))
-                out.append(SalvagedMessage(name, typ, False, stamp, data))
+                placed.append(((place,), SalvagedMessage(name, typ, False, stamp, data)))
                 self.read_counts[name] = self.read_counts.get(name, 0) + 1
             self.last_id = max(self.last_id, int(mid))
+        # in certify's order: the index walk's (without an index, its query sorts the rows by timestamp)
+        out = [m for _place, m in sorted(placed, key=lambda x: x[0])]
         self.delivered += len(out)
         return out
 
@@ -274,12 +276,15 @@ class SqliteFollower:
         return []
 
 
-def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dict[int, list[object]] | None:
-    """Row id -> the timestamps the storage's timestamp index holds for it (one per entry that names it, in index
-    order), for the rows ``rows`` (``lo``: the least of their own timestamps, None when none is an integer); a row
-    the index does not hold is left out. Certify's query (rosbags') walks that index and reads each message's time
-    there, so a damaged index entry is the message's time for both, at the row's place in the index; an entry whose
-    row id a damaged byte turned into another row's names that row a second time, and the query reads it twice.
+def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None
+                 ) -> dict[int, list[tuple[int, object]]] | None:
+    """Row id -> (place in the walk, timestamp) of each entry of the storage's timestamp index that names it (in
+    index order), for the rows ``rows`` (``lo``: the least of their own timestamps, None when none is an integer); a
+    row the index does not hold is left out. Certify's query (rosbags') walks that index, reads each message's time
+    there and yields the messages in the walk's order, so a damaged index entry is the message's time and place for
+    both (a timestamp changed in place leaves its entry where it was: the walk is then not in time order); an entry
+    whose row id a damaged byte turned into another row's names that row a second time, and the query reads it
+    twice.
     None when the storage has no timestamp index (certify's query then reads the rows' own times). The new rows'
     entries are sought from their least time on; a row not found so (a damaged index is out of order) has the
     whole index walked."""
@@ -287,11 +292,11 @@ def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None) -> dic
         return {}
     query = "SELECT rowid, timestamp FROM messages INDEXED BY timestamp_idx"  # rowid: see _rows
 
-    def entries(cursor: Iterable[tuple[Any, object]]) -> dict[int, list[object]]:
-        got: dict[int, list[object]] = {}
-        for i, t in cursor:
+    def entries(cursor: Iterable[tuple[Any, object]]) -> dict[int, list[tuple[int, object]]]:
+        got: dict[int, list[tuple[int, object]]] = {}
+        for k, (i, t) in enumerate(cursor):
             if i in rows:
-                got.setdefault(i, []).append(t)
+                got.setdefault(i, []).append((k, t))
         return got
 
     try:

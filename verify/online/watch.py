@@ -81,13 +81,11 @@ class WatchResult:
 
 
 def _in_log_order(messages: list[SalvagedMessage]) -> list[SalvagedMessage]:
-    """certify's reading order of a closed log: by log time; among equal ones by ``SalvagedMessage.tie`` (a ROS1
-    message's connection, as rosbags orders them), then the file order (a stable sort)."""
-    # log times as the format stores them: u64 in MCAP and ROS1 (a damaged one may be 2**63 or more: certify's reader
-    # then sorts as rosbags does, unsigned), a signed INTEGER in sqlite3 (a damaged one may be negative: its query
-    # sorts it first) -- only a signed source yields a negative one
-    signed = any(m.log_ns < 0 for m in messages)
-    log_ns = np.fromiter((m.log_ns for m in messages), dtype=np.int64 if signed else np.uint64, count=len(messages))
+    """certify's reading order of a closed ROS1 or MCAP log: by log time; among equal ones by
+    ``SalvagedMessage.tie`` (a ROS1 message's connection, as rosbags orders them), then the file order (a stable
+    sort)."""
+    # log times are u64 (a damaged one may be 2**63 or more: certify's reader then sorts as rosbags does, unsigned)
+    log_ns = np.fromiter((m.log_ns for m in messages), dtype=np.uint64, count=len(messages))
     ties = np.fromiter((m.tie for m in messages), dtype=np.int64, count=len(messages))
     if bool(np.all(log_ns[1:] > log_ns[:-1])) or (bool(np.all(log_ns[1:] >= log_ns[:-1])) and not ties.any()):
         return messages  # a recorded log: already in that order
@@ -385,17 +383,17 @@ class _Reading:
 
     @property
     def by_log_time(self) -> bool:
-        """Whether certify reads this log's streams by log time: a log its recorder closed, whatever its format.
-        Every indexed reader yields messages by log time, not in file order: an MCAP log's sorts each chunk's
+        """Whether certify reads this log's streams by log time, unlike the follower: a closed ROS1 or MCAP log.
+        Their indexed readers yield messages by log time, not in file order: an MCAP log's sorts each chunk's
         message records by the log time they hold and merges the chunks; a ROS1 bag's sorts each connection's index
         entries by time (the time each message record holds: the readers check they agree) and merges the
-        connections; a sqlite3 storage's query orders the rows by their timestamp column. A message recorded with a
-        log time out of its file place (a tool that rewrote a bag, a clock that jumped) is read there. Among equal
-        log times the file order stands (MCAP: chunk position, then record; sqlite3: row id, the timestamp index's
-        order; ROS1: rosbags breaks such ties by connection first -- see ``verify.ingest.ros1``). A ROS1 or MCAP log
-        not closed is read in file order, by certify's ``--salvage`` walk as here; a sqlite3 storage has no such
-        walk -- certify reads its rows by timestamp, closed or not (a bare ``.db3``, a folder still written)."""
-        return self.follower.finished or self.follower.format == "sqlite3"
+        connections. A message recorded with a log time out of its file place (a tool that rewrote a bag, a clock
+        that jumped) is read there. Among equal log times the file order stands (MCAP: chunk position, then record;
+        ROS1: rosbags breaks such ties by connection first -- ``SalvagedMessage.tie``). A ROS1 or MCAP log not
+        closed is read in file order, by certify's ``--salvage`` walk as here. A sqlite3 storage, closed or not, is
+        delivered by the follower in certify's order already: its query's, the timestamp index walked
+        (``verify.online.follow.SqliteFollower``)."""
+        return self.follower.finished and self.follower.format != "sqlite3"
 
     def report(self, new: list[Decision]) -> None:
         for d in new:
