@@ -344,3 +344,29 @@ def test_salvage_reads_the_complete_zstd_chunks_of_a_cut_mcap(seed_logs: dict[tu
     assert code == 3
     code, out, err = run(["certify", str(path), "--scenario", "nexus-sml", "--spec", SPEC, "--salvage"], capsys)
     assert code == 1, (out, err)
+
+
+@pytest.mark.parametrize("fmt", ["db3", "dir"])
+def test_a_messages_table_without_its_id_column_is_refused_on_both_paths(tmp_path: Path, fmt: str,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A sqlite3 storage whose schema text names the messages table's first column otherwise (a damaged byte in
+    ``sqlite_master``): rosbags' open counts ``messages.id`` and refuses the storage; our quick open skipped that
+    count and certified the log (fault campaign seed 121 case 275: exit 0 fast, 3 plain). Both refuse it now, in one
+    line naming the storage file (not its metadata.yaml), and so does watch."""
+    import sqlite3
+
+    log = FUZZ.write_run(FUZZ.base_run(violating=False), tmp_path / ("run.db3" if fmt == "db3" else "run"), fmt)
+    db = log if fmt == "db3" else next(log.glob("*.db3"))
+    con = sqlite3.connect(db)
+    try:
+        con.execute("PRAGMA writable_schema = ON")
+        con.execute("UPDATE sqlite_master SET sql = replace(sql, '  id INTEGER PRIMARY KEY', "
+                    "'  xd INTEGER PRIMARY KEY') WHERE name = 'messages'")
+        con.commit()
+    finally:
+        con.close()
+    for cmd in ("certify", "watch"):
+        code, _out, err = run([cmd, str(log), "--scenario", "nexus-sml", "--spec", SPEC], capsys)
+        assert code == 3, (cmd, err)
+        one_line_error(err, "id")
+        assert "metadata.yaml" not in err, err

@@ -356,7 +356,8 @@ def _read_indexed(path: Path, fmt: str, wanted: set[str], notes: list[str]) -> R
         reader.open()
     except _read_errors() as err:
         if path.is_dir() and isinstance(err, (KeyError, TypeError, AttributeError, *rosbag2_errors())) and not \
-                isinstance(err, sqlite3.DatabaseError | apsw.Error):
+                isinstance(err, sqlite3.DatabaseError | apsw.Error) and not isinstance(err.__cause__, apsw.Error):
+            # (an apsw error under rosbags' ReaderError: its storage file, not its metadata.yaml, is unreadable)
             raise LogReadError(f"unreadable {fmt} ROS2 bag: its metadata.yaml is incomplete or malformed "
                                f"({err.__class__.__name__}: {' '.join(str(err).split())[:160]})",
                                path=str(path)) from err

@@ -86,6 +86,8 @@ class QuickSqlite3Reader(Sqlite3Reader):
                 return MessageDefinition(_MSGDEF_FORMATS[m["encoding"]], m["msgdef"])
             return MessageDefinition(MessageDefinitionFormat.NONE, "")
 
+        for query in rosbags_open_queries(schema):  # compiled, not run: what they name must exist, as for rosbags
+            cur.execute(f"EXPLAIN {query}").fetchall()
         columns = ["topics.id", "name", "type", "serialization_format"]
         if schema >= 2:
             columns.append("offered_qos_profiles")
@@ -145,6 +147,21 @@ class QuickReader(Reader2):
     metadata.yaml checks, connections and message definitions, without the counting scans."""
 
     STORAGE_PLUGINS = {"dir": _QuickDirectoryReader, ".db3": QuickSqlite3Reader}  # noqa: RUF012
+
+
+def rosbags_open_queries(schema: int) -> tuple[str, str]:
+    """The two queries ``Sqlite3Reader.open`` (rosbags 0.11) runs over ``messages`` for a storage of ``schema``: its
+    connections with their message counts, and the time range. Not run here (each scans the table), only compiled
+    (``EXPLAIN``): a table whose schema a damaged byte changed (a column no longer named ``id``) fails to compile
+    them, and rosbags' open refuses the storage, so ours must too."""
+    columns = ["topics.id", "name", "type", "count(messages.id)", "serialization_format"]
+    if schema >= 2:
+        columns.append("offered_qos_profiles")
+    if schema >= 4:
+        columns.append("type_description_hash")
+    return (f"SELECT {', '.join(columns)} FROM topics LEFT JOIN messages ON topics.id == messages.topic_id "
+            f"GROUP BY topics.id ORDER BY topics.id",
+            "SELECT MIN(timestamp), MAX(timestamp) + 1, COUNT(*) FROM messages")
 
 
 def rosbags_query(ids: tuple[int, ...]) -> str:
