@@ -15,6 +15,7 @@ from __future__ import annotations
 import sqlite3
 import struct
 from collections.abc import Collection, Iterable, Iterator, Mapping
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -236,7 +237,7 @@ class SqliteFollower:
             raise LogReadError(f"cannot read the sqlite3 storage ({err})", path=str(self.path)) from err
         except sqlite3.DatabaseError as err:
             raise LogReadError(f"not a sqlite3 database ({err})", path=str(self.path)) from err
-        placed: list[tuple[tuple[object, ...], SalvagedMessage]] = []
+        placed: list[tuple[Any, SalvagedMessage]] = []  # (place in certify's order, message)
         for mid, tid, row_stamp, data in rows:
             # once per index entry that names the row (none: certify's reading yields no other row; two, where a
             # damaged entry names a row another entry names: certify's query reads it twice, at both entries' times)
@@ -244,11 +245,11 @@ class SqliteFollower:
                 name, typ = topics[tid]
                 if not sqlite_row_readable(stamp, data):  # certify's readers refuse the row alike
                     raise unreadable_row("sqlite3", name, str(self.path))
-                placed.append(((place,), SalvagedMessage(name, typ, False, stamp, data)))
+                placed.append((place, SalvagedMessage(name, typ, False, stamp, data)))
                 self.read_counts[name] = self.read_counts.get(name, 0) + 1
             self.last_id = max(self.last_id, int(mid))
         # in certify's order: the index walk's (without an index, its query sorts the rows by timestamp)
-        out = [m for _place, m in sorted(placed, key=lambda x: x[0])]
+        out = [m for _place, m in sorted(placed, key=itemgetter(0))]
         self.delivered += len(out)
         return out
 
@@ -284,9 +285,8 @@ def _index_times(con: sqlite3.Connection, rows: set[int], lo: int | None
     there and yields the messages in the walk's order, so a damaged index entry is the message's time and place for
     both (a timestamp changed in place leaves its entry where it was: the walk is then not in time order); an entry
     whose row id a damaged byte turned into another row's names that row a second time, and the query reads it
-    twice.
-    None when the storage has no timestamp index (certify's query then reads the rows' own times). The new rows'
-    entries are sought from their least time on; a row not found so (a damaged index is out of order) has the
+    twice. None when the storage has no timestamp index (certify's query then reads the rows' own times). The new
+    rows' entries are sought from their least time on; a row not found so (a damaged index is out of order) has the
     whole index walked."""
     if not rows:
         return {}
