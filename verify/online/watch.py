@@ -12,8 +12,9 @@ stream's time base, ``TwistStamped`` commands, clock corrections: the scenario's
 ``clock_offsets``, as ``--clock-offset`` gives them).
 
 Time rule: one for every stream (pose, nominal, commands, every signal topic), applied as certify applies it: to
-the whole stream, in certify's reading order (by log time for a log its recorder closed, whatever its format, else
-the file order; ``verify.online.streamtimes``, ``_Reading.by_log_time``):
+the whole stream, in certify's reading order (by log time for a ROS1 or MCAP log its recorder closed, else the file
+order; a sqlite3 storage in its timestamp index's order, as the follower delivers it; ``verify.online.streamtimes``,
+``_Reading.by_log_time``):
 - without ``follow`` (a log read once, complete or not) the messages are held until the end of the reading and
   pushed at once, each stream in certify's order: the rule sees each whole stream as certify does (the same time
   base for the pose -- ``auto``: ``verify.ingest.timebase.choose_time_base`` on the whole pose stream -- and the
