@@ -8,8 +8,9 @@ with the pose's base) -> output: the times of the poll's samples, and at the end
 certify-side ``TimeBase`` of the whole stream and the number of samples whose pushed time differs from it.
 
 certify applies the rule (stamp outliers re-timed, the header judged able or not to order the samples) to the whole
-stream in its reading order: by log time (stable, the file order breaking ties) for an MCAP log its recorder closed
-(its indexed reader's order), else the file order (``verify.online.watch`` says which). The rule looks at each
+stream in its reading order: by log time (stable, the file order breaking ties) for a ROS1 or MCAP log its recorder
+closed (its indexed reader's order), else the order the follower delivers (the file order; a sqlite3 storage's
+timestamp index walk) (``verify.online.watch`` says which). The rule looks at each
 stamp's neighbours in that order, so a poll read alone may get other times: each poll is timed with the samples read
 before it as context (the last ``CONTEXT``), and ``final`` re-applies the rule to every sample in certify's order. A
 log read once (``watch`` without ``--follow``) is pushed in one poll, in certify's order: the same times by
@@ -38,7 +39,7 @@ _PARTS = 64
 
 def reading_order(log_ns: IntArray, *, by_log_time: bool) -> IntArray:
     """The order in which certify reads a stream whose samples were read (by the follower) in file order: by log
-    time, stable (``by_log_time``: the indexed reader of a closed MCAP log), or the file order itself."""
+    time, stable (``by_log_time``: the indexed reader of a closed ROS1 or MCAP log), or the delivery order itself."""
     if not by_log_time:
         return np.arange(log_ns.shape[0], dtype=np.int64)
     return np.argsort(log_ns, kind="stable").astype(np.int64)
