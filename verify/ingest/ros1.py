@@ -150,20 +150,18 @@ class _File:
         return other
 
     def read(self, pos: int, n: int) -> bytes:
-        if pos < 0 or n < 0 or pos + n > self.size:
-            raise _UnusualError("read past the end of the file")
+        """The ``n`` bytes at ``pos``: from the read-ahead block (``block``), or read apart when they are a block or
+        more and not in it (the block is kept)."""
         rel = pos - self._block_pos
-        if rel >= 0 and rel + n <= len(self._block):
-            return self._block[rel : rel + n]
-        if n >= self.BLOCK_B:
+        if n >= self.BLOCK_B and not (rel >= 0 and rel + n <= len(self._block)):
+            if pos < 0 or pos + n > self.size:
+                raise _UnusualError("read past the end of the file")
             data = os.pread(self.fd, n, pos)
-        else:
-            self._block = os.pread(self.fd, min(self.BLOCK_B, self.size - pos), pos)
-            self._block_pos = pos
-            data = self._block[:n]
-        if len(data) != n:
-            raise _UnusualError("short read")
-        return data
+            if len(data) != n:
+                raise _UnusualError("short read")
+            return data
+        buf, base = self.block(pos, n)
+        return buf[pos - base : pos - base + n]
 
     def block(self, pos: int, n: int) -> tuple[bytes, int]:
         """(bytes, where they start in the file) holding the ``n`` bytes at ``pos``: the read-ahead block when it
