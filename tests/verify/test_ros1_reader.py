@@ -17,6 +17,7 @@ from tubempc.scenario import Scenario
 from verify.errors import TruncatedLogError
 from verify.ingest.decode import decode_pose
 from verify.ingest.raw import _read_indexed, read_raw
+from verify.ingest import ros1
 from verify.ingest.ros1 import _INDEX_HEADS, PayloadBuffer, read_ros1_fast
 from verify.ingest.ros1records import MAGIC, Op, record_at
 
@@ -236,9 +237,9 @@ def test_index_headers_seen_before_are_still_checked(tmp_path: Path, compression
     previous read) gives the same messages, and a record whose data length disagrees with its (known) header's
     count is declined as before."""
     path = _write(tmp_path / "run.bag", compression)
-    _INDEX_HEADS.clear()
+    _forget_shapes()
     cold = read_ros1_fast(path, {"/pose", "/status"})
-    assert cold is not None and _INDEX_HEADS  # the headers are known now
+    assert cold is not None and _INDEX_HEADS and ros1._INDEX_LAYOUTS  # the headers and layouts are known now
     warm = read_ros1_fast(path, {"/pose", "/status"})
     assert warm is not None
     for topic, (msgtype, has_def, log_ns, payloads) in cold.topics.items():
@@ -258,6 +259,73 @@ def test_index_headers_seen_before_are_still_checked(tmp_path: Path, compression
     bad.write_bytes(bytes(damaged))
     assert bytes(damaged[pos + 4 : pos + 4 + hlen]) in _INDEX_HEADS  # known: its data length is checked all the same
     assert read_ros1_fast(bad, {"/pose", "/status"}) is None
+
+
+def _forget_shapes() -> None:
+    """The fast reader's memory of record heads it has read in full (index headers, index layouts, chunk heads)."""
+    _INDEX_HEADS.clear()
+    ros1._INDEX_LAYOUTS.clear()
+    ros1._CHUNK_HEADS.clear()
+
+
+class _Forgetful(dict[bytes, Any]):
+    """A memory that keeps nothing."""
+
+    def __setitem__(self, key: bytes, value: Any) -> None:
+        pass
+
+
+def _outcome(path: Path) -> Any:
+    got = read_ros1_fast(path, {"/pose", "/status"})
+    if got is None:
+        return None
+    return {t: (m, d, ns.tolist(), list(p)) for t, (m, d, ns, p) in got.topics.items()}, got.available
+
+
+def _heads_and_index(data: bytes) -> list[int]:
+    """Every byte position of the bag's record heads and index data records outside its chunks' data (chunk heads,
+    index data records, connection and chunk info records)."""
+    bag = record_at(data, len(MAGIC), len(data))
+    out: list[int] = []
+    pos = int.from_bytes(bag.header["index_pos"], "little")
+    out += range(pos, len(data))
+    pos = bag.end
+    while pos < int.from_bytes(bag.header["index_pos"], "little"):
+        rec = record_at(data, pos, len(data), head_only=True)
+        out += range(pos, rec.data_start if rec.op == Op.CHUNK else rec.end)
+        pos = rec.end
+    return out
+
+
+@pytest.mark.parametrize("compression", [None, "lz4"])
+def test_record_heads_matched_as_they_are_parsed(tmp_path: Path, compression: str | None,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Chunk heads, chunk info records and a chunk's index data records that repeat, but for their values, ones read
+    in full before are matched (one compiled pattern), not parsed. One rule either way: a bag with one byte changed
+    in any of them (300 places, each to two values) reads the same -- the same messages, or declined -- with every
+    head known beforehand (from the undamaged bag) as with no head ever remembered (each parsed in full)."""
+    path = _write(tmp_path / "run.bag", compression, chunk_bytes=2048)
+    data = path.read_bytes()
+    places = _heads_and_index(data)
+    rng = np.random.default_rng(7)
+    bad = tmp_path / "bad.bag"
+    declined = 0
+    for at in rng.choice(places, size=300, replace=False).tolist():
+        for value in (data[at] ^ 0x01, data[at] ^ 0x80):
+            bad.write_bytes(data[:at] + bytes([value]) + data[at + 1 :])
+            _forget_shapes()
+            assert _outcome(path) is not None  # every head known
+            warm = _outcome(bad)
+            with monkeypatch.context() as m:  # nothing remembered: every head parsed in full
+                m.setattr(ros1._Shape, "learn", staticmethod(lambda *_a, **_k: None))
+                m.setattr(ros1._Layout, "learn", staticmethod(lambda *_a, **_k: None))
+                m.setattr(ros1, "_INDEX_HEADS", _Forgetful())
+                _forget_shapes()
+                cold = _outcome(bad)
+            assert warm == cold, f"byte {at} -> {value:#x}"
+            declined += cold is None
+    assert declined > 100  # the test has teeth: most changed bytes are declined
+    _forget_shapes()
 
 
 def _chunk_infos_reversed(data: bytes) -> bytes:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
 import struct
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -226,25 +227,115 @@ def _connections(f: _File, pos: int, count: int) -> tuple[list[_Conn], int]:
 
 def _chunk_infos(f: _File, pos: int, count: int) -> Iterator[tuple[int, int, frozenset[int]]]:
     """(chunk position, number of connections in it, their ids) per chunk, in the index's order (read as they are
-    needed: chunks are read while the rest of the index is parsed)."""
+    needed: chunks are read while the rest of the index is parsed). A record whose bytes repeat the last one read
+    in full but for its chunk position, times and connection list (``_Shape``) is matched, not parsed again."""
+    shapes: list[_Shape] = []  # newest first: chunks hold different sets of connections
     for _ in range(count):
+        m = None
+        for shape in shapes:
+            if pos + shape.size <= f.size:
+                buf, base = f.block(pos, shape.size)
+                if (m := shape.pattern.match(buf, pos - base)) is not None:
+                    break
+        if m is not None:
+            chunk_pos, data = m.group(1, 4)
+            yield int.from_bytes(chunk_pos, "little"), shape.count, _connection_ids(data)
+            pos += shape.size
+            continue
+        at = pos
         header, start, dlen, pos = f.record(pos)
         _op(header, _OP_CHUNK_INFO)
         try:  # the record layer's rule (rosbags refuses an index it breaks; then rosbags decides)
-            yield chunk_info_of(header, f.read(start, dlen))
+            info = chunk_info_of(header, f.read(start, dlen))
         except MalformedError as err:
             raise _UnusualError(str(err)) from None
+        yield info
+        if info[1] and (learnt := _Shape.learn(f.read(at, start - at), _CHUNK_INFO_OPEN, dlen)) is not None:
+            learnt.count = info[1]
+            shapes = [learnt, *shapes[:7]]
+
+
+#: a chunk info record's fields that differ from chunk to chunk (with their sizes)
+_CHUNK_INFO_OPEN = {"chunk_pos": 8, "start_time": 8, "end_time": 8}
+
+
+def _connection_ids(data: bytes) -> frozenset[int]:
+    """A chunk info record's connection ids (its data: (connection, message count) u32 pairs)."""
+    return frozenset(struct.unpack(f"<{len(data) // 4}I", data)[0::2])
+
+
+class _Shape:
+    """A record's head (header length, header, data length) whose bytes a later record repeats but for the values
+    of some header fields (``open``, each of a fixed size): such a record parses as the one it was learned from
+    with those values, so it is matched (one compiled pattern, no field parsing) instead of parsed. Groups: the open
+    values in header order, then the data length (``dlen`` None: open) or the data (``dlen`` given: that many bytes).
+    A header that names a field twice has no shape (its parse keeps the last)."""
+
+    __slots__ = ("count", "pattern", "size")
+
+    def __init__(self, pattern: re.Pattern[bytes], size: int) -> None:
+        self.pattern, self.size, self.count = pattern, size, 0
+
+    @staticmethod
+    def learn(head: bytes, open_fields: dict[str, int], dlen: int | None) -> _Shape | None:
+        """``head``: a record's bytes up to its data, read in full and accepted."""
+        hlen = int.from_bytes(head[:4], "little")
+        if len(head) != hlen + 8:
+            return None
+        parts, names, pos = [re.escape(head[:4])], set(), 4
+        while pos < 4 + hlen:
+            stop = pos + 4 + int.from_bytes(head[pos : pos + 4], "little")
+            eq = head.find(b"=", pos + 4, stop)
+            name = head[pos + 4 : eq]
+            if eq < 0 or name in names:
+                return None
+            names.add(name)
+            size = open_fields.get(name.decode("ascii", "replace"))
+            if size is None:
+                parts.append(re.escape(head[pos:stop]))
+            elif stop - eq - 1 == size:
+                parts.append(re.escape(head[pos : eq + 1]) + b"(.{%d})" % size)
+            else:
+                return None
+            pos = stop
+        if dlen is None:
+            parts.append(b"(.{4})")
+            return _Shape(re.compile(b"".join(parts), re.DOTALL), hlen + 8)
+        parts.append(re.escape(head[-4:]) + b"(.{%d})" % dlen)
+        return _Shape(re.compile(b"".join(parts), re.DOTALL), hlen + 8 + dlen)
 
 
 def _chunk_head(f: _File, pos: int) -> tuple[str, int, int, int, int]:
-    """The chunk record at ``pos``: (compression, uncompressed size, data start, data length, next position)."""
+    """The chunk record at ``pos``: (compression, uncompressed size, data start, data length, next position). A
+    chunk record whose head repeats one read in full before but for its size and data length (``_Shape``) is
+    matched, not parsed again."""
+    for shape, compression in _CHUNK_HEADS:
+        if pos + shape.size <= f.size:
+            buf, base = f.block(pos, shape.size)
+            m = shape.pattern.match(buf, pos - base)
+            if m is not None:
+                size, dlen = m.group(1, 2)
+                start = pos + shape.size
+                n = int.from_bytes(dlen, "little")
+                if start + n > f.size:
+                    raise _UnusualError("cut record")
+                return compression, int.from_bytes(size, "little"), start, n, start + n
     header, start, dlen, nxt = f.record(pos)
     _op(header, _OP_CHUNK)
     compression = header.get("compression", b"").decode()
     size = _u32(header.get("size", b""), "size")
     if compression not in ("none", "bz2", "lz4"):
         raise _UnusualError(f"compression {compression!r}")
+    shape = _Shape.learn(f.read(pos, start - pos), {"size": 4}, None)
+    if shape is not None:
+        if len(_CHUNK_HEADS) >= 8:
+            _CHUNK_HEADS.pop()
+        _CHUNK_HEADS.insert(0, (shape, compression))
     return compression, size, start, dlen, nxt
+
+
+#: chunk record heads read in full (newest first), with their compression: most bags repeat one
+_CHUNK_HEADS: list[tuple[_Shape, str]] = []
 
 
 def _chunk_body(f: _File, compression: str, size: int, start: int, dlen: int) -> bytes:
@@ -296,41 +387,51 @@ def _fetch(f: _File, head: tuple[str, int, int, int], mine: dict[int, bytes], to
     return _chunk_body(f, compression, size, start, dlen)
 
 
-def _copy_records(chunk: bytes, mine: dict[int, bytes]) -> Records:
+def _copy_records(chunk: bytes, mine: dict[int, bytes]) -> _Copied:
     """The wanted records copied out of a whole chunk, by offset: plain Python (a chunk holds a few dozen wanted
-    records; numpy's per-call cost would exceed the work). Each record must end before the next wanted one (or the
-    chunk) ends (``verify.ingest.records.ros1_records_back_to_back``)."""
+    records; numpy's per-call cost would exceed the work; ``_joined`` makes the arrays once for all chunks). Each
+    record must end before the next wanted one (or the chunk) ends
+    (``verify.ingest.records.ros1_records_back_to_back``)."""
     entries = sorted((o, sec * 1_000_000_000 + nsec, cid, k) for cid, index in mine.items()
                      for k, (sec, nsec, o) in enumerate(struct.iter_unpack(_ENTRY_FORMAT, index)))
     if not entries:
-        empty = np.zeros(0, dtype=np.int64)
-        return np.zeros(0, dtype=np.uint8), empty, empty, empty, empty
+        return b"", [], (), (), ()
     offs, times, cids, ranks = zip(*entries, strict=True)
     try:
         sizes = ros1_records_back_to_back(chunk, list(offs))
     except SpanError:
         raise _UnusualError("index offset outside its chunk or records overlap") from None
-    pos = np.zeros(len(sizes), dtype=np.int64)
-    if len(sizes) > 1:
-        np.cumsum(sizes[:-1], out=pos[1:])
-    data = b"".join([chunk[o : o + n] for o, n in zip(offs, sizes, strict=True)])
-    return (np.frombuffer(data, dtype=np.uint8), pos, np.array(cids, dtype=np.int64), np.array(times, dtype=np.int64),
-            np.array(ranks, dtype=np.int64))
+    return b"".join([chunk[o : o + n] for o, n in zip(offs, sizes, strict=True)]), sizes, cids, times, ranks
 
 
-def _joined(pieces: list[Records]) -> Records:
-    """The chunks' compact records as one buffer (positions shifted), in the index's order of chunks (each record's
-    order key gains its chunk's rank)."""
+#: a chunk's wanted records as ``_copy_records`` copies them: the records back to back, their sizes, connection
+#: ids, log times and ranks in their connection's index data record of the chunk
+_Copied = tuple[bytes, Sequence[int], Sequence[int], Sequence[int], Sequence[int]]
+
+
+def _as_copied(records: Records) -> _Copied:
+    """Records read one by one (an uncompressed chunk among compressed ones) in ``_copy_records``' form."""
+    u8, pos, cid, times, rank = records
+    return u8.tobytes(), np.diff(pos, append=u8.shape[0]).tolist(), cid.tolist(), times.tolist(), rank.tolist()
+
+
+def _joined(pieces: list[_Copied]) -> Records:
+    """The chunks' copied records as one buffer, with each record's position, in the index's order of chunks (each
+    record's order key gains its chunk's rank): one array per field for all chunks."""
     if not pieces:
         empty = np.zeros(0, dtype=np.int64)
         return np.zeros(0, dtype=np.uint8), empty, empty, empty, empty
-    shift = np.cumsum([0] + [piece[0].shape[0] for piece in pieces[:-1]])
-    counts = [piece[1].shape[0] for piece in pieces]
-    chunk_rank = np.repeat(np.arange(len(pieces), dtype=np.int64) << 32, counts)
-    return (np.concatenate([piece[0] for piece in pieces]),
-            np.concatenate([piece[1] + k for piece, k in zip(pieces, shift.tolist(), strict=True)]),
-            np.concatenate([piece[2] for piece in pieces]), np.concatenate([piece[3] for piece in pieces]),
-            np.concatenate([piece[4] for piece in pieces]) + chunk_rank)
+
+    def column(k: int) -> IntArray:
+        return np.fromiter(itertools.chain.from_iterable(piece[k] for piece in pieces), dtype=np.int64)
+
+    sizes = column(1)
+    pos = np.zeros(sizes.shape[0], dtype=np.int64)
+    if sizes.shape[0] > 1:
+        np.cumsum(sizes[:-1], out=pos[1:])
+    chunk_rank = np.repeat(np.arange(len(pieces), dtype=np.int64) << 32, [len(piece[1]) for piece in pieces])
+    data = np.frombuffer(b"".join([piece[0] for piece in pieces]), dtype=np.uint8)
+    return data, pos, column(2), column(3), column(4) + chunk_rank
 
 
 @dataclass(slots=True)
@@ -419,19 +520,28 @@ def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selec
                   ) -> tuple[dict[int, bytes], int]:
     """A chunk's index data records (right after the chunk record; the record layer's ``index_data``) -> the wanted
     connections' entries and the number of records in the chunk; the connections must be those its chunk info
-    names, each once. A header seen before (the same bytes) is not parsed again: what its fields decide (op,
-    version, connection, count) is known; the data length, the record's end and the entries' size are checked for
-    every record, as ``index_data`` does (read from the read-ahead block: a chunk's index records are a few hundred
-    bytes)."""
+    names, each once. Index records whose heads repeat, in order, those of an earlier chunk with these connections
+    (``_Layout``: their header bytes and data lengths) are matched in one call; else each record is read: a header
+    seen before (the same bytes) is not parsed again (what its fields decide -- op, version, connection, count -- is
+    known); the data length, the record's end and the entries' size are checked for every record, as
+    ``index_data`` does (read from the read-ahead block: a chunk's index records are a few hundred bytes)."""
+    for layout in _INDEX_LAYOUTS.get(ids, ()):
+        if after + layout.size <= f.size:
+            buf, base = f.block(after, layout.size)
+            m = layout.pattern.match(buf, after - base)
+            if m is not None:
+                return {cid: m.group(g) for g, cid in layout.groups if cid in selected}, layout.total
     mine: dict[int, bytes] = {}
     seen: set[int] = set()
+    heads: list[tuple[bytes, int, int]] = []  # each record's head bytes, connection id and data length
     total, pos = 0, after
     for _ in range(n_conns):
         buf, base = f.block(pos, 4)
         (hlen,) = struct.unpack_from("<I", buf, pos - base)
         buf, base = f.block(pos, hlen + 8)
         rel = pos - base
-        known = _INDEX_HEADS.get(buf[rel + 4 : rel + 4 + hlen])
+        head = buf[rel : rel + hlen + 8]
+        known = _INDEX_HEADS.get(head[4 : 4 + hlen])
         if known is None:
             cid, entries, pos = _index_record(f, pos)
             n = len(entries) // INDEX_ENTRY.itemsize
@@ -450,12 +560,46 @@ def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selec
         if cid in seen:
             raise _UnusualError("two index records for one connection in a chunk")
         seen.add(cid)
+        heads.append((head, cid, n * INDEX_ENTRY.itemsize))
         total += n
         if cid in selected:
             mine[cid] = entries
     if seen != ids:
         raise _UnusualError("chunk info and index records disagree")
+    _Layout.learn(ids, heads, total)
     return mine, total
+
+
+class _Layout:
+    """A chunk's index data records as an earlier chunk with the same connections had them, read record by record
+    and accepted: their heads (header length, header, data length) in order, each followed by its entries. A
+    chunk whose index region repeats those heads in that order (one compiled pattern, its entries as groups) holds
+    the same records with other entries: what the record-by-record reading decides of it is decided (each header
+    known, each data length its count's, each connection once, the chunk info's connections)."""
+
+    __slots__ = ("groups", "pattern", "size", "total")
+
+    def __init__(self, heads: list[tuple[bytes, int, int]], total: int) -> None:
+        self.pattern = re.compile(b"".join(re.escape(h) + b"(.{%d})" % n for h, _c, n in heads), re.DOTALL)
+        self.groups = [(g, cid) for g, (_h, cid, _n) in enumerate(heads, start=1)]
+        self.size = sum(len(h) + n for h, _c, n in heads)
+        self.total = total
+
+    @staticmethod
+    def learn(ids: frozenset[int], heads: list[tuple[bytes, int, int]], total: int) -> None:
+        known = _INDEX_LAYOUTS.setdefault(ids, [])
+        if len(_INDEX_LAYOUTS) > _INDEX_HEADS_MAX:
+            _INDEX_LAYOUTS.clear()
+            _INDEX_LAYOUTS[ids] = known
+        if len(known) >= _LAYOUTS_PER_CONNECTIONS:
+            known.pop()
+        known.insert(0, _Layout(heads, total))
+
+
+#: per set of connections (a chunk info's), the index data record layouts of the last chunks read record by record
+#: (newest first): message counts per chunk vary a little, so a bag repeats a few
+_INDEX_LAYOUTS: dict[frozenset[int], list[_Layout]] = {}
+_LAYOUTS_PER_CONNECTIONS = 8
 
 
 #: index data record header bytes -> (connection id, entry count), for headers that passed ``_index_record``'s
@@ -565,12 +709,12 @@ def _parse_chunked(f: _File, planned: Iterable[_Plan], selected: dict[int, _Conn
     (the hand-over costs ~15 us of Python per task). The records are parsed once all are in: parsed here every 64
     chunks while the next were decompressed, a call took ~7 ms more (the parse competes with the decompressing
     threads for the two cores, and no chunk is handed over while it runs)."""
-    def fetched(batch: list[_Plan]) -> list[Records]:
+    def fetched(batch: list[_Plan]) -> list[_Copied]:
         g = f.fork()
         out = []
         for item in batch:
             piece = _fetch(g, item.head, item.mine, item.total)
-            out.append(piece if isinstance(piece, tuple) else _copy_records(piece, item.mine))
+            out.append(_as_copied(piece) if isinstance(piece, tuple) else _copy_records(piece, item.mine))
         return out
 
     def batches(items: Iterable[_Plan]) -> Iterator[list[_Plan]]:
