@@ -15,9 +15,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from tubempc.scenario import Scenario
 from verify.errors import TruncatedLogError
+from verify.ingest import ros1
 from verify.ingest.decode import decode_pose
 from verify.ingest.raw import _read_indexed, read_raw
-from verify.ingest import ros1
 from verify.ingest.ros1 import _INDEX_HEADS, PayloadBuffer, read_ros1_fast
 from verify.ingest.ros1records import MAGIC, Op, record_at
 

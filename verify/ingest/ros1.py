@@ -326,11 +326,11 @@ def _chunk_head(f: _File, pos: int) -> tuple[str, int, int, int, int]:
     size = _u32(header.get("size", b""), "size")
     if compression not in ("none", "bz2", "lz4"):
         raise _UnusualError(f"compression {compression!r}")
-    shape = _Shape.learn(f.read(pos, start - pos), {"size": 4}, None)
-    if shape is not None:
+    learnt = _Shape.learn(f.read(pos, start - pos), {"size": 4}, None)
+    if learnt is not None:
         if len(_CHUNK_HEADS) >= 8:
             _CHUNK_HEADS.pop()
-        _CHUNK_HEADS.insert(0, (shape, compression))
+        _CHUNK_HEADS.insert(0, (learnt, compression))
     return compression, size, start, dlen, nxt
 
 
