@@ -245,3 +245,55 @@ def test_mcap_uncompressed_chunks_are_read_message_by_message(tmp_path: Path, mo
     assert got is not None and got["/pose"].log_ns.shape[0] == 20
     assert read_b[0] < mcap.stat().st_size // 50, f"read {read_b[0]} of {mcap.stat().st_size} bytes"
     _assert_same(bag, ("/pose",), monkeypatch)
+
+
+def test_mcap_chunks_of_few_records_read_as_the_vectorized_walk_reads_them(tmp_path: Path) -> None:
+    """A chunk of few records is walked and read in plain Python (``_few_messages``), one of many with numpy
+    (``_walked_messages``): one rule either way. The records of a chunk (schema and channel records among its
+    messages), each byte of 250 places changed to two values: both give the same messages (channel, log time,
+    payload, in the same order) or both decline."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    from verify.ingest import mcap as fast_mcap
+
+    bag = _write(tmp_path / "bag", StoragePlugin.MCAP, chunk_every=40)
+    storage = McapReader(next(bag.glob("*.mcap")))
+    storage.open()
+    try:
+        known = {int(cid): str(ch.topic) for cid, ch in storage.channels.items()}
+        chunk = storage.chunks[0]
+    finally:
+        storage.close()
+    at = int(chunk.chunk_start_offset) + fast_mcap._CHUNK_DATA_AT + len(chunk.compression)
+    records = next(bag.glob("*.mcap")).read_bytes()[at : at + int(chunk.uncompressed_size)]
+    wanted = {cid for cid, topic in known.items() if topic in ("/pose", "/cmd")}
+    tables = {"is_known": fast_mcap._channel_table(known), "is_wanted": fast_mcap._channel_table(wanted)}
+
+    def outcome(fn: object, raw: bytes) -> object:
+        try:
+            channel, log_ns, data, lens = fast_mcap._copied_out(fn(raw))  # type: ignore[operator]
+        except (fast_mcap._UnusualError, fast_mcap.MalformedError) as err:
+            return type(err).__name__
+        return channel.tolist(), log_ns.tolist(), data.tobytes(), lens.tolist()
+
+    def few(raw: bytes) -> object:
+        return fast_mcap._few_messages(raw, known, wanted)
+
+    def walked(raw: bytes) -> object:
+        return fast_mcap._walked_messages(raw, None, known, **tables)
+
+    intact = outcome(few, records)
+    assert intact == outcome(walked, records) and isinstance(intact, tuple) and len(intact[0]) > 10
+    rng = np.random.default_rng(3)
+    declined = 0
+    for pos in rng.choice(len(records), size=250, replace=False).tolist():
+        for value in (records[pos] ^ 0x01, records[pos] ^ 0xF0):
+            damaged = records[:pos] + bytes([value]) + records[pos + 1 :]
+            got = outcome(few, damaged)
+            assert got == outcome(walked, damaged), f"byte {pos} -> {value:#x}"
+            declined += isinstance(got, str)
+    assert declined > 20  # the test has teeth: record heads and fixed fields are hit
+    # a message record too short for its fixed fields (channel, sequence, log and publish times), walked all the same
+    for n in (0, 2, 21):
+        short = records + bytes([5]) + n.to_bytes(8, "little") + bytes(n)
+        assert outcome(few, short) == outcome(walked, short) == "FastPathError"

@@ -28,6 +28,7 @@ The message index itself is only a hint: nothing is read from it that the walk d
 
 from __future__ import annotations
 
+import itertools
 import os
 import struct
 import zlib
@@ -63,6 +64,7 @@ from verify.ingest.records import (
     read_records,
     read_scratch,
     retain_freed_memory,
+    walk_steps,
 )
 
 __all__ = ["TopicMessages", "gather", "read_mcap_storage"]
@@ -148,12 +150,15 @@ def _read(storage: McapReader, connections: Collection[Connection]) -> dict[str,
     return {t: _merge(p) for t, p in _by_topic(pieces, len(topics), topics).items()}
 
 
-def _copied_out(found: tuple[IntArray, IntArray, IntArray, IntArray, U8Array]
+def _copied_out(found: tuple[IntArray, IntArray, IntArray | None, IntArray, U8Array]
                 ) -> tuple[IntArray, IntArray, U8Array, IntArray]:
-    """A chunk's wanted messages (channel, log time, payload starts and lengths in ``u8``) -> the same with the
-    payloads packed into their own buffer: done in the thread that decompressed the chunk, so the reading thread only
-    collects, and the decompressed chunk is dropped where it was made."""
+    """A chunk's wanted messages (channel, log time, payload starts and lengths in ``u8``; no starts: ``u8`` holds
+    just the payloads, back to back) -> the same with the payloads packed into their own buffer: done in the thread
+    that decompressed the chunk, so the reading thread only collects, and the decompressed chunk is dropped where it
+    was made."""
     channel, log_ns, starts, lens, u8 = found
+    if starts is None:  # packed already (``_few_messages``)
+        return channel, log_ns, u8, lens
     return channel, log_ns, gather(u8, starts, lens), lens
 
 
@@ -219,7 +224,7 @@ def _decompress(data: bytes | memoryview, compression: str, usize: int, crc: int
 
 def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], known: dict[int, str], *,
                     is_known: npt.NDArray[np.bool_], is_wanted: npt.NDArray[np.bool_]
-                    ) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
+                    ) -> tuple[IntArray, IntArray, IntArray | None, IntArray, U8Array]:
     """The wanted messages of one chunk in rosbags' order: channel, log time, payload start and length in the
     returned bytes (the decompressed chunk, or only its wanted records: ``_sparse``). ``is_known``, ``is_wanted``:
     per channel id, whether the summary declares it, whether it is wanted (``_channel_table``)."""
@@ -227,19 +232,33 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], know
     usize = int(chunk.uncompressed_size)
     if not chunk.compression and (sparse := _sparse(fd, size, [chunk], wanted, known)) is not None:
         return sparse  # only its wanted records read
-    (crc,) = struct.unpack("<I", _pread(fd, size, start + _CHUNK_CRC_AT, 4))
     at, csize = start + _CHUNK_DATA_AT + len(chunk.compression), int(chunk.compressed_size)
     if at + csize > size:
         raise _UnusualError("read past the end of the file")
-    # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer, then decompressed
-    compressed = _pread(fd, size, at, csize) if not chunk.compression else read_scratch(fd, at, csize)
+    # uncompressed: its own buffer (kept while parsed); compressed: read into a reused buffer (from its CRC on: one
+    # read), then decompressed
+    if not chunk.compression:
+        (crc,) = struct.unpack("<I", _pread(fd, size, start + _CHUNK_CRC_AT, 4))
+        compressed: bytes | memoryview = _pread(fd, size, at, csize)
+    else:
+        head = at - (start + _CHUNK_CRC_AT)
+        stored = read_scratch(fd, start + _CHUNK_CRC_AT, head + csize)
+        (crc,) = struct.unpack_from("<I", stored)
+        compressed = stored[head:]
     raw = _decompress(compressed, chunk.compression, usize, crc)
     del compressed
+    if sum(int(n) for n in chunk.channel_count.values()) <= _STEP_RECORDS:
+        return _few_messages(raw, known, wanted)
+    # the message index as hints where the chunk holds many records (a hint never changes the walk's result)
+    return _walked_messages(raw, _index_hints(fd, size, chunk, usize), known, is_known=is_known, is_wanted=is_wanted)
+
+
+def _walked_messages(raw: bytes, hints: IntArray | None, known: dict[int, str], *, is_known: npt.NDArray[np.bool_],
+                     is_wanted: npt.NDArray[np.bool_]) -> tuple[IntArray, IntArray, IntArray, IntArray, U8Array]:
+    """A decompressed chunk's wanted messages (``_chunk_messages``), its records walked with numpy (``hints``:
+    record starts from its message index)."""
     u8 = np.frombuffer(raw, dtype=np.uint8)
-    # the message index as hints only where the chunk holds many records: stepping over a few dozen records one by
-    # one costs less than reading and sorting the index (a hint never changes the walk's result)
-    many = sum(int(n) for n in chunk.channel_count.values()) > _STEP_RECORDS
-    pos, op, length = chunk_records(raw, _index_hints(fd, size, chunk, usize) if many else None)
+    pos, op, length = chunk_records(raw, hints)
     _parse_others(raw, pos, op, length, known)
     is_msg = op == _OP_MESSAGE
     pos, length = pos[is_msg], length[is_msg]
@@ -255,6 +274,39 @@ def _chunk_messages(fd: int, size: int, chunk: ChunkInfo, wanted: set[int], know
         perm = np.argsort(log_ns, kind="stable")  # rosbags: sorted(..., key=timestamp), stable
         pos, length, channel, log_ns = pos[perm], length[perm], channel[perm], log_ns[perm]
     return channel, log_ns, pos + 9 + _MSG_HEAD, length - _MSG_HEAD, u8
+
+
+def _few_messages(raw: bytes, known: dict[int, str], wanted: set[int]
+                  ) -> tuple[IntArray, IntArray, None, IntArray, U8Array]:
+    """``_chunk_messages`` for a chunk of few records (``_STEP_RECORDS``), in plain Python: numpy's per-call cost
+    exceeds the work on a few dozen records. The same walk (the record layer's steps, ``walk_steps``), the same
+    checks (other records parse, messages hold their fixed fields on a declared channel, log times below 2**63)
+    and the same result, its payloads already packed (no starts: ``_copied_out`` passes them on)."""
+    starts, ends = walk_steps(raw, MCAP)
+    view = memoryview(raw)
+    unpack = struct.unpack_from
+    found: list[tuple[int, int, int, int]] = []
+    for pos, end in zip(starts, ends, strict=True):
+        op = raw[pos]
+        if op == _OP_MESSAGE:
+            n = end - pos - RECORD_HEAD
+            if n < _MSG_HEAD:
+                raise _UnusualError("message record shorter than its fixed fields")  # rosbags: struct.error
+            channel, log_ns = unpack("<H4xQ", raw, pos + RECORD_HEAD)
+            if channel not in known:
+                raise _UnusualError("a message on a channel the summary does not declare")  # the scan refuses it
+            if log_ns >= 1 << 63:
+                raise _UnusualError("value beyond int64")
+            if channel in wanted:
+                found.append((log_ns, channel, pos + RECORD_HEAD + _MSG_HEAD, n - _MSG_HEAD))
+        elif op in _PARSED_OPS and not _parses(op, view[pos + RECORD_HEAD : end], known):
+            raise _UnusualError("a malformed record in a chunk")
+    if any(a[0] > b[0] for a, b in itertools.pairwise(found)):
+        found.sort(key=lambda m: m[0])  # rosbags: sorted(..., key=timestamp), stable
+    data = np.frombuffer(b"".join([raw[s : s + n] for _t, _c, s, n in found]), dtype=np.uint8)
+    lens = np.array([m[3] for m in found], dtype=np.int64)
+    return (np.array([m[1] for m in found], dtype=np.int64), np.array([m[0] for m in found], dtype=np.int64),
+            None, lens, data)
 
 
 def _sparse(fd: int, size: int, chunks: list[ChunkInfo], wanted: set[int], known: dict[int, str]

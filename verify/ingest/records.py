@@ -184,6 +184,17 @@ _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 
 
+def walk_steps(buf: bytes | memoryview, kind: str) -> tuple[list[int], list[int]]:
+    """``walk_chain`` without hints, as Python lists (start and end of every record): for a chunk of a few dozen
+    records, read on in plain Python."""
+    view = memoryview(buf)
+    starts: list[int] = []
+    ends: list[int] = []
+    if view:
+        _step(view, kind, 0, len(view), until=len(view), starts=starts, ends=ends)
+    return starts, ends
+
+
 def _step(view: memoryview, kind: str, pos: int, size: int, *, until: int, starts: list[int], ends: list[int]) -> int:
     """Records stepped over one by one from ``pos`` (appended to ``starts``/``ends``) until one ends at or past
     ``until`` -> the position after the last; ``MalformedError`` when a record does not end by ``size``."""
