@@ -7,7 +7,11 @@ way unusual (then the caller reads it with ``rosbags``, which also decides trunc
 Reading follows the format (wiki.ros.org/Bags/Format/2.0): the bag header record gives ``index_pos``; there the
 connection records (topic, type, definition) and chunk info records (chunk position, message count per connection)
 are read; each chunk record (compression none / bz2 / lz4, uncompressed size) is followed by one index data record
-per connection listing ``(time, offset)`` of its messages inside the uncompressed chunk. For the wanted connections
+per connection listing ``(time, offset)`` of its messages inside the uncompressed chunk. A bag repeats these heads
+from chunk to chunk with other values (a chunk's position, size, times, entries): a chunk info record, chunk head or
+run of index data records whose bytes repeat one read in full before, but for those values, is matched by one
+compiled pattern (``_Shape``, ``_Layout``) instead of parsed field by field; what the full reading decides of it is
+decided by the match (the test draws damaged bytes across both). For the wanted connections
 the message data records are located at those offsets and checked with numpy (same header layout, ``op`` = 2, the
 right connection id, time equal to the index), and the payloads are copied out with strided views (no per-message
 Python object). Messages are ordered as ``rosbags`` yields them (``_ordered``: by time, then connection, chunk
