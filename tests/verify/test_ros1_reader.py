@@ -265,6 +265,7 @@ def _forget_shapes() -> None:
     """The fast reader's memory of record heads it has read in full (index headers, index layouts, chunk heads)."""
     _INDEX_HEADS.clear()
     ros1._INDEX_LAYOUTS.clear()
+    ros1._LAYOUTS_SEEN.clear()
     ros1._CHUNK_HEADS.clear()
 
 
@@ -361,3 +362,19 @@ def test_chunks_listed_out_of_file_order(tmp_path: Path, compression: str | None
     assert xs != sorted(xs)  # the test has teeth: rosbags' order among ties is neither writing nor file order
     _same_as_rosbags(path, {"/pose"})
     _same_as_rosbags(flipped, {"/pose"})
+
+
+def test_an_index_layout_is_remembered_once_it_repeats() -> None:
+    """A chunk's run of index records is compiled into a pattern (~200 us, ten chunks' reading) only when a second
+    chunk repeats it: a bag whose message counts never repeat from chunk to chunk compiles none."""
+    _forget_shapes()
+    ids = frozenset({1, 2})
+    heads = [(b"\x04\x00\x00\x00head", 1, 12), (b"\x04\x00\x00\x00tail", 2, 24)]
+    ros1._Layout.learn(ids, heads, 3)
+    assert not ros1._INDEX_LAYOUTS
+    ros1._Layout.learn(ids, [(b"\x04\x00\x00\x00head", 1, 24), (b"\x04\x00\x00\x00tail", 2, 24)], 4)
+    assert not ros1._INDEX_LAYOUTS  # other heads: seen once each
+    ros1._Layout.learn(ids, heads, 3)
+    (layout,) = ros1._INDEX_LAYOUTS[ids]
+    assert layout.total == 3 and layout.size == 8 + 12 + 8 + 24
+    _forget_shapes()
