@@ -595,7 +595,7 @@ class _Layout:
         """Remember the layout of a chunk's index records read record by record, once it is seen a second time (a
         pattern costs ~200 us to compile, ten chunks' reading: a bag whose message counts never repeat from chunk
         to chunk compiles none)."""
-        key = b"".join(h for h, _c, _n in heads)
+        key = tuple(heads)
         if _LAYOUTS_SEEN.pop(key, None) is None:
             if len(_LAYOUTS_SEEN) >= _INDEX_HEADS_MAX:
                 _LAYOUTS_SEEN.clear()
@@ -614,8 +614,8 @@ class _Layout:
 #: (newest first): message counts per chunk vary a little, so a bag repeats a few
 _INDEX_LAYOUTS: dict[frozenset[int], list[_Layout]] = {}
 _LAYOUTS_PER_CONNECTIONS = 8
-#: layouts read record by record once (their heads' bytes), not yet remembered
-_LAYOUTS_SEEN: dict[bytes, bool] = {}
+#: layouts read record by record once, not yet remembered
+_LAYOUTS_SEEN: dict[tuple[tuple[bytes, int, int], ...], bool] = {}
 
 
 #: index data record header bytes -> (connection id, entry count), for headers that passed ``_index_record``'s
