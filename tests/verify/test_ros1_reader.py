@@ -266,6 +266,7 @@ def _forget_shapes() -> None:
     _INDEX_HEADS.clear()
     ros1._INDEX_LAYOUTS.clear()
     ros1._LAYOUTS_SEEN.clear()
+    ros1._LAYOUTS_COMPILED.clear()
     ros1._CHUNK_HEADS.clear()
 
 

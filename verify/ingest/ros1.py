@@ -592,30 +592,37 @@ class _Layout:
 
     @staticmethod
     def learn(ids: frozenset[int], heads: list[tuple[bytes, int, int]], total: int) -> None:
-        """Remember the layout of a chunk's index records read record by record, once it is seen a second time (a
-        pattern costs ~200 us to compile, ten chunks' reading: a bag whose message counts never repeat from chunk
-        to chunk compiles none)."""
+        """Remember the layout of a chunk's index records read record by record among the next to be tried for
+        these connections. A layout is compiled once a second chunk repeats it (a pattern costs ~200 us, ten
+        chunks' reading: a bag whose message counts never repeat from chunk to chunk compiles none), and kept
+        compiled (a layout tried again later is not compiled again)."""
         key = tuple(heads)
-        if _LAYOUTS_SEEN.pop(key, None) is None:
-            if len(_LAYOUTS_SEEN) >= _INDEX_HEADS_MAX:
-                _LAYOUTS_SEEN.clear()
-            _LAYOUTS_SEEN[key] = True
-            return
-        known = _INDEX_LAYOUTS.setdefault(ids, [])
+        layout = _LAYOUTS_COMPILED.get(key)
+        if layout is None:
+            if _LAYOUTS_SEEN.pop(key, None) is None:
+                if len(_LAYOUTS_SEEN) >= _INDEX_HEADS_MAX:
+                    _LAYOUTS_SEEN.clear()
+                _LAYOUTS_SEEN[key] = True
+                return
+            if len(_LAYOUTS_COMPILED) >= _LAYOUTS_COMPILED_MAX:
+                _LAYOUTS_COMPILED.clear()
+            layout = _LAYOUTS_COMPILED[key] = _Layout(heads, total)
         if len(_INDEX_LAYOUTS) > _INDEX_HEADS_MAX:
             _INDEX_LAYOUTS.clear()
-            _INDEX_LAYOUTS[ids] = known
-        if len(known) >= _LAYOUTS_PER_CONNECTIONS:
-            known.pop()
-        known.insert(0, _Layout(heads, total))
+        tried = _INDEX_LAYOUTS.setdefault(ids, [])
+        if len(tried) >= _LAYOUTS_PER_CONNECTIONS:
+            tried.pop()
+        tried.insert(0, layout)
 
 
-#: per set of connections (a chunk info's), the index data record layouts of the last chunks read record by record
-#: (newest first): message counts per chunk vary a little, so a bag repeats a few
+#: per set of connections (a chunk info's), the index data record layouts to try (newest first): message counts
+#: per chunk vary a little, so a bag repeats a few
 _INDEX_LAYOUTS: dict[frozenset[int], list[_Layout]] = {}
 _LAYOUTS_PER_CONNECTIONS = 8
-#: layouts read record by record once, not yet remembered
+#: layouts read record by record once, not yet compiled; and those compiled
 _LAYOUTS_SEEN: dict[tuple[tuple[bytes, int, int], ...], bool] = {}
+_LAYOUTS_COMPILED: dict[tuple[tuple[bytes, int, int], ...], _Layout] = {}
+_LAYOUTS_COMPILED_MAX = 256  # a compiled pattern holds a few kB
 
 
 #: index data record header bytes -> (connection id, entry count), for headers that passed ``_index_record``'s
