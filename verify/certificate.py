@@ -13,11 +13,16 @@ atom or window was unknown, when, why and what would decide it, with a one-sente
 report shows as is. Checks keep their own detail fields (``subformula``, ``reason``,
 ``radius_m``, ...) beside the common ones; the top level admits no field the schema does not name, so a new field
 is a schema change (and a ``CERTIFICATE_VERSION`` bump), never a silent one. Every model is built on first use
-(``defer_build``): certify validates one ``Certificate``, whose validator holds the nested models' schemas.
+(``defer_build``): certify validates one ``Certificate``, whose validator holds the nested models' schemas. That
+build (~4 ms of Python) is started in a background thread when certify begins to read a log
+(``build_in_background``), whose reading runs mostly outside the GIL; ``Certificate.model_validate`` and its schema
+wait for it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from enum import StrEnum
 from typing import Any, Literal
 
@@ -25,7 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 __all__ = ["CERTIFICATE_SCHEMA_ID", "CERTIFICATE_VERSION", "CERTIFY_JSON_SCHEMA_ID", "Certificate", "CheckEntry",
            "FleetInfo", "NotChecked", "ObligationEntry", "RobotEntry", "TimedRunEntry", "TubeInfo", "UnknownEntry",
-           "UnusableLog", "Verdict", "certificate_schema", "certify_json_schema"]
+           "UnusableLog", "Verdict", "build_in_background", "certificate_schema", "certify_json_schema"]
 
 #: 3: typed model with a published schema; margin_unit on every check, margins of failed checks always stated
 #: 4: per-obligation results; a failed check's margin may be null with margin_reason; decided_at and explanation
@@ -237,6 +242,18 @@ class Certificate(BaseModel):
     fleet: FleetInfo | None = Field(default=None, description="several robots in one log: how they were judged "
                                                               "together")
 
+    @classmethod
+    def model_validate(cls, obj: Any, **kwargs: Any) -> Certificate:
+        """pydantic's, once the model's build started in the background (``build_in_background``) is done."""
+        _built()
+        return super().model_validate(obj, **kwargs)
+
+    @classmethod
+    def model_json_schema(cls, *args: Any, **kwargs: Any) -> dict[str, Any]:
+        """pydantic's, once the model's build started in the background (``build_in_background``) is done."""
+        _built()
+        return super().model_json_schema(*args, **kwargs)
+
     def check(self, name: str) -> CheckEntry | None:
         return next((c for c in self.checks if c.name == name), None)
 
@@ -275,6 +292,35 @@ class UnusableLog(BaseModel):
     verdict: Literal["unusable", "error"] = Field(description="unusable input (exit 3) or an internal error (70)")
     exit_code: Literal[3, 70]
     error: str | None = Field(description="the one-line reason")
+
+
+_BUILDING = threading.Lock()
+_builder: list[threading.Thread] = []  # the one background build of this process, once started
+
+
+def build_in_background() -> None:
+    """Start building ``Certificate``'s validator (pydantic's schema of it and its nested models: ~4 ms of Python,
+    the first call's one cost in judging) in a daemon thread, once per process: certify starts it before it reads
+    a log, whose reading mostly runs outside the GIL (decompression, reads, SQLite), so the certificate's validation
+    at the end finds the model built. Every use of the model's validator or schema waits for the build
+    (``Certificate.model_validate``, ``Certificate.model_json_schema``); a build that fails leaves the model to be
+    built on first use, as without this."""
+    with _BUILDING:
+        if _builder or Certificate.__pydantic_complete__:
+            return
+        thread = threading.Thread(target=_build, name="certificate-model", daemon=True)
+        _builder.append(thread)
+        thread.start()
+
+
+def _build() -> None:
+    with contextlib.suppress(Exception):  # the model is then built on first use instead, and raises there
+        Certificate.model_rebuild()
+
+
+def _built() -> None:
+    if _builder and _builder[0] is not threading.current_thread():
+        _builder[0].join()
 
 
 def certify_json_schema() -> dict[str, Any]:

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from runkit.outputs import write_output_file
 from tubempc.mitl import atoms
 from tubempc.scenario import Scenario, ScenarioError, load_scenario
-from verify.certificate import CERTIFICATE_VERSION, Certificate
+from verify.certificate import CERTIFICATE_VERSION, Certificate, build_in_background
 from verify.checks import CheckResult, check_clearance, check_input_box, check_tube, check_workspace
 from verify.errors import ScenarioInputError
 from verify.geometry import containment, label_margins
@@ -188,6 +188,7 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
         return result
     selection = select_checks(sc, checks)
     formula_text = str(formula_of(sc, spec))
+    build_in_background()  # the certificate model, built while the log is read
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
                    clock_offsets=clock_offsets)
     return _judge(log, sc, formula_text=formula_text, selection=selection)
