@@ -300,15 +300,16 @@ _builder: list[threading.Thread] = []  # the one background build of this proces
 
 def build_in_background() -> None:
     """Start building ``Certificate``'s validator (pydantic's schema of it and its nested models: ~4 ms of Python,
-    the first call's one cost in judging) in a daemon thread, once per process: certify starts it before it reads
-    a log, whose reading mostly runs outside the GIL (decompression, reads, SQLite), so the certificate's validation
-    at the end finds the model built. Every use of the model's validator or schema waits for the build
+    the first call's one cost in judging) in a thread, once per process: certify starts it before it reads a log,
+    whose reading mostly runs outside the GIL (decompression, reads, SQLite), so the certificate's validation at the
+    end finds the model built. Every use of the model's validator or schema waits for the build
     (``Certificate.model_validate``, ``Certificate.model_json_schema``); a build that fails leaves the model to be
-    built on first use, as without this."""
+    built on first use, as without this. Not a daemon: a process that stops at once (a log that cannot be read,
+    exit 3) waits the few ms for it at exit rather than tearing it down mid-build (which may write to stderr)."""
     with _BUILDING:
         if _builder or Certificate.__pydantic_complete__:
             return
-        thread = threading.Thread(target=_build, name="certificate-model", daemon=True)
+        thread = threading.Thread(target=_build, name="certificate-model", daemon=False)
         _builder.append(thread)
         thread.start()
 

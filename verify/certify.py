@@ -179,6 +179,7 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
     ``checks``: the checks to run (default: the scenario's ``checks:``, else every check whose data it names).
     ``clock_offsets``: topic -> seconds added to that topic's times (extends the scenario's ``clock_offsets``)."""
     sc = resolve_scenario(scenario)
+    build_in_background()  # the certificate model, built while the log is read
     if sc.robots:  # several robots in one log: verify.fleet reads each robot and judges them jointly
         from verify.fleet import certify_fleet_log
 
@@ -188,7 +189,6 @@ def certify_log(log_path: str | Path, scenario: Scenario | str | Path, *, spec: 
         return result
     selection = select_checks(sc, checks)
     formula_text = str(formula_of(sc, spec))
-    build_in_background()  # the certificate model, built while the log is read
     log = read_log(log_path, sc, time_base=time_base, salvage=salvage, time0_ns=time0_ns, digest=digest,
                    clock_offsets=clock_offsets)
     return _judge(log, sc, formula_text=formula_text, selection=selection)
