@@ -371,11 +371,11 @@ def test_an_index_layout_is_remembered_once_it_repeats() -> None:
     _forget_shapes()
     ids = frozenset({1, 2})
     heads = [(b"\x04\x00\x00\x00head", 1, 12), (b"\x04\x00\x00\x00tail", 2, 24)]
-    ros1._Layout.learn(ids, heads, 3)
+    ros1._Layout.learn(ids, heads)
     assert not ros1._INDEX_LAYOUTS
-    ros1._Layout.learn(ids, [(b"\x04\x00\x00\x00head", 1, 24), (b"\x04\x00\x00\x00tail", 2, 24)], 4)
+    ros1._Layout.learn(ids, [(b"\x04\x00\x00\x00head", 1, 24), (b"\x04\x00\x00\x00tail", 2, 24)])
     assert not ros1._INDEX_LAYOUTS  # other heads: seen once each
-    ros1._Layout.learn(ids, heads, 3)
+    ros1._Layout.learn(ids, heads)
     (layout,) = ros1._INDEX_LAYOUTS[ids]
     assert layout.total == 3 and layout.size == 8 + 12 + 8 + 24
     _forget_shapes()

@@ -571,7 +571,7 @@ def _wanted_index(f: _File, after: int, n_conns: int, ids: frozenset[int], selec
             mine[cid] = entries
     if seen != ids:
         raise _UnusualError("chunk info and index records disagree")
-    _Layout.learn(ids, heads, total)
+    _Layout.learn(ids, heads)
     return mine, total
 
 
@@ -584,14 +584,14 @@ class _Layout:
 
     __slots__ = ("groups", "pattern", "size", "total")
 
-    def __init__(self, heads: list[tuple[bytes, int, int]], total: int) -> None:
+    def __init__(self, heads: list[tuple[bytes, int, int]]) -> None:
         self.pattern = re.compile(b"".join(re.escape(h) + b"(.{%d})" % n for h, _c, n in heads), re.DOTALL)
         self.groups = [(g, cid) for g, (_h, cid, _n) in enumerate(heads, start=1)]
         self.size = sum(len(h) + n for h, _c, n in heads)
-        self.total = total
+        self.total = sum(n for _h, _c, n in heads) // INDEX_ENTRY.itemsize  # the chunk's records
 
     @staticmethod
-    def learn(ids: frozenset[int], heads: list[tuple[bytes, int, int]], total: int) -> None:
+    def learn(ids: frozenset[int], heads: list[tuple[bytes, int, int]]) -> None:
         """Remember the layout of a chunk's index records read record by record among the next to be tried for
         these connections. A layout is compiled once a second chunk repeats it (a pattern costs ~200 us, ten
         chunks' reading: a bag whose message counts never repeat from chunk to chunk compiles none), and kept
@@ -606,7 +606,7 @@ class _Layout:
                 return
             if len(_LAYOUTS_COMPILED) >= _LAYOUTS_COMPILED_MAX:
                 _LAYOUTS_COMPILED.clear()
-            layout = _LAYOUTS_COMPILED[key] = _Layout(heads, total)
+            layout = _LAYOUTS_COMPILED[key] = _Layout(heads)
         if len(_INDEX_LAYOUTS) > _INDEX_HEADS_MAX:
             _INDEX_LAYOUTS.clear()
         tried = _INDEX_LAYOUTS.setdefault(ids, [])
